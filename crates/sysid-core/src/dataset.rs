@@ -1,0 +1,367 @@
+//! Uniformly sampled time-series data: named channels with units, several experiments,
+//! missing samples (NaN) allowed in measured channels only, split and window.
+//!
+//! Storage is column-per-sample (`channels × samples`), so one sample is one contiguous
+//! column of an nalgebra matrix.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{CoreError, Result};
+
+/// Relative tolerance on the sample step when checking that a time vector is uniform.
+///
+/// Time columns written as decimal text carry round-off of about 1e-12 relative to `t`;
+/// 1e-6 of a step accepts that while still catching a dropped or duplicated sample.
+pub const UNIFORM_TIME_RTOL: f64 = 1e-6;
+
+/// A named channel (an input, or a measured state/output) with an optional unit.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Channel {
+    /// Channel name, e.g. `theta`.
+    pub name: String,
+    /// Physical unit, e.g. `rad`; `None` when unknown.
+    pub unit: Option<String>,
+}
+
+impl Channel {
+    /// A channel without a unit.
+    pub fn new(name: impl Into<String>) -> Self {
+        Self { name: name.into(), unit: None }
+    }
+
+    /// A channel with a unit.
+    pub fn with_unit(name: impl Into<String>, unit: impl Into<String>) -> Self {
+        Self { name: name.into(), unit: Some(unit.into()) }
+    }
+}
+
+/// One uniformly sampled experiment: `t_k = t0 + k·dt`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Experiment {
+    t0: f64,
+    dt: f64,
+    inputs: DMatrix<f64>,
+    outputs: DMatrix<f64>,
+}
+
+impl Experiment {
+    /// Build an experiment from its start time, step and data (`m × N` inputs, `p × N`
+    /// outputs; NaN marks a missing output sample).
+    ///
+    /// Errors: non-positive `dt`, different sample counts, non-finite inputs, infinite
+    /// outputs. Channel names in errors are `u<i>` / `y<i>`; [`Dataset::new`] re-checks
+    /// with real names.
+    pub fn new(t0: f64, dt: f64, inputs: DMatrix<f64>, outputs: DMatrix<f64>) -> Result<Self> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(CoreError::BadSamplePeriod { dt });
+        }
+        if !t0.is_finite() {
+            return Err(CoreError::InvalidArgument { name: "t0", value: t0, reason: "must be finite" });
+        }
+        if inputs.ncols() != outputs.ncols() {
+            return Err(CoreError::Length {
+                what: "input samples vs output samples",
+                found: inputs.ncols(),
+                expected: outputs.ncols(),
+            });
+        }
+        let exp = Self { t0, dt, inputs, outputs };
+        let names_u: Vec<String> = (0..exp.n_inputs()).map(|i| format!("u{i}")).collect();
+        let names_y: Vec<String> = (0..exp.n_outputs()).map(|i| format!("y{i}")).collect();
+        exp.check_values(0, &names_u, &names_y)?;
+        Ok(exp)
+    }
+
+    /// Build an experiment from an explicit time vector, checking that it increases and is
+    /// uniform to [`UNIFORM_TIME_RTOL`] of the mean step.
+    pub fn from_times(t: &[f64], inputs: DMatrix<f64>, outputs: DMatrix<f64>) -> Result<Self> {
+        let (t0, dt) = uniform_step(t)?;
+        if inputs.ncols() != t.len() {
+            return Err(CoreError::Length { what: "input samples vs time samples", found: inputs.ncols(), expected: t.len() });
+        }
+        Self::new(t0, dt, inputs, outputs)
+    }
+
+    fn check_values(&self, experiment: usize, inputs: &[String], outputs: &[String]) -> Result<()> {
+        for k in 0..self.len() {
+            for (i, name) in inputs.iter().enumerate() {
+                if !self.inputs[(i, k)].is_finite() {
+                    return Err(CoreError::NonFiniteInput { channel: name.clone(), experiment, sample: k });
+                }
+            }
+            for (i, name) in outputs.iter().enumerate() {
+                if self.outputs[(i, k)].is_infinite() {
+                    return Err(CoreError::InfiniteOutput { channel: name.clone(), experiment, sample: k });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.inputs.ncols()
+    }
+
+    /// True when there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Time of the first sample, s.
+    pub fn t0(&self) -> f64 {
+        self.t0
+    }
+
+    /// Sample period, s.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// Time of sample `k`, s.
+    pub fn time(&self, k: usize) -> f64 {
+        self.t0 + k as f64 * self.dt
+    }
+
+    /// All sample times, s.
+    pub fn times(&self) -> Vec<f64> {
+        (0..self.len()).map(|k| self.time(k)).collect()
+    }
+
+    /// Number of input channels.
+    pub fn n_inputs(&self) -> usize {
+        self.inputs.nrows()
+    }
+
+    /// Number of output (measured) channels.
+    pub fn n_outputs(&self) -> usize {
+        self.outputs.nrows()
+    }
+
+    /// Inputs, `m × N`.
+    pub fn inputs(&self) -> &DMatrix<f64> {
+        &self.inputs
+    }
+
+    /// Outputs, `p × N`; NaN marks a missing sample.
+    pub fn outputs(&self) -> &DMatrix<f64> {
+        &self.outputs
+    }
+
+    /// Input vector at sample `k` (contiguous column).
+    pub fn input(&self, k: usize) -> &[f64] {
+        let m = self.n_inputs();
+        &self.inputs.as_slice()[k * m..(k + 1) * m]
+    }
+
+    /// Output vector at sample `k` (contiguous column; NaN = missing).
+    pub fn output(&self, k: usize) -> &[f64] {
+        let p = self.n_outputs();
+        &self.outputs.as_slice()[k * p..(k + 1) * p]
+    }
+
+    /// Samples `start..end` as a new experiment (time origin kept).
+    pub fn window(&self, start: usize, end: usize) -> Result<Self> {
+        if start >= end || end > self.len() {
+            return Err(CoreError::Range { start, end, len: self.len() });
+        }
+        Ok(Self {
+            t0: self.time(start),
+            dt: self.dt,
+            inputs: self.inputs.columns(start, end - start).into_owned(),
+            outputs: self.outputs.columns(start, end - start).into_owned(),
+        })
+    }
+}
+
+/// Check that `t` increases uniformly; return `(t0, dt)` with `dt` the mean step.
+pub fn uniform_step(t: &[f64]) -> Result<(f64, f64)> {
+    if t.len() < 2 {
+        return Err(CoreError::TooFewSamples { what: "time vector", found: t.len(), needed: 2 });
+    }
+    for (k, w) in t.windows(2).enumerate() {
+        if !(w[1] > w[0]) || !w[1].is_finite() || !w[0].is_finite() {
+            return Err(CoreError::NonIncreasingTime { sample: k + 1, t_prev: w[0], t: w[1] });
+        }
+    }
+    let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    for (k, w) in t.windows(2).enumerate() {
+        let step = w[1] - w[0];
+        // Tolerance: relative to the step, plus round-off of the absolute time value.
+        let tol = UNIFORM_TIME_RTOL * dt + 1e-12 * w[1].abs();
+        if (step - dt).abs() > tol {
+            return Err(CoreError::NonUniformTime { sample: k + 1, step, dt });
+        }
+    }
+    Ok((t[0], dt))
+}
+
+/// Several experiments sharing the same named input and output channels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dataset {
+    inputs: Vec<Channel>,
+    outputs: Vec<Channel>,
+    experiments: Vec<Experiment>,
+}
+
+impl Dataset {
+    /// Build a dataset; checks channel counts, unique names and values of every experiment.
+    pub fn new(inputs: Vec<Channel>, outputs: Vec<Channel>, experiments: Vec<Experiment>) -> Result<Self> {
+        check_unique("channel", inputs.iter().chain(outputs.iter()).map(|c| c.name.as_str()))?;
+        let names_u: Vec<String> = inputs.iter().map(|c| c.name.clone()).collect();
+        let names_y: Vec<String> = outputs.iter().map(|c| c.name.clone()).collect();
+        for (e, exp) in experiments.iter().enumerate() {
+            if exp.n_inputs() != inputs.len() {
+                return Err(CoreError::Length { what: "input channels of an experiment", found: exp.n_inputs(), expected: inputs.len() });
+            }
+            if exp.n_outputs() != outputs.len() {
+                return Err(CoreError::Length { what: "output channels of an experiment", found: exp.n_outputs(), expected: outputs.len() });
+            }
+            exp.check_values(e, &names_u, &names_y)?;
+        }
+        Ok(Self { inputs, outputs, experiments })
+    }
+
+    /// Input channels.
+    pub fn input_channels(&self) -> &[Channel] {
+        &self.inputs
+    }
+
+    /// Output (measured) channels.
+    pub fn output_channels(&self) -> &[Channel] {
+        &self.outputs
+    }
+
+    /// Names of the input channels.
+    pub fn input_names(&self) -> Vec<String> {
+        self.inputs.iter().map(|c| c.name.clone()).collect()
+    }
+
+    /// Names of the output channels.
+    pub fn output_names(&self) -> Vec<String> {
+        self.outputs.iter().map(|c| c.name.clone()).collect()
+    }
+
+    /// The experiments.
+    pub fn experiments(&self) -> &[Experiment] {
+        &self.experiments
+    }
+
+    /// Total number of samples over all experiments.
+    pub fn total_samples(&self) -> usize {
+        self.experiments.iter().map(Experiment::len).sum()
+    }
+
+    /// Index of an input channel by name.
+    pub fn input_index(&self, name: &str) -> Result<usize> {
+        self.inputs.iter().position(|c| c.name == name).ok_or_else(|| CoreError::UnknownName { kind: "input", name: name.into() })
+    }
+
+    /// Index of an output channel by name.
+    pub fn output_index(&self, name: &str) -> Result<usize> {
+        self.outputs.iter().position(|c| c.name == name).ok_or_else(|| CoreError::UnknownName { kind: "output", name: name.into() })
+    }
+
+    /// Split every experiment at `fraction` of its samples: first part, second part.
+    pub fn split(&self, fraction: f64) -> Result<(Self, Self)> {
+        if !(fraction > 0.0 && fraction < 1.0) {
+            return Err(CoreError::InvalidArgument { name: "fraction", value: fraction, reason: "must lie in (0, 1)" });
+        }
+        let mut first = Vec::new();
+        let mut second = Vec::new();
+        for exp in &self.experiments {
+            let cut = ((exp.len() as f64) * fraction).round() as usize;
+            first.push(exp.window(0, cut)?);
+            second.push(exp.window(cut, exp.len())?);
+        }
+        Ok((self.with_experiments(first), self.with_experiments(second)))
+    }
+
+    /// Samples `start..end` of experiment `experiment` as a one-experiment dataset.
+    pub fn window(&self, experiment: usize, start: usize, end: usize) -> Result<Self> {
+        let exp = self.experiments.get(experiment).ok_or(CoreError::Range {
+            start: experiment,
+            end: experiment + 1,
+            len: self.experiments.len(),
+        })?;
+        Ok(self.with_experiments(vec![exp.window(start, end)?]))
+    }
+
+    fn with_experiments(&self, experiments: Vec<Experiment>) -> Self {
+        Self { inputs: self.inputs.clone(), outputs: self.outputs.clone(), experiments }
+    }
+}
+
+/// Error on the first name that appears twice.
+pub fn check_unique<'a>(kind: &'static str, names: impl Iterator<Item = &'a str>) -> Result<()> {
+    let mut seen = std::collections::HashSet::new();
+    for n in names {
+        if !seen.insert(n) {
+            return Err(CoreError::DuplicateName { kind, name: n.to_string() });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn exp(n: usize) -> Experiment {
+        let u = DMatrix::from_fn(1, n, |_, k| k as f64);
+        let y = DMatrix::from_fn(2, n, |i, k| (i * 100 + k) as f64);
+        Experiment::new(0.5, 0.1, u, y).unwrap()
+    }
+
+    #[test]
+    fn column_access_and_time() {
+        let e = exp(10);
+        assert_eq!(e.output(3), &[3.0, 103.0]);
+        assert_eq!(e.input(4), &[4.0]);
+        assert!((e.time(3) - 0.8).abs() < 1e-15);
+    }
+
+    #[test]
+    fn window_and_split_keep_time() {
+        let d = Dataset::new(vec![Channel::new("u")], vec![Channel::new("a"), Channel::new("b")], vec![exp(10)]).unwrap();
+        let (a, b) = d.split(0.3).unwrap();
+        assert_eq!(a.experiments()[0].len(), 3);
+        assert_eq!(b.experiments()[0].len(), 7);
+        assert!((b.experiments()[0].t0() - 0.8).abs() < 1e-15);
+        assert_eq!(b.experiments()[0].output(0), &[3.0, 103.0]);
+        assert!(matches!(d.window(0, 5, 20), Err(CoreError::Range { .. })));
+    }
+
+    #[test]
+    fn bad_time_is_typed() {
+        let u = DMatrix::zeros(1, 4);
+        let y = DMatrix::zeros(1, 4);
+        assert!(matches!(
+            Experiment::from_times(&[0.0, 0.1, 0.1, 0.3], u.clone(), y.clone()),
+            Err(CoreError::NonIncreasingTime { sample: 2, .. })
+        ));
+        assert!(matches!(
+            Experiment::from_times(&[0.0, 0.1, 0.25, 0.3], u.clone(), y.clone()),
+            Err(CoreError::NonUniformTime { sample: 2, .. })
+        ));
+        assert!(Experiment::from_times(&[0.0, 0.1, 0.2, 0.3], u, y).is_ok());
+    }
+
+    #[test]
+    fn nan_input_rejected_nan_output_allowed() {
+        let mut u = DMatrix::zeros(1, 4);
+        let mut y = DMatrix::zeros(1, 4);
+        y[(0, 2)] = f64::NAN;
+        assert!(Experiment::new(0.0, 0.1, u.clone(), y.clone()).is_ok());
+        u[(0, 1)] = f64::NAN;
+        let e = Experiment::new(0.0, 0.1, u, y);
+        assert!(matches!(e, Err(CoreError::NonFiniteInput { sample: 1, .. })));
+    }
+
+    #[test]
+    fn duplicate_channel_names_rejected() {
+        let d = Dataset::new(vec![Channel::new("u")], vec![Channel::new("u"), Channel::new("b")], vec![exp(3)]);
+        assert!(matches!(d, Err(CoreError::DuplicateName { .. })));
+    }
+}

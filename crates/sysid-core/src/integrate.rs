@@ -1,0 +1,362 @@
+//! ODE integrators for sampled-data simulation: fixed-step RK4 with sub-steps and
+//! adaptive Dormand–Prince 5(4) with error control. Inputs are held constant between
+//! samples (zero-order hold), and every interval ends exactly on the next sample time.
+//!
+//! Written here rather than taken from `ode_solvers` because sampled-data simulation needs
+//! the input to change at each sample and steps to land exactly on sample times (its RK4
+//! overshoots `t_end`; see `../shared/notes/crates.md`).
+
+use nalgebra::DMatrix;
+
+use crate::dynamics::Dynamics;
+use crate::error::{CoreError, Result};
+
+/// How to integrate between samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Integrator {
+    /// Classical fourth-order Runge–Kutta with `substeps` equal steps per sample interval.
+    Rk4 {
+        /// Steps per sample interval (≥ 1).
+        substeps: usize,
+    },
+    /// Dormand–Prince 5(4) with local error control.
+    DormandPrince(DpOptions),
+}
+
+impl Default for Integrator {
+    fn default() -> Self {
+        Integrator::DormandPrince(DpOptions::default())
+    }
+}
+
+/// Options of the adaptive Dormand–Prince integrator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DpOptions {
+    /// Relative tolerance on each state's local error.
+    pub rtol: f64,
+    /// Absolute tolerance on each state's local error.
+    pub atol: f64,
+    /// Smallest step allowed, s; a smaller one is [`CoreError::StepSizeUnderflow`].
+    pub h_min: f64,
+    /// Step budget per call of [`integrate_interval`].
+    pub max_steps: usize,
+}
+
+impl Default for DpOptions {
+    fn default() -> Self {
+        Self { rtol: 1e-8, atol: 1e-10, h_min: 1e-12, max_steps: 100_000 }
+    }
+}
+
+/// States beyond this magnitude count as a blown-up simulation.
+pub const DEFAULT_BLOW_UP: f64 = 1e12;
+
+/// Reusable buffers so integration does not allocate per step.
+#[derive(Debug, Clone)]
+pub struct Workspace {
+    k: [Vec<f64>; 7],
+    tmp: Vec<f64>,
+    y5: Vec<f64>,
+    /// Last accepted adaptive step, carried between intervals.
+    h_last: Option<f64>,
+}
+
+impl Workspace {
+    /// Buffers for `n` states.
+    pub fn new(n: usize) -> Self {
+        Self {
+            k: std::array::from_fn(|_| vec![0.0; n]),
+            tmp: vec![0.0; n],
+            y5: vec![0.0; n],
+            h_last: None,
+        }
+    }
+}
+
+/// One classical RK4 step of size `h` from `(t, x)` with input `u` held; updates `x`.
+pub fn rk4_step<D: Dynamics + ?Sized>(f: &D, t: f64, h: f64, x: &mut [f64], u: &[f64], ws: &mut Workspace) {
+    let n = x.len();
+    let [k1, k2, k3, k4, ..] = &mut ws.k;
+    let tmp = &mut ws.tmp;
+    f.rhs(t, x, u, k1);
+    for i in 0..n {
+        tmp[i] = x[i] + 0.5 * h * k1[i];
+    }
+    f.rhs(t + 0.5 * h, tmp, u, k2);
+    for i in 0..n {
+        tmp[i] = x[i] + 0.5 * h * k2[i];
+    }
+    f.rhs(t + 0.5 * h, tmp, u, k3);
+    for i in 0..n {
+        tmp[i] = x[i] + h * k3[i];
+    }
+    f.rhs(t + h, tmp, u, k4);
+    for i in 0..n {
+        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+}
+
+// Dormand–Prince 5(4) tableau (Dormand & Prince 1980; Hairer, Nørsett & Wanner, Solving
+// ODEs I, Table 5.2).
+const C: [f64; 7] = [0.0, 1.0 / 5.0, 3.0 / 10.0, 4.0 / 5.0, 8.0 / 9.0, 1.0, 1.0];
+const A: [[f64; 6]; 7] = [
+    [0.0; 6],
+    [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
+    [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
+    [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0],
+    [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0],
+    [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
+];
+/// Error weights: 5th-order minus embedded 4th-order weights.
+const E: [f64; 7] = [
+    71.0 / 57600.0,
+    0.0,
+    -71.0 / 16695.0,
+    71.0 / 1920.0,
+    -17253.0 / 339200.0,
+    22.0 / 525.0,
+    -1.0 / 40.0,
+];
+
+/// Integrate from `t0` to `t1` with `u` held constant, updating `x` in place.
+pub fn integrate_interval<D: Dynamics + ?Sized>(
+    f: &D,
+    t0: f64,
+    t1: f64,
+    x: &mut [f64],
+    u: &[f64],
+    method: &Integrator,
+    ws: &mut Workspace,
+) -> Result<()> {
+    match method {
+        Integrator::Rk4 { substeps } => {
+            let s = (*substeps).max(1);
+            let h = (t1 - t0) / s as f64;
+            for j in 0..s {
+                rk4_step(f, t0 + j as f64 * h, h, x, u, ws);
+            }
+            Ok(())
+        }
+        Integrator::DormandPrince(opt) => dopri_interval(f, t0, t1, x, u, opt, ws),
+    }
+}
+
+fn dopri_interval<D: Dynamics + ?Sized>(
+    f: &D,
+    t0: f64,
+    t1: f64,
+    x: &mut [f64],
+    u: &[f64],
+    opt: &DpOptions,
+    ws: &mut Workspace,
+) -> Result<()> {
+    let n = x.len();
+    let span = t1 - t0;
+    let mut t = t0;
+    let mut h = ws.h_last.unwrap_or(span).min(span);
+    // k[0] holds f(t, x) at the start of each step (first-same-as-last after the first).
+    f.rhs(t, x, u, &mut ws.k[0]);
+    let mut steps = 0usize;
+    while t < t1 {
+        if steps >= opt.max_steps {
+            return Err(CoreError::TooManySteps { max_steps: opt.max_steps, t });
+        }
+        steps += 1;
+        let last = t + h >= t1 - 1e-14 * t1.abs().max(span);
+        let h_step = if last { t1 - t } else { h };
+        for s in 1..7 {
+            for i in 0..n {
+                let mut acc = x[i];
+                for (j, a) in A[s].iter().enumerate().take(s) {
+                    acc += h_step * a * ws.k[j][i];
+                }
+                ws.tmp[i] = acc;
+            }
+            let (head, tail) = ws.k.split_at_mut(s);
+            let _ = head;
+            f.rhs(t + C[s] * h_step, &ws.tmp, u, &mut tail[0]);
+        }
+        // tmp now holds the 5th-order solution (stage 7 point = A[6] weights).
+        ws.y5.copy_from_slice(&ws.tmp);
+        let mut err = 0.0;
+        for i in 0..n {
+            let mut e = 0.0;
+            for (s, w) in E.iter().enumerate() {
+                e += w * ws.k[s][i];
+            }
+            e *= h_step;
+            let sc = opt.atol + opt.rtol * x[i].abs().max(ws.y5[i].abs());
+            err += (e / sc) * (e / sc);
+        }
+        let err = (err / n.max(1) as f64).sqrt();
+        if !err.is_finite() {
+            let (state, value) = first_bad(&ws.y5);
+            return Err(CoreError::Diverged { t: t + h_step, state, value });
+        }
+        if err <= 1.0 {
+            t = if last { t1 } else { t + h_step };
+            x.copy_from_slice(&ws.y5);
+            let (k0, rest) = ws.k.split_at_mut(1);
+            k0[0].copy_from_slice(&rest[5]);
+            let fac = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            if !last {
+                h = h_step * fac;
+                ws.h_last = Some(h);
+            } else {
+                // Keep the unclipped step for the next interval.
+                ws.h_last = Some((h_step * fac).max(h));
+            }
+        } else {
+            let fac = (0.9 * err.powf(-0.2)).clamp(0.2, 1.0);
+            h = h_step * fac;
+            if h < opt.h_min {
+                return Err(CoreError::StepSizeUnderflow { t, h });
+            }
+        }
+    }
+    Ok(())
+}
+
+fn first_bad(x: &[f64]) -> (usize, f64) {
+    x.iter().enumerate().find(|(_, v)| !v.is_finite()).map(|(i, v)| (i, *v)).unwrap_or((0, f64::NAN))
+}
+
+/// Free-run simulation on a uniform grid `t_k = t0 + k·dt`, `k = 0..N` (`N` = columns of
+/// `inputs`, `m × N`), input `u_k` held on `[t_k, t_{k+1})`. Returns the states `n × N`
+/// (column `k` is `x(t_k)`, column 0 is `x0`).
+///
+/// Errors with [`CoreError::Diverged`] when a state becomes non-finite or exceeds
+/// `blow_up` in magnitude.
+pub fn simulate<D: Dynamics + ?Sized>(
+    f: &D,
+    x0: &[f64],
+    t0: f64,
+    dt: f64,
+    inputs: &DMatrix<f64>,
+    method: &Integrator,
+    blow_up: f64,
+) -> Result<DMatrix<f64>> {
+    let n = f.n_states();
+    if x0.len() != n {
+        return Err(CoreError::Length { what: "initial state", found: x0.len(), expected: n });
+    }
+    if inputs.nrows() != f.n_inputs() {
+        return Err(CoreError::Length { what: "input channels", found: inputs.nrows(), expected: f.n_inputs() });
+    }
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(CoreError::BadSamplePeriod { dt });
+    }
+    let len = inputs.ncols();
+    let mut out = DMatrix::zeros(n, len);
+    if len == 0 {
+        return Ok(out);
+    }
+    let mut x = x0.to_vec();
+    let mut ws = Workspace::new(n);
+    out.column_mut(0).copy_from_slice(&x);
+    let m = inputs.nrows();
+    for k in 1..len {
+        let u = &inputs.as_slice()[(k - 1) * m..k * m];
+        let ta = t0 + (k - 1) as f64 * dt;
+        let tb = t0 + k as f64 * dt;
+        integrate_interval(f, ta, tb, &mut x, u, method, &mut ws)?;
+        if let Some((state, value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite() || v.abs() > blow_up) {
+            return Err(CoreError::Diverged { t: tb, state, value: *value });
+        }
+        out.column_mut(k).copy_from_slice(&x);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ẋ = λ x + u (scalar), exact solution known.
+    struct Decay(f64);
+    impl Dynamics for Decay {
+        fn n_states(&self) -> usize {
+            1
+        }
+        fn n_inputs(&self) -> usize {
+            1
+        }
+        fn rhs(&self, _t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+            dx[0] = self.0 * x[0] + u[0];
+        }
+    }
+
+    /// Harmonic oscillator rotated: x'' = -x, exact solution cos/sin.
+    struct Osc;
+    impl Dynamics for Osc {
+        fn n_states(&self) -> usize {
+            2
+        }
+        fn n_inputs(&self) -> usize {
+            0
+        }
+        fn rhs(&self, _t: f64, x: &[f64], _u: &[f64], dx: &mut [f64]) {
+            dx[0] = x[1];
+            dx[1] = -x[0];
+        }
+    }
+
+    fn rk4_error(steps: usize) -> f64 {
+        let mut x = [1.0, 0.0];
+        let mut ws = Workspace::new(2);
+        integrate_interval(&Osc, 0.0, 2.0, &mut x, &[], &Integrator::Rk4 { substeps: steps }, &mut ws).unwrap();
+        ((x[0] - 2.0_f64.cos()).powi(2) + (x[1] + 2.0_f64.sin()).powi(2)).sqrt()
+    }
+
+    #[test]
+    fn rk4_is_fourth_order() {
+        let e1 = rk4_error(20);
+        let e2 = rk4_error(40);
+        let order = (e1 / e2).log2();
+        assert!((order - 4.0).abs() < 0.15, "observed order {order}");
+    }
+
+    #[test]
+    fn dopri_meets_tolerance_and_lands_on_t1() {
+        for rtol in [1e-4, 1e-7, 1e-10] {
+            let opt = DpOptions { rtol, atol: rtol * 1e-2, ..DpOptions::default() };
+            let mut x = [1.0];
+            let mut ws = Workspace::new(1);
+            integrate_interval(&Decay(-3.0), 0.0, 2.0, &mut x, &[1.0], &Integrator::DormandPrince(opt), &mut ws).unwrap();
+            // x(t) = 1/3 + (1 - 1/3) e^{-3t}
+            let exact = 1.0 / 3.0 + (2.0 / 3.0) * (-6.0_f64).exp();
+            // Global error is at most a small multiple of the local tolerance here (stable problem).
+            assert!((x[0] - exact).abs() < 10.0 * rtol, "rtol {rtol}: err {}", (x[0] - exact).abs());
+        }
+    }
+
+    #[test]
+    fn dopri_fixed_step_is_fifth_order() {
+        // Disable error control (huge tolerance) so the step is the whole interval / k.
+        let opt = DpOptions { rtol: 1e6, atol: 1e6, ..DpOptions::default() };
+        let err = |k: usize| {
+            let mut x = [1.0, 0.0];
+            let mut ws = Workspace::new(2);
+            let h = 2.0 / k as f64;
+            for j in 0..k {
+                ws.h_last = None;
+                integrate_interval(&Osc, j as f64 * h, (j + 1) as f64 * h, &mut x, &[], &Integrator::DormandPrince(opt), &mut ws)
+                    .unwrap();
+            }
+            ((x[0] - 2.0_f64.cos()).powi(2) + (x[1] + 2.0_f64.sin()).powi(2)).sqrt()
+        };
+        let order = (err(10) / err(20)).log2();
+        assert!((order - 5.0).abs() < 0.3, "observed order {order}");
+    }
+
+    #[test]
+    fn simulate_holds_input_and_detects_blow_up() {
+        let u = DMatrix::from_element(1, 11, 2.0);
+        let xs = simulate(&Decay(0.0), &[0.0], 0.0, 0.1, &u, &Integrator::Rk4 { substeps: 1 }, DEFAULT_BLOW_UP).unwrap();
+        assert!((xs[(0, 10)] - 2.0).abs() < 1e-12);
+        let u = DMatrix::zeros(1, 200);
+        let r = simulate(&Decay(50.0), &[1.0], 0.0, 1.0, &u, &Integrator::Rk4 { substeps: 4 }, 1e6);
+        assert!(matches!(r, Err(CoreError::Diverged { .. })));
+    }
+}

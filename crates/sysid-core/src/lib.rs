@@ -1,0 +1,19 @@
+#![doc = include_str!("../README.md")]
+
+pub mod correlation;
+pub mod dataset;
+pub mod dynamics;
+pub mod error;
+pub mod estimate;
+pub mod integrate;
+pub mod linear;
+pub mod metrics;
+
+pub use correlation::{Confidence, acf, confidence_bound, xcf};
+pub use dataset::{Channel, Dataset, Experiment};
+pub use dynamics::{Correction, Dynamics, Horizon, Model, Prediction};
+pub use error::{CoreError, Result};
+pub use estimate::{ExperimentEstimate, IterationRecord, MmeEstimate, SolveReport, Termination};
+pub use integrate::{DpOptions, Integrator, simulate};
+pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh};
+pub use metrics::{ChannelMetrics, channel_metrics};
