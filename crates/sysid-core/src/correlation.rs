@@ -30,10 +30,18 @@ pub fn confidence_bound(samples: usize, level: Confidence) -> f64 {
 
 fn centred(x: &[f64], what: &'static str) -> Result<(Vec<f64>, f64)> {
     if x.len() < 2 {
-        return Err(CoreError::TooFewSamples { what, found: x.len(), needed: 2 });
+        return Err(CoreError::TooFewSamples {
+            what,
+            found: x.len(),
+            needed: 2,
+        });
     }
     if let Some(k) = x.iter().position(|v| !v.is_finite()) {
-        return Err(CoreError::InvalidArgument { name: what, value: k as f64, reason: "series is not finite at this sample index" });
+        return Err(CoreError::InvalidArgument {
+            name: what,
+            value: k as f64,
+            reason: "series is not finite at this sample index",
+        });
     }
     let mean = x.iter().sum::<f64>() / x.len() as f64;
     let c: Vec<f64> = x.iter().map(|v| v - mean).collect();
@@ -62,7 +70,11 @@ pub fn acf(x: &[f64], max_lag: usize) -> Result<Vec<f64>> {
 /// follows `x`.
 pub fn xcf(x: &[f64], y: &[f64], max_lag: usize) -> Result<Vec<f64>> {
     if x.len() != y.len() {
-        return Err(CoreError::Length { what: "cross-correlation series", found: y.len(), expected: x.len() });
+        return Err(CoreError::Length {
+            what: "cross-correlation series",
+            found: y.len(),
+            expected: x.len(),
+        });
     }
     let (cx, sx) = centred(x, "cross-correlation series x")?;
     let (cy, sy) = centred(y, "cross-correlation series y")?;
@@ -100,9 +112,15 @@ mod tests {
     #[test]
     fn xcf_of_delayed_copy_peaks_at_delay() {
         let x: Vec<f64> = (0..200).map(|k| ((k * 7919) % 101) as f64).collect();
-        let y: Vec<f64> = (0..200).map(|k| if k >= 3 { x[k - 3] } else { 0.0 }).collect();
+        let y: Vec<f64> = (0..200)
+            .map(|k| if k >= 3 { x[k - 3] } else { 0.0 })
+            .collect();
         let r = xcf(&x, &y, 10).unwrap();
-        let (imax, _) = r.iter().enumerate().fold((0, f64::MIN), |a, (i, v)| if *v > a.1 { (i, *v) } else { a });
+        let (imax, _) =
+            r.iter().enumerate().fold(
+                (0, f64::MIN),
+                |a, (i, v)| if *v > a.1 { (i, *v) } else { a },
+            );
         assert_eq!(imax as isize - 10, 3);
     }
 

@@ -27,12 +27,18 @@ pub struct Channel {
 impl Channel {
     /// A channel without a unit.
     pub fn new(name: impl Into<String>) -> Self {
-        Self { name: name.into(), unit: None }
+        Self {
+            name: name.into(),
+            unit: None,
+        }
     }
 
     /// A channel with a unit.
     pub fn with_unit(name: impl Into<String>, unit: impl Into<String>) -> Self {
-        Self { name: name.into(), unit: Some(unit.into()) }
+        Self {
+            name: name.into(),
+            unit: Some(unit.into()),
+        }
     }
 }
 
@@ -57,7 +63,11 @@ impl Experiment {
             return Err(CoreError::BadSamplePeriod { dt });
         }
         if !t0.is_finite() {
-            return Err(CoreError::InvalidArgument { name: "t0", value: t0, reason: "must be finite" });
+            return Err(CoreError::InvalidArgument {
+                name: "t0",
+                value: t0,
+                reason: "must be finite",
+            });
         }
         if inputs.ncols() != outputs.ncols() {
             return Err(CoreError::Length {
@@ -66,7 +76,12 @@ impl Experiment {
                 expected: outputs.ncols(),
             });
         }
-        let exp = Self { t0, dt, inputs, outputs };
+        let exp = Self {
+            t0,
+            dt,
+            inputs,
+            outputs,
+        };
         let names_u: Vec<String> = (0..exp.n_inputs()).map(|i| format!("u{i}")).collect();
         let names_y: Vec<String> = (0..exp.n_outputs()).map(|i| format!("y{i}")).collect();
         exp.check_values(0, &names_u, &names_y)?;
@@ -78,7 +93,11 @@ impl Experiment {
     pub fn from_times(t: &[f64], inputs: DMatrix<f64>, outputs: DMatrix<f64>) -> Result<Self> {
         let (t0, dt) = uniform_step(t)?;
         if inputs.ncols() != t.len() {
-            return Err(CoreError::Length { what: "input samples vs time samples", found: inputs.ncols(), expected: t.len() });
+            return Err(CoreError::Length {
+                what: "input samples vs time samples",
+                found: inputs.ncols(),
+                expected: t.len(),
+            });
         }
         Self::new(t0, dt, inputs, outputs)
     }
@@ -87,12 +106,20 @@ impl Experiment {
         for k in 0..self.len() {
             for (i, name) in inputs.iter().enumerate() {
                 if !self.inputs[(i, k)].is_finite() {
-                    return Err(CoreError::NonFiniteInput { channel: name.clone(), experiment, sample: k });
+                    return Err(CoreError::NonFiniteInput {
+                        channel: name.clone(),
+                        experiment,
+                        sample: k,
+                    });
                 }
             }
             for (i, name) in outputs.iter().enumerate() {
                 if self.outputs[(i, k)].is_infinite() {
-                    return Err(CoreError::InfiniteOutput { channel: name.clone(), experiment, sample: k });
+                    return Err(CoreError::InfiniteOutput {
+                        channel: name.clone(),
+                        experiment,
+                        sample: k,
+                    });
                 }
             }
         }
@@ -164,7 +191,11 @@ impl Experiment {
     /// Samples `start..end` as a new experiment (time origin kept).
     pub fn window(&self, start: usize, end: usize) -> Result<Self> {
         if start >= end || end > self.len() {
-            return Err(CoreError::Range { start, end, len: self.len() });
+            return Err(CoreError::Range {
+                start,
+                end,
+                len: self.len(),
+            });
         }
         Ok(Self {
             t0: self.time(start),
@@ -178,11 +209,19 @@ impl Experiment {
 /// Check that `t` increases uniformly; return `(t0, dt)` with `dt` the mean step.
 pub fn uniform_step(t: &[f64]) -> Result<(f64, f64)> {
     if t.len() < 2 {
-        return Err(CoreError::TooFewSamples { what: "time vector", found: t.len(), needed: 2 });
+        return Err(CoreError::TooFewSamples {
+            what: "time vector",
+            found: t.len(),
+            needed: 2,
+        });
     }
     for (k, w) in t.windows(2).enumerate() {
-        if !(w[1] > w[0]) || !w[1].is_finite() || !w[0].is_finite() {
-            return Err(CoreError::NonIncreasingTime { sample: k + 1, t_prev: w[0], t: w[1] });
+        if !w[1].is_finite() || !w[0].is_finite() || w[1] <= w[0] {
+            return Err(CoreError::NonIncreasingTime {
+                sample: k + 1,
+                t_prev: w[0],
+                t: w[1],
+            });
         }
     }
     let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
@@ -191,7 +230,11 @@ pub fn uniform_step(t: &[f64]) -> Result<(f64, f64)> {
         // Tolerance: relative to the step, plus round-off of the absolute time value.
         let tol = UNIFORM_TIME_RTOL * dt + 1e-12 * w[1].abs();
         if (step - dt).abs() > tol {
-            return Err(CoreError::NonUniformTime { sample: k + 1, step, dt });
+            return Err(CoreError::NonUniformTime {
+                sample: k + 1,
+                step,
+                dt,
+            });
         }
     }
     Ok((t[0], dt))
@@ -207,20 +250,39 @@ pub struct Dataset {
 
 impl Dataset {
     /// Build a dataset; checks channel counts, unique names and values of every experiment.
-    pub fn new(inputs: Vec<Channel>, outputs: Vec<Channel>, experiments: Vec<Experiment>) -> Result<Self> {
-        check_unique("channel", inputs.iter().chain(outputs.iter()).map(|c| c.name.as_str()))?;
+    pub fn new(
+        inputs: Vec<Channel>,
+        outputs: Vec<Channel>,
+        experiments: Vec<Experiment>,
+    ) -> Result<Self> {
+        check_unique(
+            "channel",
+            inputs.iter().chain(outputs.iter()).map(|c| c.name.as_str()),
+        )?;
         let names_u: Vec<String> = inputs.iter().map(|c| c.name.clone()).collect();
         let names_y: Vec<String> = outputs.iter().map(|c| c.name.clone()).collect();
         for (e, exp) in experiments.iter().enumerate() {
             if exp.n_inputs() != inputs.len() {
-                return Err(CoreError::Length { what: "input channels of an experiment", found: exp.n_inputs(), expected: inputs.len() });
+                return Err(CoreError::Length {
+                    what: "input channels of an experiment",
+                    found: exp.n_inputs(),
+                    expected: inputs.len(),
+                });
             }
             if exp.n_outputs() != outputs.len() {
-                return Err(CoreError::Length { what: "output channels of an experiment", found: exp.n_outputs(), expected: outputs.len() });
+                return Err(CoreError::Length {
+                    what: "output channels of an experiment",
+                    found: exp.n_outputs(),
+                    expected: outputs.len(),
+                });
             }
             exp.check_values(e, &names_u, &names_y)?;
         }
-        Ok(Self { inputs, outputs, experiments })
+        Ok(Self {
+            inputs,
+            outputs,
+            experiments,
+        })
     }
 
     /// Input channels.
@@ -255,18 +317,34 @@ impl Dataset {
 
     /// Index of an input channel by name.
     pub fn input_index(&self, name: &str) -> Result<usize> {
-        self.inputs.iter().position(|c| c.name == name).ok_or_else(|| CoreError::UnknownName { kind: "input", name: name.into() })
+        self.inputs
+            .iter()
+            .position(|c| c.name == name)
+            .ok_or_else(|| CoreError::UnknownName {
+                kind: "input",
+                name: name.into(),
+            })
     }
 
     /// Index of an output channel by name.
     pub fn output_index(&self, name: &str) -> Result<usize> {
-        self.outputs.iter().position(|c| c.name == name).ok_or_else(|| CoreError::UnknownName { kind: "output", name: name.into() })
+        self.outputs
+            .iter()
+            .position(|c| c.name == name)
+            .ok_or_else(|| CoreError::UnknownName {
+                kind: "output",
+                name: name.into(),
+            })
     }
 
     /// Split every experiment at `fraction` of its samples: first part, second part.
     pub fn split(&self, fraction: f64) -> Result<(Self, Self)> {
         if !(fraction > 0.0 && fraction < 1.0) {
-            return Err(CoreError::InvalidArgument { name: "fraction", value: fraction, reason: "must lie in (0, 1)" });
+            return Err(CoreError::InvalidArgument {
+                name: "fraction",
+                value: fraction,
+                reason: "must lie in (0, 1)",
+            });
         }
         let mut first = Vec::new();
         let mut second = Vec::new();
@@ -289,7 +367,11 @@ impl Dataset {
     }
 
     fn with_experiments(&self, experiments: Vec<Experiment>) -> Self {
-        Self { inputs: self.inputs.clone(), outputs: self.outputs.clone(), experiments }
+        Self {
+            inputs: self.inputs.clone(),
+            outputs: self.outputs.clone(),
+            experiments,
+        }
     }
 }
 
@@ -298,7 +380,10 @@ pub fn check_unique<'a>(kind: &'static str, names: impl Iterator<Item = &'a str>
     let mut seen = std::collections::HashSet::new();
     for n in names {
         if !seen.insert(n) {
-            return Err(CoreError::DuplicateName { kind, name: n.to_string() });
+            return Err(CoreError::DuplicateName {
+                kind,
+                name: n.to_string(),
+            });
         }
     }
     Ok(())
@@ -324,7 +409,12 @@ mod tests {
 
     #[test]
     fn window_and_split_keep_time() {
-        let d = Dataset::new(vec![Channel::new("u")], vec![Channel::new("a"), Channel::new("b")], vec![exp(10)]).unwrap();
+        let d = Dataset::new(
+            vec![Channel::new("u")],
+            vec![Channel::new("a"), Channel::new("b")],
+            vec![exp(10)],
+        )
+        .unwrap();
         let (a, b) = d.split(0.3).unwrap();
         assert_eq!(a.experiments()[0].len(), 3);
         assert_eq!(b.experiments()[0].len(), 7);
@@ -356,12 +446,19 @@ mod tests {
         assert!(Experiment::new(0.0, 0.1, u.clone(), y.clone()).is_ok());
         u[(0, 1)] = f64::NAN;
         let e = Experiment::new(0.0, 0.1, u, y);
-        assert!(matches!(e, Err(CoreError::NonFiniteInput { sample: 1, .. })));
+        assert!(matches!(
+            e,
+            Err(CoreError::NonFiniteInput { sample: 1, .. })
+        ));
     }
 
     #[test]
     fn duplicate_channel_names_rejected() {
-        let d = Dataset::new(vec![Channel::new("u")], vec![Channel::new("u"), Channel::new("b")], vec![exp(3)]);
+        let d = Dataset::new(
+            vec![Channel::new("u")],
+            vec![Channel::new("u"), Channel::new("b")],
+            vec![exp(3)],
+        );
         assert!(matches!(d, Err(CoreError::DuplicateName { .. })));
     }
 }

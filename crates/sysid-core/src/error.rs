@@ -52,7 +52,9 @@ pub enum CoreError {
         col: usize,
     },
     /// An input sample is missing or not finite (inputs must be complete).
-    #[error("input channel '{channel}' is not finite at sample {sample} of experiment {experiment}")]
+    #[error(
+        "input channel '{channel}' is not finite at sample {sample} of experiment {experiment}"
+    )]
     NonFiniteInput {
         /// Channel name.
         channel: String,
@@ -189,7 +191,11 @@ pub fn check_finite(matrix: &'static str, m: &nalgebra::DMatrix<f64>) -> Result<
     for j in 0..m.ncols() {
         for i in 0..m.nrows() {
             if !m[(i, j)].is_finite() {
-                return Err(CoreError::NonFiniteMatrix { matrix, row: i, col: j });
+                return Err(CoreError::NonFiniteMatrix {
+                    matrix,
+                    row: i,
+                    col: j,
+                });
             }
         }
     }

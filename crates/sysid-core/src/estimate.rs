@@ -82,7 +82,13 @@ impl ExperimentEstimate {
         let q = self.corrections.nrows();
         let n = self.len();
         let pieces = self.corrections.ncols();
-        DMatrix::from_fn(q, n, |i, k| if pieces == 0 { 0.0 } else { self.corrections[(i, (k * self.substeps).min(pieces - 1))] })
+        DMatrix::from_fn(q, n, |i, k| {
+            if pieces == 0 {
+                0.0
+            } else {
+                self.corrections[(i, (k * self.substeps).min(pieces - 1))]
+            }
+        })
     }
 }
 

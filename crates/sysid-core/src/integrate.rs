@@ -6,6 +6,9 @@
 //! the input to change at each sample and steps to land exactly on sample times (its RK4
 //! overshoots `t_end`; see `../shared/notes/crates.md`).
 
+// Index loops over small state vectors read like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::DMatrix;
 
 use crate::dynamics::Dynamics;
@@ -44,7 +47,12 @@ pub struct DpOptions {
 
 impl Default for DpOptions {
     fn default() -> Self {
-        Self { rtol: 1e-8, atol: 1e-10, h_min: 1e-12, max_steps: 100_000 }
+        Self {
+            rtol: 1e-8,
+            atol: 1e-10,
+            h_min: 1e-12,
+            max_steps: 100_000,
+        }
     }
 }
 
@@ -74,7 +82,14 @@ impl Workspace {
 }
 
 /// One classical RK4 step of size `h` from `(t, x)` with input `u` held; updates `x`.
-pub fn rk4_step<D: Dynamics + ?Sized>(f: &D, t: f64, h: f64, x: &mut [f64], u: &[f64], ws: &mut Workspace) {
+pub fn rk4_step<D: Dynamics + ?Sized>(
+    f: &D,
+    t: f64,
+    h: f64,
+    x: &mut [f64],
+    u: &[f64],
+    ws: &mut Workspace,
+) {
     let n = x.len();
     let [k1, k2, k3, k4, ..] = &mut ws.k;
     let tmp = &mut ws.tmp;
@@ -104,9 +119,30 @@ const A: [[f64; 6]; 7] = [
     [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
     [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
-    [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0],
-    [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0],
-    [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
+    [
+        19372.0 / 6561.0,
+        -25360.0 / 2187.0,
+        64448.0 / 6561.0,
+        -212.0 / 729.0,
+        0.0,
+        0.0,
+    ],
+    [
+        9017.0 / 3168.0,
+        -355.0 / 33.0,
+        46732.0 / 5247.0,
+        49.0 / 176.0,
+        -5103.0 / 18656.0,
+        0.0,
+    ],
+    [
+        35.0 / 384.0,
+        0.0,
+        500.0 / 1113.0,
+        125.0 / 192.0,
+        -2187.0 / 6784.0,
+        11.0 / 84.0,
+    ],
 ];
 /// Error weights: 5th-order minus embedded 4th-order weights.
 const E: [f64; 7] = [
@@ -160,7 +196,10 @@ fn dopri_interval<D: Dynamics + ?Sized>(
     let mut steps = 0usize;
     while t < t1 {
         if steps >= opt.max_steps {
-            return Err(CoreError::TooManySteps { max_steps: opt.max_steps, t });
+            return Err(CoreError::TooManySteps {
+                max_steps: opt.max_steps,
+                t,
+            });
         }
         steps += 1;
         let last = t + h >= t1 - 1e-14 * t1.abs().max(span);
@@ -192,14 +231,22 @@ fn dopri_interval<D: Dynamics + ?Sized>(
         let err = (err / n.max(1) as f64).sqrt();
         if !err.is_finite() {
             let (state, value) = first_bad(&ws.y5);
-            return Err(CoreError::Diverged { t: t + h_step, state, value });
+            return Err(CoreError::Diverged {
+                t: t + h_step,
+                state,
+                value,
+            });
         }
         if err <= 1.0 {
             t = if last { t1 } else { t + h_step };
             x.copy_from_slice(&ws.y5);
             let (k0, rest) = ws.k.split_at_mut(1);
             k0[0].copy_from_slice(&rest[5]);
-            let fac = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            let fac = if err == 0.0 {
+                5.0
+            } else {
+                (0.9 * err.powf(-0.2)).clamp(0.2, 5.0)
+            };
             if !last {
                 h = h_step * fac;
                 ws.h_last = Some(h);
@@ -219,7 +266,11 @@ fn dopri_interval<D: Dynamics + ?Sized>(
 }
 
 fn first_bad(x: &[f64]) -> (usize, f64) {
-    x.iter().enumerate().find(|(_, v)| !v.is_finite()).map(|(i, v)| (i, *v)).unwrap_or((0, f64::NAN))
+    x.iter()
+        .enumerate()
+        .find(|(_, v)| !v.is_finite())
+        .map(|(i, v)| (i, *v))
+        .unwrap_or((0, f64::NAN))
 }
 
 /// Free-run simulation on a uniform grid `t_k = t0 + k·dt`, `k = 0..N` (`N` = columns of
@@ -239,10 +290,18 @@ pub fn simulate<D: Dynamics + ?Sized>(
 ) -> Result<DMatrix<f64>> {
     let n = f.n_states();
     if x0.len() != n {
-        return Err(CoreError::Length { what: "initial state", found: x0.len(), expected: n });
+        return Err(CoreError::Length {
+            what: "initial state",
+            found: x0.len(),
+            expected: n,
+        });
     }
     if inputs.nrows() != f.n_inputs() {
-        return Err(CoreError::Length { what: "input channels", found: inputs.nrows(), expected: f.n_inputs() });
+        return Err(CoreError::Length {
+            what: "input channels",
+            found: inputs.nrows(),
+            expected: f.n_inputs(),
+        });
     }
     if !(dt.is_finite() && dt > 0.0) {
         return Err(CoreError::BadSamplePeriod { dt });
@@ -261,8 +320,16 @@ pub fn simulate<D: Dynamics + ?Sized>(
         let ta = t0 + (k - 1) as f64 * dt;
         let tb = t0 + k as f64 * dt;
         integrate_interval(f, ta, tb, &mut x, u, method, &mut ws)?;
-        if let Some((state, value)) = x.iter().enumerate().find(|(_, v)| !v.is_finite() || v.abs() > blow_up) {
-            return Err(CoreError::Diverged { t: tb, state, value: *value });
+        if let Some((state, value)) = x
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !v.is_finite() || v.abs() > blow_up)
+        {
+            return Err(CoreError::Diverged {
+                t: tb,
+                state,
+                value: *value,
+            });
         }
         out.column_mut(k).copy_from_slice(&x);
     }
@@ -305,7 +372,16 @@ mod tests {
     fn rk4_error(steps: usize) -> f64 {
         let mut x = [1.0, 0.0];
         let mut ws = Workspace::new(2);
-        integrate_interval(&Osc, 0.0, 2.0, &mut x, &[], &Integrator::Rk4 { substeps: steps }, &mut ws).unwrap();
+        integrate_interval(
+            &Osc,
+            0.0,
+            2.0,
+            &mut x,
+            &[],
+            &Integrator::Rk4 { substeps: steps },
+            &mut ws,
+        )
+        .unwrap();
         ((x[0] - 2.0_f64.cos()).powi(2) + (x[1] + 2.0_f64.sin()).powi(2)).sqrt()
     }
 
@@ -320,29 +396,58 @@ mod tests {
     #[test]
     fn dopri_meets_tolerance_and_lands_on_t1() {
         for rtol in [1e-4, 1e-7, 1e-10] {
-            let opt = DpOptions { rtol, atol: rtol * 1e-2, ..DpOptions::default() };
+            let opt = DpOptions {
+                rtol,
+                atol: rtol * 1e-2,
+                ..DpOptions::default()
+            };
             let mut x = [1.0];
             let mut ws = Workspace::new(1);
-            integrate_interval(&Decay(-3.0), 0.0, 2.0, &mut x, &[1.0], &Integrator::DormandPrince(opt), &mut ws).unwrap();
+            integrate_interval(
+                &Decay(-3.0),
+                0.0,
+                2.0,
+                &mut x,
+                &[1.0],
+                &Integrator::DormandPrince(opt),
+                &mut ws,
+            )
+            .unwrap();
             // x(t) = 1/3 + (1 - 1/3) e^{-3t}
             let exact = 1.0 / 3.0 + (2.0 / 3.0) * (-6.0_f64).exp();
             // Global error is at most a small multiple of the local tolerance here (stable problem).
-            assert!((x[0] - exact).abs() < 10.0 * rtol, "rtol {rtol}: err {}", (x[0] - exact).abs());
+            assert!(
+                (x[0] - exact).abs() < 10.0 * rtol,
+                "rtol {rtol}: err {}",
+                (x[0] - exact).abs()
+            );
         }
     }
 
     #[test]
     fn dopri_fixed_step_is_fifth_order() {
         // Disable error control (huge tolerance) so the step is the whole interval / k.
-        let opt = DpOptions { rtol: 1e6, atol: 1e6, ..DpOptions::default() };
+        let opt = DpOptions {
+            rtol: 1e6,
+            atol: 1e6,
+            ..DpOptions::default()
+        };
         let err = |k: usize| {
             let mut x = [1.0, 0.0];
             let mut ws = Workspace::new(2);
             let h = 2.0 / k as f64;
             for j in 0..k {
                 ws.h_last = None;
-                integrate_interval(&Osc, j as f64 * h, (j + 1) as f64 * h, &mut x, &[], &Integrator::DormandPrince(opt), &mut ws)
-                    .unwrap();
+                integrate_interval(
+                    &Osc,
+                    j as f64 * h,
+                    (j + 1) as f64 * h,
+                    &mut x,
+                    &[],
+                    &Integrator::DormandPrince(opt),
+                    &mut ws,
+                )
+                .unwrap();
             }
             ((x[0] - 2.0_f64.cos()).powi(2) + (x[1] + 2.0_f64.sin()).powi(2)).sqrt()
         };
@@ -353,10 +458,27 @@ mod tests {
     #[test]
     fn simulate_holds_input_and_detects_blow_up() {
         let u = DMatrix::from_element(1, 11, 2.0);
-        let xs = simulate(&Decay(0.0), &[0.0], 0.0, 0.1, &u, &Integrator::Rk4 { substeps: 1 }, DEFAULT_BLOW_UP).unwrap();
+        let xs = simulate(
+            &Decay(0.0),
+            &[0.0],
+            0.0,
+            0.1,
+            &u,
+            &Integrator::Rk4 { substeps: 1 },
+            DEFAULT_BLOW_UP,
+        )
+        .unwrap();
         assert!((xs[(0, 10)] - 2.0).abs() < 1e-12);
         let u = DMatrix::zeros(1, 200);
-        let r = simulate(&Decay(50.0), &[1.0], 0.0, 1.0, &u, &Integrator::Rk4 { substeps: 4 }, 1e6);
+        let r = simulate(
+            &Decay(50.0),
+            &[1.0],
+            0.0,
+            1.0,
+            &u,
+            &Integrator::Rk4 { substeps: 4 },
+            1e6,
+        );
         assert!(matches!(r, Err(CoreError::Diverged { .. })));
     }
 }

@@ -1,6 +1,9 @@
 //! The assumed linear model `ẋ = A x + B u + E d`, `y = C x`, with named states, inputs,
 //! outputs and corrections, shape checks, and exact zero-order-hold discretisation.
 
+// Index loops over small state vectors read like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
@@ -41,7 +44,12 @@ impl ModelNames {
     /// Default names `x1…`, `u1…`, `y1…`, `d1…`.
     pub fn numbered(n: usize, m: usize, p: usize, q: usize) -> Self {
         let f = |prefix: &str, k: usize| (1..=k).map(|i| format!("{prefix}{i}")).collect();
-        Self { states: f("x", n), inputs: f("u", m), outputs: f("y", p), corrections: f("d", q) }
+        Self {
+            states: f("x", n),
+            inputs: f("u", m),
+            outputs: f("y", p),
+            corrections: f("d", q),
+        }
     }
 }
 
@@ -62,11 +70,21 @@ impl LinearModel {
     ) -> Result<Self> {
         let n = a.nrows();
         if a.ncols() != n {
-            return Err(CoreError::NotSquare { matrix: "A", rows: a.nrows(), cols: a.ncols() });
+            return Err(CoreError::NotSquare {
+                matrix: "A",
+                rows: a.nrows(),
+                cols: a.ncols(),
+            });
         }
         let shape = |matrix, m: &DMatrix<f64>, er, ec| {
             if m.nrows() != er || m.ncols() != ec {
-                Err(CoreError::Shape { matrix, rows: m.nrows(), cols: m.ncols(), expected_rows: er, expected_cols: ec })
+                Err(CoreError::Shape {
+                    matrix,
+                    rows: m.nrows(),
+                    cols: m.ncols(),
+                    expected_rows: er,
+                    expected_cols: ec,
+                })
             } else {
                 Ok(())
             }
@@ -78,7 +96,15 @@ impl LinearModel {
             check_finite(name, m)?;
         }
         let count = |what, v: &Vec<String>, expected| {
-            if v.len() != expected { Err(CoreError::Length { what, found: v.len(), expected }) } else { Ok(()) }
+            if v.len() != expected {
+                Err(CoreError::Length {
+                    what,
+                    found: v.len(),
+                    expected,
+                })
+            } else {
+                Ok(())
+            }
         };
         count("state names", &names.states, n)?;
         count("input names", &names.inputs, b.ncols())?;
@@ -88,7 +114,16 @@ impl LinearModel {
         check_unique("input", names.inputs.iter().map(String::as_str))?;
         check_unique("output", names.outputs.iter().map(String::as_str))?;
         check_unique("correction", names.corrections.iter().map(String::as_str))?;
-        Ok(Self { a, b, c, e, states: names.states, inputs: names.inputs, outputs: names.outputs, corrections: names.corrections })
+        Ok(Self {
+            a,
+            b,
+            c,
+            e,
+            states: names.states,
+            inputs: names.inputs,
+            outputs: names.outputs,
+            corrections: names.corrections,
+        })
     }
 
     /// State matrix `A`.
@@ -142,7 +177,13 @@ impl LinearModel {
 
     /// Index of a state by name.
     pub fn state_index(&self, name: &str) -> Result<usize> {
-        self.states.iter().position(|s| s == name).ok_or_else(|| CoreError::UnknownName { kind: "state", name: name.into() })
+        self.states
+            .iter()
+            .position(|s| s == name)
+            .ok_or_else(|| CoreError::UnknownName {
+                kind: "state",
+                name: name.into(),
+            })
     }
 
     /// A copy with `A` and `B` replaced (same shapes required), e.g. after a regression
@@ -155,7 +196,13 @@ impl LinearModel {
             corrections: self.corrections.clone(),
         };
         if b.nrows() != self.n_states() || b.ncols() != self.n_inputs() {
-            return Err(CoreError::Shape { matrix: "B", rows: b.nrows(), cols: b.ncols(), expected_rows: self.n_states(), expected_cols: self.n_inputs() });
+            return Err(CoreError::Shape {
+                matrix: "B",
+                rows: b.nrows(),
+                cols: b.ncols(),
+                expected_rows: self.n_states(),
+                expected_cols: self.n_inputs(),
+            });
         }
         Self::with_names(a, b, self.c.clone(), self.e.clone(), names)
     }
@@ -175,8 +222,12 @@ impl LinearModel {
     /// `exp([[A, B, E], [0, 0, 0]]·h) = [[Ad, Bd, Ed], [0, I, 0], [0, 0, I]]`.
     pub fn discretize(&self, h: f64) -> Result<DiscreteLinear> {
         discretize_zoh(&self.a, &[&self.b, &self.e], h).map(|mut blocks| {
-            let ed = blocks.pop().unwrap_or_else(|| DMatrix::zeros(self.n_states(), 0));
-            let bd = blocks.pop().unwrap_or_else(|| DMatrix::zeros(self.n_states(), 0));
+            let ed = blocks
+                .pop()
+                .unwrap_or_else(|| DMatrix::zeros(self.n_states(), 0));
+            let bd = blocks
+                .pop()
+                .unwrap_or_else(|| DMatrix::zeros(self.n_states(), 0));
             let ad = blocks.pop().unwrap_or_else(|| DMatrix::zeros(0, 0));
             DiscreteLinear { h, ad, bd, ed }
         })
@@ -212,18 +263,36 @@ pub struct DiscreteLinear {
 /// Exact ZOH discretisation of `ẋ = A x + Σ_i G_i w_i` over `h`: returns
 /// `[exp(A h), Γ G_1, Γ G_2, …]` with `Γ = ∫₀ʰ exp(A s) ds`, from one matrix exponential
 /// of the augmented matrix (Van Loan's block trick).
-pub fn discretize_zoh(a: &DMatrix<f64>, inputs: &[&DMatrix<f64>], h: f64) -> Result<Vec<DMatrix<f64>>> {
+pub fn discretize_zoh(
+    a: &DMatrix<f64>,
+    inputs: &[&DMatrix<f64>],
+    h: f64,
+) -> Result<Vec<DMatrix<f64>>> {
     if !(h.is_finite() && h > 0.0) {
-        return Err(CoreError::InvalidArgument { name: "h", value: h, reason: "step must be positive and finite" });
+        return Err(CoreError::InvalidArgument {
+            name: "h",
+            value: h,
+            reason: "step must be positive and finite",
+        });
     }
     let n = a.nrows();
     if a.ncols() != n {
-        return Err(CoreError::NotSquare { matrix: "A", rows: a.nrows(), cols: a.ncols() });
+        return Err(CoreError::NotSquare {
+            matrix: "A",
+            rows: a.nrows(),
+            cols: a.ncols(),
+        });
     }
     let widths: Vec<usize> = inputs.iter().map(|g| g.ncols()).collect();
     for g in inputs {
         if g.nrows() != n {
-            return Err(CoreError::Shape { matrix: "input block", rows: g.nrows(), cols: g.ncols(), expected_rows: n, expected_cols: g.ncols() });
+            return Err(CoreError::Shape {
+                matrix: "input block",
+                rows: g.nrows(),
+                cols: g.ncols(),
+                expected_rows: n,
+                expected_cols: g.ncols(),
+            });
         }
     }
     let total = n + widths.iter().sum::<usize>();
@@ -266,7 +335,14 @@ impl Dynamics for LinearModel {
             dx[i] = s;
         }
     }
-    fn jacobians(&self, _t: f64, _x: &[f64], _u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+    fn jacobians(
+        &self,
+        _t: f64,
+        _x: &[f64],
+        _u: &[f64],
+        a: &mut DMatrix<f64>,
+        b: &mut DMatrix<f64>,
+    ) {
         a.copy_from(&self.a);
         b.copy_from(&self.b);
     }
@@ -299,7 +375,12 @@ mod tests {
         let ad = DMatrix::from_row_slice(
             2,
             2,
-            &[ex * (co + s / wd * si), ex * si / wd, -w * w * ex * si / wd, ex * (co - s / wd * si)],
+            &[
+                ex * (co + s / wd * si),
+                ex * si / wd,
+                -w * w * ex * si / wd,
+                ex * (co - s / wd * si),
+            ],
         );
         // Step response of x from rest with unit input: x(h) = (1 - Ad00)/w², v(h) = Ad01 (impulse response of x).
         let bd = DMatrix::from_row_slice(2, 1, &[(1.0 - ad[(0, 0)]) / (w * w), ad[(0, 1)]]);
@@ -311,13 +392,33 @@ mod tests {
     #[test]
     fn shape_errors_name_the_matrix() {
         let a = DMatrix::zeros(2, 3);
-        let r = LinearModel::new(a, DMatrix::zeros(2, 1), DMatrix::zeros(1, 2), DMatrix::zeros(2, 1));
+        let r = LinearModel::new(
+            a,
+            DMatrix::zeros(2, 1),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(2, 1),
+        );
         assert!(matches!(r, Err(CoreError::NotSquare { matrix: "A", .. })));
-        let r = LinearModel::new(DMatrix::zeros(2, 2), DMatrix::zeros(3, 1), DMatrix::zeros(1, 2), DMatrix::zeros(2, 1));
+        let r = LinearModel::new(
+            DMatrix::zeros(2, 2),
+            DMatrix::zeros(3, 1),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(2, 1),
+        );
         assert!(matches!(r, Err(CoreError::Shape { matrix: "B", .. })));
-        let r = LinearModel::new(DMatrix::zeros(2, 2), DMatrix::zeros(2, 1), DMatrix::zeros(1, 3), DMatrix::zeros(2, 1));
+        let r = LinearModel::new(
+            DMatrix::zeros(2, 2),
+            DMatrix::zeros(2, 1),
+            DMatrix::zeros(1, 3),
+            DMatrix::zeros(2, 1),
+        );
         assert!(matches!(r, Err(CoreError::Shape { matrix: "C", .. })));
-        let r = LinearModel::new(DMatrix::zeros(2, 2), DMatrix::zeros(2, 1), DMatrix::zeros(1, 2), DMatrix::zeros(1, 1));
+        let r = LinearModel::new(
+            DMatrix::zeros(2, 2),
+            DMatrix::zeros(2, 1),
+            DMatrix::zeros(1, 2),
+            DMatrix::zeros(1, 1),
+        );
         assert!(matches!(r, Err(CoreError::Shape { matrix: "E", .. })));
     }
 

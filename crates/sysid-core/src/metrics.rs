@@ -26,28 +26,53 @@ pub struct ChannelMetrics {
 /// the measurement is present.
 pub fn channel_metrics(measured: &[f64], predicted: &[f64]) -> Result<ChannelMetrics> {
     if measured.len() != predicted.len() {
-        return Err(CoreError::Length { what: "predicted vs measured samples", found: predicted.len(), expected: measured.len() });
+        return Err(CoreError::Length {
+            what: "predicted vs measured samples",
+            found: predicted.len(),
+            expected: measured.len(),
+        });
     }
     let pairs = || measured.iter().zip(predicted).filter(|(y, _)| !y.is_nan());
     let n = pairs().count();
     if n < 2 {
-        return Err(CoreError::TooFewSamples { what: "fit metrics", found: n, needed: 2 });
+        return Err(CoreError::TooFewSamples {
+            what: "fit metrics",
+            found: n,
+            needed: 2,
+        });
     }
-    if let Some(k) = measured.iter().zip(predicted).position(|(y, p)| !y.is_nan() && !p.is_finite()) {
-        return Err(CoreError::InvalidArgument { name: "prediction", value: k as f64, reason: "prediction is not finite at this sample index" });
+    if let Some(k) = measured
+        .iter()
+        .zip(predicted)
+        .position(|(y, p)| !y.is_nan() && !p.is_finite())
+    {
+        return Err(CoreError::InvalidArgument {
+            name: "prediction",
+            value: k as f64,
+            reason: "prediction is not finite at this sample index",
+        });
     }
     let nf = n as f64;
     let mean_y = pairs().map(|(y, _)| y).sum::<f64>() / nf;
     let sse: f64 = pairs().map(|(y, p)| (y - p) * (y - p)).sum();
     let sst: f64 = pairs().map(|(y, _)| (y - mean_y) * (y - mean_y)).sum();
     let mean_e = pairs().map(|(y, p)| y - p).sum::<f64>() / nf;
-    let var_e = pairs().map(|(y, p)| (y - p - mean_e) * (y - p - mean_e)).sum::<f64>() / (nf - 1.0);
+    let var_e = pairs()
+        .map(|(y, p)| (y - p - mean_e) * (y - p - mean_e))
+        .sum::<f64>()
+        / (nf - 1.0);
     let (fit, r2) = if sst > 0.0 {
         (100.0 * (1.0 - (sse / sst).sqrt()), 1.0 - sse / sst)
     } else {
         (f64::NAN, f64::NAN)
     };
-    Ok(ChannelMetrics { fit_percent: fit, r2, rmse: (sse / nf).sqrt(), error_variance: var_e, samples: n })
+    Ok(ChannelMetrics {
+        fit_percent: fit,
+        r2,
+        rmse: (sse / nf).sqrt(),
+        error_variance: var_e,
+        samples: n,
+    })
 }
 
 #[cfg(test)]
@@ -69,7 +94,8 @@ mod tests {
     #[test]
     fn missing_samples_are_skipped() {
         let full = channel_metrics(&[1.0, 2.0, 3.0, 4.0], &[1.0, 2.0, 4.0, 3.0]).unwrap();
-        let gap = channel_metrics(&[1.0, f64::NAN, 2.0, 3.0, 4.0], &[1.0, 99.0, 2.0, 4.0, 3.0]).unwrap();
+        let gap =
+            channel_metrics(&[1.0, f64::NAN, 2.0, 3.0, 4.0], &[1.0, 99.0, 2.0, 4.0, 3.0]).unwrap();
         assert_eq!(full, gap);
     }
 

@@ -1,0 +1,42 @@
+//! Criterion bench: Levenberg–Marquardt training of a 2-5-1 network on 1000 samples for a
+//! fixed number of epochs (no early stopping, no goal, so every iteration does the same
+//! work).
+
+use std::hint::black_box;
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use nalgebra::DMatrix;
+use nn::{LmConfig, Mlp, ValidationSplit, train_lm};
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+
+fn bench_lm(c: &mut Criterion) {
+    let n = 1000;
+    let epochs = 20;
+    let mut rng = ChaCha8Rng::seed_from_u64(42);
+    let x = DMatrix::<f64>::from_fn(2, n, |_, _| rng.random_range(-2.0..2.0));
+    let t = DMatrix::from_fn(1, n, |_, k| (x[(0, k)]).sin() * (0.5 * x[(1, k)]).cos());
+    let net = Mlp::for_data(&x, &t, &[5], 7).expect("valid data");
+    let config = LmConfig {
+        max_epochs: epochs,
+        validation: ValidationSplit::None,
+        min_gradient: 0.0,
+        ..LmConfig::default()
+    };
+    let mut group = c.benchmark_group("lm");
+    group.bench_with_input(
+        BenchmarkId::new("2-5-1", format!("{n}x{epochs}epochs")),
+        &(x, t),
+        |b, (x, t)| {
+            b.iter(|| {
+                let mut trained = net.clone();
+                let report = train_lm(&mut trained, x, t, &config, None).expect("valid");
+                black_box(report.train_mse)
+            })
+        },
+    );
+    group.finish();
+}
+
+criterion_group!(benches, bench_lm);
+criterion_main!(benches);

@@ -1,0 +1,175 @@
+//! Configuration of Levenberg–Marquardt training ([`LmConfig`]), the validation split
+//! ([`ValidationSplit`]) and the space in which errors are measured ([`ErrorSpace`]).
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{NnError, Result};
+
+/// In which units training errors, MSE goals and reported MSEs are measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorSpace {
+    /// Original target units (as MATLAB's `trainlm` with default normalisation 'none').
+    /// The MSE is `Σ (t − y)² / (N·q)` on raw data.
+    #[default]
+    Original,
+    /// Targets scaled by the network's output scaler to [−1, 1]. Every output channel then
+    /// weighs the same whatever its physical scale; prefer it for multi-output networks
+    /// whose outputs differ in magnitude.
+    Normalised,
+}
+
+/// How the training samples are split into a training part and a validation part used
+/// for early stopping.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ValidationSplit {
+    /// No validation: train on every sample; no early stopping.
+    None,
+    /// `round(fraction·N)` samples drawn without replacement by a `ChaCha8Rng` seeded with
+    /// `seed` (MATLAB's `dividerand` without a test part).
+    Random {
+        /// Fraction of samples used for validation, in (0, 1).
+        fraction: f64,
+        /// Seed of the shuffle.
+        seed: u64,
+    },
+    /// The last `round(fraction·N)` samples (a contiguous block at the end, which suits
+    /// time series where neighbouring samples are correlated).
+    Tail {
+        /// Fraction of samples used for validation, in (0, 1).
+        fraction: f64,
+    },
+}
+
+/// Levenberg–Marquardt settings. Defaults follow MATLAB's `trainlm` where it has one.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct LmConfig {
+    /// Maximum number of accepted epochs (LM steps). Default 1000.
+    pub max_epochs: usize,
+    /// Stop when the training MSE is at or below this value (in [`LmConfig::error_space`]
+    /// units squared). Default 0 (never).
+    pub goal_mse: f64,
+    /// Stop when the Euclidean norm of the gradient of the objective (MSE plus decay term)
+    /// with respect to the weights falls below this. Default 1e-10.
+    pub min_gradient: f64,
+    /// Initial damping μ. Default 1e-3.
+    pub mu_initial: f64,
+    /// Factor applied to μ after an accepted step, in (0, 1). Default 0.1.
+    pub mu_decrease: f64,
+    /// Factor applied to μ after a rejected step, > 1. Default 10.
+    pub mu_increase: f64,
+    /// Stop when μ would exceed this. Default 1e10.
+    pub mu_max: f64,
+    /// Validation split for early stopping. Default `Random { fraction: 0.15, seed: 0 }`
+    /// (`trainlm`'s default validation share).
+    pub validation: ValidationSplit,
+    /// Stop after this many consecutive epochs whose validation MSE is above the best so
+    /// far (an equal value neither counts nor resets). Default 6.
+    pub max_fail: usize,
+    /// Weight decay λ ≥ 0: the objective is `MSE + λ·‖w‖²/n_w` (mean squared weight, as
+    /// MATLAB's `msereg`). Default 0.
+    pub weight_decay: f64,
+    /// Units of errors and MSEs. Default [`ErrorSpace::Original`].
+    pub error_space: ErrorSpace,
+}
+
+impl Default for LmConfig {
+    fn default() -> Self {
+        Self {
+            max_epochs: 1000,
+            goal_mse: 0.0,
+            min_gradient: 1e-10,
+            mu_initial: 1e-3,
+            mu_decrease: 0.1,
+            mu_increase: 10.0,
+            mu_max: 1e10,
+            validation: ValidationSplit::Random {
+                fraction: 0.15,
+                seed: 0,
+            },
+            max_fail: 6,
+            weight_decay: 0.0,
+            error_space: ErrorSpace::Original,
+        }
+    }
+}
+
+impl LmConfig {
+    /// Check every field is in range.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field, value, reason| {
+            Err(NnError::InvalidConfig {
+                field,
+                value,
+                reason,
+            })
+        };
+        if !(self.goal_mse.is_finite() && self.goal_mse >= 0.0) {
+            return bad("goal_mse", self.goal_mse, "must be finite and ≥ 0");
+        }
+        if !(self.min_gradient.is_finite() && self.min_gradient >= 0.0) {
+            return bad("min_gradient", self.min_gradient, "must be finite and ≥ 0");
+        }
+        if !(self.mu_initial.is_finite() && self.mu_initial > 0.0) {
+            return bad("mu_initial", self.mu_initial, "must be finite and > 0");
+        }
+        if !(self.mu_decrease > 0.0 && self.mu_decrease < 1.0) {
+            return bad("mu_decrease", self.mu_decrease, "must be in (0, 1)");
+        }
+        if !(self.mu_increase.is_finite() && self.mu_increase > 1.0) {
+            return bad("mu_increase", self.mu_increase, "must be finite and > 1");
+        }
+        if !(self.mu_max.is_finite() && self.mu_max >= self.mu_initial) {
+            return bad("mu_max", self.mu_max, "must be finite and ≥ mu_initial");
+        }
+        if self.max_fail == 0 {
+            return bad("max_fail", 0.0, "must be ≥ 1");
+        }
+        if !(self.weight_decay.is_finite() && self.weight_decay >= 0.0) {
+            return bad("weight_decay", self.weight_decay, "must be finite and ≥ 0");
+        }
+        match self.validation {
+            ValidationSplit::None => {}
+            ValidationSplit::Random { fraction, .. } | ValidationSplit::Tail { fraction } => {
+                if !(fraction > 0.0 && fraction < 1.0) {
+                    return bad("validation.fraction", fraction, "must be in (0, 1)");
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_valid_and_bad_fields_are_named() {
+        LmConfig::default().validate().unwrap();
+        let c = LmConfig {
+            mu_decrease: 1.5,
+            ..LmConfig::default()
+        };
+        assert!(matches!(
+            c.validate(),
+            Err(NnError::InvalidConfig {
+                field: "mu_decrease",
+                ..
+            })
+        ));
+        let c = LmConfig {
+            validation: ValidationSplit::Tail { fraction: 1.0 },
+            ..LmConfig::default()
+        };
+        assert!(matches!(
+            c.validate(),
+            Err(NnError::InvalidConfig {
+                field: "validation.fraction",
+                ..
+            })
+        ));
+    }
+}

@@ -1,0 +1,222 @@
+//! A trained network used as the model-error term of a hybrid model: [`NetCorrection`]
+//! implements `sysid_core::Correction` with network inputs `[x, u]` and outputs `d`, and
+//! gives the Jacobians `∂d/∂x`, `∂d/∂u` for linearisation.
+
+use std::cell::RefCell;
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use sysid_core::Correction;
+
+use crate::error::{NnError, Result};
+use crate::mlp::{Mlp, Workspace};
+
+/// A network `d = NN([x; u])` read as a correction of a model with `n_states` states:
+/// network inputs `0..n_states` are the states, the rest are the model inputs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "NetCorrectionRaw")]
+pub struct NetCorrection {
+    net: Mlp,
+    n_states: usize,
+}
+
+#[derive(Deserialize)]
+struct NetCorrectionRaw {
+    net: Mlp,
+    n_states: usize,
+}
+
+impl TryFrom<NetCorrectionRaw> for NetCorrection {
+    type Error = NnError;
+    fn try_from(raw: NetCorrectionRaw) -> Result<Self> {
+        NetCorrection::new(raw.net, raw.n_states)
+    }
+}
+
+thread_local! {
+    /// Per-thread scratch for [`Correction::eval`], which takes `&self` and cannot carry a
+    /// caller workspace; it lets integrators call the network without allocating.
+    static SCRATCH: RefCell<Workspace> = RefCell::new(Workspace::new());
+}
+
+impl NetCorrection {
+    /// Wrap `net`, whose first `n_states` inputs are states and the remaining ones model
+    /// inputs.
+    ///
+    /// Errors: `n_states` larger than the network's input count.
+    pub fn new(net: Mlp, n_states: usize) -> Result<Self> {
+        if n_states > net.n_inputs() {
+            return Err(NnError::CorrectionSplit {
+                n_states,
+                n_inputs: net.n_inputs(),
+            });
+        }
+        Ok(Self { net, n_states })
+    }
+
+    /// The network.
+    pub fn network(&self) -> &Mlp {
+        &self.net
+    }
+
+    /// Give back the network.
+    pub fn into_network(self) -> Mlp {
+        self.net
+    }
+
+    /// Evaluate `d = NN([x; u])` with a caller workspace (allocation-free once it has
+    /// grown).
+    ///
+    /// Errors: `x`, `u` or `d` of the wrong length.
+    pub fn eval_into(&self, x: &[f64], u: &[f64], d: &mut [f64], ws: &mut Workspace) -> Result<()> {
+        self.load(x, u, d.len(), ws)?;
+        self.net.forward_scaled(ws);
+        let out = self.net.output_range();
+        self.net.output_scaler().unscale_into(&ws.acts[out], d);
+        Ok(())
+    }
+
+    /// Evaluate `d` and the Jacobians `∂d/∂x` (`q × n`) and `∂d/∂u` (`q × m`) at `(x, u)`.
+    ///
+    /// Errors: any slice or matrix of the wrong size.
+    pub fn jacobians(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        d: &mut [f64],
+        dx: &mut DMatrix<f64>,
+        du: &mut DMatrix<f64>,
+        ws: &mut Workspace,
+    ) -> Result<()> {
+        let q = self.net.n_outputs();
+        let m = self.n_inputs();
+        for (matrix, mat, cols) in [("dd/dx", &*dx, self.n_states), ("dd/du", &*du, m)] {
+            if mat.nrows() != q || mat.ncols() != cols {
+                return Err(NnError::Shape {
+                    matrix,
+                    rows: mat.nrows(),
+                    cols: mat.ncols(),
+                    expected_rows: q,
+                    expected_cols: cols,
+                });
+            }
+        }
+        self.eval_into(x, u, d, ws)?;
+        let n = self.n_states;
+        self.net.input_gradients(ws, |o, j, v| {
+            if j < n {
+                dx[(o, j)] = v;
+            } else {
+                du[(o, j - n)] = v;
+            }
+        });
+        Ok(())
+    }
+
+    /// Check lengths, prepare `ws` and write the scaled `[x; u]` into it.
+    fn load(&self, x: &[f64], u: &[f64], d_len: usize, ws: &mut Workspace) -> Result<()> {
+        if x.len() != self.n_states {
+            return Err(NnError::Length {
+                what: "correction states",
+                found: x.len(),
+                expected: self.n_states,
+            });
+        }
+        if u.len() != self.n_inputs() {
+            return Err(NnError::Length {
+                what: "correction inputs",
+                found: u.len(),
+                expected: self.n_inputs(),
+            });
+        }
+        if d_len != self.net.n_outputs() {
+            return Err(NnError::Length {
+                what: "correction outputs",
+                found: d_len,
+                expected: self.net.n_outputs(),
+            });
+        }
+        ws.prepare(self.net.architecture());
+        let s = self.net.input_scaler();
+        for (j, v) in x.iter().chain(u).enumerate() {
+            ws.acts[j] = (v - s.centre()[j]) / s.half_range()[j];
+        }
+        Ok(())
+    }
+}
+
+impl Correction for NetCorrection {
+    fn n_states(&self) -> usize {
+        self.n_states
+    }
+
+    fn n_inputs(&self) -> usize {
+        self.net.n_inputs() - self.n_states
+    }
+
+    fn n_outputs(&self) -> usize {
+        self.net.n_outputs()
+    }
+
+    /// Evaluate `d = NN([x; u])`. The trait cannot return an error: slices of the wrong
+    /// length fill `d` with NaN, which the hybrid simulation reports as divergence.
+    fn eval(&self, x: &[f64], u: &[f64], d: &mut [f64]) {
+        let ok = SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut ws) => self.eval_into(x, u, d, &mut ws),
+            // Re-entrant call on this thread (not expected): use a fresh workspace.
+            Err(_) => self.eval_into(x, u, d, &mut Workspace::new()),
+        });
+        if ok.is_err() {
+            d.fill(f64::NAN);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mlp::Architecture;
+
+    #[test]
+    #[allow(
+        clippy::float_cmp,
+        reason = "same operations in the same order give identical bits"
+    )]
+    fn eval_matches_forward_on_concatenated_input() {
+        let net = Mlp::new(&Architecture::single(3, 4, 2), 5).unwrap();
+        let corr = NetCorrection::new(net.clone(), 2).unwrap();
+        assert_eq!(
+            (corr.n_states(), corr.n_inputs(), corr.n_outputs()),
+            (2, 1, 2)
+        );
+        let mut d = [0.0; 2];
+        corr.eval(&[0.3, -0.2], &[0.9], &mut d);
+        let mut y = [0.0; 2];
+        net.forward(&[0.3, -0.2, 0.9], &mut y, &mut Workspace::new())
+            .unwrap();
+        // Same arithmetic in the same order: identical bits.
+        assert_eq!(d, y);
+        let full = net.input_jacobian(&[0.3, -0.2, 0.9]).unwrap();
+        let (mut dx, mut du) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 1));
+        corr.jacobians(
+            &[0.3, -0.2],
+            &[0.9],
+            &mut d,
+            &mut dx,
+            &mut du,
+            &mut Workspace::new(),
+        )
+        .unwrap();
+        assert_eq!(dx, full.columns(0, 2).into_owned());
+        assert_eq!(du, full.columns(2, 1).into_owned());
+        corr.eval(&[0.3], &[0.9], &mut d);
+        assert!(d.iter().all(|v| v.is_nan()));
+        assert!(matches!(
+            NetCorrection::new(net, 4),
+            Err(NnError::CorrectionSplit {
+                n_states: 4,
+                n_inputs: 3
+            })
+        ));
+    }
+}

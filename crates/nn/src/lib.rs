@@ -1,0 +1,20 @@
+#![doc = include_str!("../README.md")]
+
+pub mod config;
+pub mod correction;
+pub mod error;
+pub mod jacobian;
+pub mod lm;
+pub mod mlp;
+pub mod scaling;
+pub mod sweep;
+
+pub use config::{ErrorSpace, LmConfig, ValidationSplit};
+pub use correction::NetCorrection;
+pub use error::{NnError, Result};
+pub use lm::{EpochInfo, StopReason, TrainReport, split_indices, train_lm};
+pub use mlp::{Architecture, Mlp, Workspace};
+pub use scaling::{CONSTANT_CHANNEL_RTOL, Scaler};
+pub use sweep::{
+    Selection, SweepConfig, SweepProgress, SweepResult, SweepRow, derive_seed, select, sizing_sweep,
+};

@@ -1,0 +1,413 @@
+//! Levenberg–Marquardt training of an [`Mlp`] (MATLAB `trainlm`-style): damped
+//! Gauss–Newton steps `(JᵀJ + μI) δ = Jᵀe` solved by Cholesky, μ adaptation, early
+//! stopping on a validation split, optional weight decay, and the [`TrainReport`].
+
+use nalgebra::{Cholesky, DMatrix, DVector};
+use rand::SeedableRng;
+use rand::rngs::ChaCha8Rng;
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+
+use crate::config::{ErrorSpace, LmConfig, ValidationSplit};
+use crate::error::{NnError, Result};
+use crate::mlp::{Mlp, Workspace, check_training_data};
+
+/// μ never drops below this: far below any useful damping, it only stops μ from
+/// underflowing after long runs of accepted steps.
+const MU_FLOOR: f64 = 1e-20;
+
+/// Why training stopped. Not converging is a reason, not an error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum StopReason {
+    /// [`LmConfig::max_epochs`] epochs were run.
+    MaxEpochs,
+    /// The training MSE reached [`LmConfig::goal_mse`].
+    GoalReached,
+    /// The gradient norm fell below [`LmConfig::min_gradient`].
+    MinGradient,
+    /// No step reduced the objective before μ exceeded [`LmConfig::mu_max`].
+    MuMax,
+    /// The validation MSE failed to improve [`LmConfig::max_fail`] epochs in a row.
+    ValidationStop,
+}
+
+/// State after one epoch, passed to the progress callback.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct EpochInfo {
+    /// Epoch number (1 = after the first accepted step).
+    pub epoch: usize,
+    /// Training MSE after the step.
+    pub train_mse: f64,
+    /// Validation MSE after the step (`None` without a validation split).
+    pub val_mse: Option<f64>,
+    /// Damping μ after the step's adaptation.
+    pub mu: f64,
+    /// Norm of the objective's gradient after the step.
+    pub gradient_norm: f64,
+}
+
+/// What training did. MSEs are in [`LmConfig::error_space`] units.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainReport {
+    /// Why it stopped.
+    pub termination: StopReason,
+    /// Epochs run (accepted steps).
+    pub epochs: usize,
+    /// Epoch whose weights were returned: the best-validation epoch when a validation
+    /// split is used, otherwise the last epoch.
+    pub best_epoch: usize,
+    /// Training MSE of the returned weights.
+    pub train_mse: f64,
+    /// Validation MSE of the returned weights (`None` without validation).
+    pub val_mse: Option<f64>,
+    /// Training MSE per epoch; index 0 is the initial network.
+    pub train_history: Vec<f64>,
+    /// Validation MSE per epoch (index 0 = initial); empty without validation.
+    pub val_history: Vec<f64>,
+    /// Final damping μ.
+    pub mu: f64,
+    /// Gradient norm at the last epoch.
+    pub gradient_norm: f64,
+    /// Samples used for training.
+    pub n_train: usize,
+    /// Samples used for validation.
+    pub n_val: usize,
+}
+
+/// Samples of one part (training or validation), in scaled units.
+struct Part {
+    x: DMatrix<f64>,
+    t: DMatrix<f64>,
+}
+
+impl Part {
+    fn gather(net: &Mlp, inputs: &DMatrix<f64>, targets: &DMatrix<f64>, idx: &[usize]) -> Self {
+        let mut x = DMatrix::zeros(inputs.nrows(), idx.len());
+        let mut t = DMatrix::zeros(targets.nrows(), idx.len());
+        for (c, &k) in idx.iter().enumerate() {
+            net.input_scaler()
+                .scale_into(inputs.column(k).as_slice(), x.column_mut(c).as_mut_slice());
+            net.output_scaler()
+                .scale_into(targets.column(k).as_slice(), t.column_mut(c).as_mut_slice());
+        }
+        Self { x, t }
+    }
+
+    fn len(&self) -> usize {
+        self.x.ncols()
+    }
+
+    /// Sum of squared errors `Σ (ρ_o·(t̂ − ŷ))²` over the part.
+    fn sse(&self, net: &Mlp, rho: &[f64], ws: &mut Workspace) -> f64 {
+        let n = net.n_inputs();
+        let out = net.output_range();
+        let mut sse = 0.0;
+        for (x, t) in self.x.column_iter().zip(self.t.column_iter()) {
+            ws.acts[..n].copy_from_slice(x.as_slice());
+            net.forward_scaled(ws);
+            for ((&y, &t), &r) in ws.acts[out.clone()].iter().zip(t.iter()).zip(rho) {
+                let e = r * (t - y);
+                sse += e * e;
+            }
+        }
+        sse
+    }
+
+    /// Residuals `e` (row `k·q + o`), Jacobian `J = ∂y/∂w` and the SSE.
+    fn linearise(
+        &self,
+        net: &Mlp,
+        rho: &[f64],
+        ws: &mut Workspace,
+        e: &mut DVector<f64>,
+        jac: &mut DMatrix<f64>,
+    ) -> f64 {
+        let n = net.n_inputs();
+        let q = net.n_outputs();
+        let out = net.output_range();
+        let mut sse = 0.0;
+        for (k, (x, t)) in self.x.column_iter().zip(self.t.column_iter()).enumerate() {
+            ws.acts[..n].copy_from_slice(x.as_slice());
+            net.forward_scaled(ws);
+            for (o, ((&y, &t), &r)) in ws.acts[out.clone()]
+                .iter()
+                .zip(t.iter())
+                .zip(rho)
+                .enumerate()
+            {
+                let ek = r * (t - y);
+                e[k * q + o] = ek;
+                sse += ek * ek;
+            }
+            net.weight_rows_scaled(ws, rho, jac, k * q);
+        }
+        sse
+    }
+}
+
+/// Per-output factor `ρ_o` turning scaled errors into [`ErrorSpace`] errors.
+fn error_weights(net: &Mlp, space: ErrorSpace) -> Vec<f64> {
+    match space {
+        ErrorSpace::Original => net.output_scaler().half_range().to_vec(),
+        ErrorSpace::Normalised => vec![1.0; net.n_outputs()],
+    }
+}
+
+impl Mlp {
+    /// Mean squared error `Σ (t − y)² / (N·q)` on `inputs` (`n × N`) and `targets`
+    /// (`q × N`), in `space` units.
+    ///
+    /// Errors: shape mismatch, zero samples, non-finite data.
+    pub fn mse(
+        &self,
+        inputs: &DMatrix<f64>,
+        targets: &DMatrix<f64>,
+        space: ErrorSpace,
+    ) -> Result<f64> {
+        check_training_data(self.architecture(), inputs, targets)?;
+        let idx: Vec<usize> = (0..inputs.ncols()).collect();
+        let part = Part::gather(self, inputs, targets, &idx);
+        let mut ws = Workspace::new();
+        ws.prepare(self.architecture());
+        let rho = error_weights(self, space);
+        Ok(part.sse(self, &rho, &mut ws) / (part.len() * self.n_outputs()) as f64)
+    }
+}
+
+/// Split sample indices `0..n` into sorted (training, validation) lists.
+///
+/// Errors: a split that leaves either side empty.
+pub fn split_indices(n: usize, split: &ValidationSplit) -> Result<(Vec<usize>, Vec<usize>)> {
+    let fraction = match *split {
+        ValidationSplit::None => return Ok(((0..n).collect(), Vec::new())),
+        ValidationSplit::Random { fraction, .. } | ValidationSplit::Tail { fraction } => fraction,
+    };
+    let n_val = (fraction * n as f64).round() as usize;
+    if n_val == 0 || n_val >= n {
+        // Smallest n for which round(f·n) ≥ 1 and n − round(f·n) ≥ 1.
+        let needed = 2usize
+            .max((0.5 / fraction).ceil() as usize)
+            .max((0.5 / (1.0 - fraction)).ceil() as usize);
+        return Err(NnError::TooFewSamples {
+            what: "validation split",
+            found: n,
+            needed,
+        });
+    }
+    match *split {
+        ValidationSplit::Random { seed, .. } => {
+            let mut perm: Vec<usize> = (0..n).collect();
+            perm.shuffle(&mut ChaCha8Rng::seed_from_u64(seed));
+            let mut val = perm[..n_val].to_vec();
+            let mut train = perm[n_val..].to_vec();
+            val.sort_unstable();
+            train.sort_unstable();
+            Ok((train, val))
+        }
+        _ => Ok(((0..n - n_val).collect(), (n - n_val..n).collect())),
+    }
+}
+
+/// Train `net` in place by Levenberg–Marquardt on `inputs` (`n × N`) and `targets`
+/// (`q × N`), one sample per column. The network's scalers are used as they are (build
+/// it with [`Mlp::for_data`] to fit them to the data).
+///
+/// Each epoch solves `(JᵀJ + (c + μ)I) δ = Jᵀe − c·w` by Cholesky, where `J = ∂y/∂w`
+/// (rows `k·q + o`), `e = t − y` and `c = λ·N_train·q / n_w` carries the weight decay λ
+/// (it makes the step minimise `MSE + λ·‖w‖²/n_w`). A step is accepted if it lowers that
+/// objective; then μ ← μ·`mu_decrease`, else μ ← μ·`mu_increase` and the solve is
+/// repeated (a failed factorisation counts as a rejected step) until μ > `mu_max`.
+/// Stopping is checked before each epoch in this order: goal MSE, gradient norm,
+/// validation failures, epoch budget (Hagan & Menhaj, IEEE TNN 1994; MATLAB `trainlm`).
+///
+/// With a validation split the returned network carries the weights of the epoch with
+/// the lowest validation MSE (the first one on ties); otherwise the last weights.
+/// `progress` is called after every epoch.
+///
+/// Errors: invalid config, shape mismatch, zero samples, non-finite data, a split that
+/// leaves a side empty. On error `net` is unchanged.
+pub fn train_lm(
+    net: &mut Mlp,
+    inputs: &DMatrix<f64>,
+    targets: &DMatrix<f64>,
+    config: &LmConfig,
+    mut progress: Option<&mut dyn FnMut(EpochInfo)>,
+) -> Result<TrainReport> {
+    config.validate()?;
+    check_training_data(net.architecture(), inputs, targets)?;
+    let (train_idx, val_idx) = split_indices(inputs.ncols(), &config.validation)?;
+    let train = Part::gather(net, inputs, targets, &train_idx);
+    let val = (!val_idx.is_empty()).then(|| Part::gather(net, inputs, targets, &val_idx));
+
+    let q = net.n_outputs();
+    let nw = net.n_weights();
+    let rho = error_weights(net, config.error_space);
+    let m_train = (train.len() * q) as f64;
+    let m_val = val.as_ref().map_or(1.0, |v| (v.len() * q) as f64);
+    let decay = config.weight_decay * m_train / nw as f64;
+
+    let mut ws = Workspace::new();
+    ws.prepare(net.architecture());
+    let mut e = DVector::zeros(train.len() * q);
+    let mut jac = DMatrix::zeros(train.len() * q, nw);
+    let mut jtj = DMatrix::zeros(nw, nw);
+    let mut rhs = DVector::zeros(nw);
+    let mut w = DVector::from_column_slice(net.weights());
+
+    // Objective scaled by m_train: SSE + c·‖w‖².
+    let mut sse = train.linearise(net, &rho, &mut ws, &mut e, &mut jac);
+    let mut objective = sse + decay * w.norm_squared();
+    let val_mse =
+        |net: &Mlp, ws: &mut Workspace| val.as_ref().map(|v| v.sse(net, &rho, ws) / m_val);
+
+    let mut train_history = vec![sse / m_train];
+    let mut val_history = Vec::new();
+    let mut best = (f64::INFINITY, w.clone(), 0);
+    if let Some(v) = val_mse(net, &mut ws) {
+        val_history.push(v);
+        best = (v, w.clone(), 0);
+    }
+    let mut fails = 0;
+    let mut mu = config.mu_initial;
+    let mut epoch = 0;
+
+    // Gradient of the objective MSE + λ‖w‖²/n_w: −(2/M)(Jᵀe − c·w).
+    let gradient =
+        |jac: &DMatrix<f64>, e: &DVector<f64>, w: &DVector<f64>, rhs: &mut DVector<f64>| {
+            rhs.gemv_tr(1.0, jac, e, 0.0);
+            rhs.axpy(-decay, w, 1.0);
+            2.0 * rhs.norm() / m_train
+        };
+    let mut gradient_norm = gradient(&jac, &e, &w, &mut rhs);
+
+    let termination = loop {
+        if sse / m_train <= config.goal_mse {
+            break StopReason::GoalReached;
+        }
+        if gradient_norm < config.min_gradient {
+            break StopReason::MinGradient;
+        }
+        if fails >= config.max_fail {
+            break StopReason::ValidationStop;
+        }
+        if epoch >= config.max_epochs {
+            break StopReason::MaxEpochs;
+        }
+        jtj.gemm_tr(1.0, &jac, &jac, 0.0);
+        // rhs already holds Jᵀe − c·w from the gradient evaluation.
+        let mut accepted = None;
+        while mu <= config.mu_max {
+            let mut a = jtj.clone();
+            for i in 0..nw {
+                a[(i, i)] += decay + mu;
+            }
+            if let Some(chol) = Cholesky::new(a) {
+                let delta = chol.solve(&rhs);
+                if delta.iter().all(|d| d.is_finite()) {
+                    let trial = &w + &delta;
+                    net.weights_mut().copy_from_slice(trial.as_slice());
+                    let trial_sse = train.sse(net, &rho, &mut ws);
+                    let trial_obj = trial_sse + decay * trial.norm_squared();
+                    if trial_obj < objective {
+                        accepted = Some((trial, trial_obj));
+                        mu = (mu * config.mu_decrease).max(MU_FLOOR);
+                        break;
+                    }
+                }
+            }
+            mu *= config.mu_increase;
+        }
+        let Some((trial, trial_obj)) = accepted else {
+            net.weights_mut().copy_from_slice(w.as_slice());
+            break StopReason::MuMax;
+        };
+        epoch += 1;
+        w = trial;
+        objective = trial_obj;
+        net.weights_mut().copy_from_slice(w.as_slice());
+        sse = train.linearise(net, &rho, &mut ws, &mut e, &mut jac);
+        gradient_norm = gradient(&jac, &e, &w, &mut rhs);
+        train_history.push(sse / m_train);
+        let v = val_mse(net, &mut ws);
+        if let Some(v) = v {
+            val_history.push(v);
+            if v < best.0 {
+                best = (v, w.clone(), epoch);
+                fails = 0;
+            } else if v > best.0 {
+                fails += 1;
+            }
+        }
+        if let Some(cb) = progress.as_mut() {
+            cb(EpochInfo {
+                epoch,
+                train_mse: sse / m_train,
+                val_mse: v,
+                mu,
+                gradient_norm,
+            });
+        }
+    };
+
+    let (best_epoch, val_best) = if val.is_some() {
+        net.weights_mut().copy_from_slice(best.1.as_slice());
+        (best.2, Some(best.0))
+    } else {
+        (epoch, None)
+    };
+    Ok(TrainReport {
+        termination,
+        epochs: epoch,
+        best_epoch,
+        train_mse: train_history[best_epoch],
+        val_mse: val_best,
+        train_history,
+        val_history,
+        mu,
+        gradient_norm,
+        n_train: train.len(),
+        n_val: val_idx.len(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_sizes_and_disjointness() {
+        let (tr, va) = split_indices(
+            20,
+            &ValidationSplit::Random {
+                fraction: 0.25,
+                seed: 9,
+            },
+        )
+        .unwrap();
+        assert_eq!((tr.len(), va.len()), (15, 5));
+        let mut all: Vec<usize> = tr.iter().chain(&va).copied().collect();
+        all.sort_unstable();
+        assert_eq!(all, (0..20).collect::<Vec<_>>());
+        let (tr, va) = split_indices(10, &ValidationSplit::Tail { fraction: 0.3 }).unwrap();
+        assert_eq!(tr, (0..7).collect::<Vec<_>>());
+        assert_eq!(va, vec![7, 8, 9]);
+        // round(0.15·3) = 0 validation samples: the smallest workable N is 4 (round(0.6) = 1).
+        assert_eq!(
+            split_indices(
+                3,
+                &ValidationSplit::Random {
+                    fraction: 0.15,
+                    seed: 0
+                }
+            )
+            .unwrap_err(),
+            NnError::TooFewSamples {
+                what: "validation split",
+                found: 3,
+                needed: 4
+            }
+        );
+    }
+}

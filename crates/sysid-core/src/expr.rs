@@ -1,0 +1,430 @@
+//! Plain math expressions over named variables — the `term` strings of a model file
+//! (SPEC §5): parsing with column-accurate errors, allocation-free evaluation, symbolic
+//! derivatives and canonical, re-parseable printing.
+//!
+//! # Grammar
+//!
+//! From the loosest to the tightest binding:
+//!
+//! ```text
+//! sum     := product (('+' | '-') product)*      left-associative: 1-2-3 = (1-2)-3
+//! product := unary (('*' | '/') unary)*          left-associative: 8/4/2 = (8/4)/2
+//! unary   := '-' unary | power                   -x^2 = -(x^2)
+//! power   := primary ('^' unary)?                right-associative: 2^3^2 = 2^(3^2)
+//! primary := number | name | function '(' sum ')' | '(' sum ')'
+//! ```
+//!
+//! Numbers are decimal literals with an optional exponent (`3`, `0.5`, `.5`, `1e-3`,
+//! `2.5E+4`); a literal must be finite. Names are identifiers (a letter or `_`, then
+//! letters, digits or `_`) and must be among the declared variables. A name directly
+//! followed by `(` is a function call; the functions are [`Func`]: `sin cos tan exp log
+//! sqrt abs sign tanh`, where `log` is the natural logarithm and `sign(0) = 0`. There is
+//! no implicit multiplication (`2x` is an error) and no unary plus.
+//!
+//! # Values outside a function's domain
+//!
+//! Evaluation follows IEEE arithmetic (`a^b` is `a·a` when `b` is exactly 2, `powf`
+//! otherwise): `sqrt(-1)` and `log(-1)` are NaN, `1/0` is `+inf`.
+//! Callers that need finite values (integrators, estimators) check the results.
+//!
+//! # Derivatives
+//!
+//! [`Expr::derivative`] differentiates symbolically with the usual rules. Conventions at
+//! points where the function is not differentiable, valid almost everywhere:
+//! `d abs(a) = sign(a)·da` (0 at `a = 0`, a subgradient); `d sign(a) = 0`;
+//! `d sqrt(a) = da/(2·sqrt(a))`, which is `+inf·da` at `a = 0`; `d a^c = c·a^(c-1)·da`
+//! for a constant exponent `c`, and `a^b·(db·log(a) + b·da/a)` otherwise (needs `a > 0`).
+//!
+//! # Simplification
+//!
+//! Every tree (parsed or differentiated) is built through the same light rules: constant
+//! folding when the result is finite, `0·a = 0`, `0/a = 0`, `1·a = a`, `a/1 = a`,
+//! `a ± 0 = a`, `0 - a = -a`, `-(-a) = a`, `a - (-b) = a + b`, `a + (-b) = a - b`,
+//! `a^0 = 1`, `a^1 = a`, `1^a = 1`. The rules `0·a = 0` and `0/a = 0` ignore the NaN that
+//! IEEE gives for `a = ±inf` (or `a = 0` in `0/a`), so the simplified function equals the
+//! written one wherever the written one is finite. Constants are always finite.
+//!
+//! # Printing
+//!
+//! [`Display`](std::fmt::Display) prints a canonical form: spaces around `+` and `-`,
+//! none around `*`, `/` and `^`, and parentheses only where the grammar needs them (plus
+//! around a negative right operand, `a*(-b)`, for readability). Parsing the printed text
+//! with the same variables gives back the identical tree, hence the identical function.
+
+use std::fmt;
+use std::sync::Arc;
+
+use thiserror::Error;
+
+use parse::checked_names;
+use tree::{Op, Tree, collect_vars, compile, diff, remap, write_tree};
+
+mod parse;
+#[cfg(test)]
+mod tests;
+mod tree;
+
+/// Deepest nesting the parser accepts: parentheses, calls, unary minus, powers and
+/// operator chains all add a level. Model-file terms are a few levels deep; the limit
+/// keeps the recursive parser and the tree walks far from the thread's stack limit.
+pub const MAX_DEPTH: usize = 100;
+
+/// Evaluation stack size. Operands are emitted deeper-subtree-first (Sethi–Ullman order),
+/// so a tree needs at most `log2(leaves) + 1` slots: 32 slots cover 2^31 leaves.
+const STACK: usize = 32;
+
+/// Errors from parsing, differentiating or re-binding an [`Expr`].
+///
+/// Columns are 0-based character (not byte) positions in the expression text.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ExprError {
+    /// The text holds no expression at all.
+    #[error("empty expression (column {column})")]
+    Empty {
+        /// Column where an expression was expected.
+        column: usize,
+    },
+    /// A character that starts no token.
+    #[error("column {column}: unexpected character '{character}'")]
+    UnexpectedCharacter {
+        /// Column of the character.
+        column: usize,
+        /// The character.
+        character: char,
+    },
+    /// A malformed or non-finite numeric literal.
+    #[error("column {column}: invalid number '{text}': {reason}")]
+    InvalidNumber {
+        /// Column where the literal starts.
+        column: usize,
+        /// The literal as written.
+        text: String,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
+    /// A name that is not a declared variable.
+    #[error("column {column}: unknown name '{name}' (variables: {})", .known.join(", "))]
+    UnknownName {
+        /// Column where the name starts.
+        column: usize,
+        /// The name.
+        name: String,
+        /// The declared variables.
+        known: Vec<String>,
+    },
+    /// A call of a function that does not exist.
+    #[error(
+        "column {column}: unknown function '{name}' (functions: sin cos tan exp log sqrt abs \
+         sign tanh)"
+    )]
+    UnknownFunction {
+        /// Column where the function name starts.
+        column: usize,
+        /// The name.
+        name: String,
+    },
+    /// A token where something else was required.
+    #[error("column {column}: expected {expected}, found {found}")]
+    UnexpectedToken {
+        /// Column of the token.
+        column: usize,
+        /// The token as written (quoted), or `end of input`.
+        found: String,
+        /// What the grammar required there.
+        expected: &'static str,
+    },
+    /// A `(` that is never closed.
+    #[error("column {column}: '(' is never closed")]
+    UnclosedParenthesis {
+        /// Column of the `(`.
+        column: usize,
+    },
+    /// A `)` with no matching `(`.
+    #[error("column {column}: ')' has no matching '('")]
+    UnmatchedParenthesis {
+        /// Column of the `)`.
+        column: usize,
+    },
+    /// Tokens left over after a complete expression.
+    #[error("column {column}: expected an operator or the end, found {found}")]
+    TrailingInput {
+        /// Column of the first left-over token.
+        column: usize,
+        /// That token, quoted.
+        found: String,
+    },
+    /// Nesting deeper than [`MAX_DEPTH`].
+    #[error("column {column}: expression nested deeper than {limit} levels")]
+    TooDeep {
+        /// Column where the limit was passed.
+        column: usize,
+        /// The limit.
+        limit: usize,
+    },
+    /// A declared variable name that is not an identifier (it could not be printed back).
+    #[error("variable name '{name}' is not an identifier")]
+    InvalidVariableName {
+        /// The name.
+        name: String,
+    },
+    /// A variable declared twice.
+    #[error("variable '{name}' is declared twice")]
+    DuplicateVariable {
+        /// The name.
+        name: String,
+    },
+    /// A variable index beyond the declared variables.
+    #[error("variable index {index} is out of range for {n_variables} variables")]
+    VariableIndex {
+        /// The index asked for.
+        index: usize,
+        /// Number of declared variables.
+        n_variables: usize,
+    },
+    /// Re-binding to a variable list that lacks a variable the expression uses.
+    #[error("the expression uses '{name}', which is not among the new variables")]
+    MissingVariable {
+        /// The variable's name.
+        name: String,
+    },
+}
+
+/// The functions an expression may call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Func {
+    /// Sine (radians).
+    Sin,
+    /// Cosine (radians).
+    Cos,
+    /// Tangent (radians).
+    Tan,
+    /// Exponential `e^x`.
+    Exp,
+    /// Natural logarithm (NaN below 0, `-inf` at 0).
+    Log,
+    /// Square root (NaN below 0).
+    Sqrt,
+    /// Absolute value.
+    Abs,
+    /// Sign: 1 above 0, -1 below, 0 at 0 (NaN for NaN).
+    Sign,
+    /// Hyperbolic tangent.
+    Tanh,
+}
+
+impl Func {
+    /// Every function, in the order the grammar lists them.
+    pub const ALL: [Func; 9] = [
+        Func::Sin,
+        Func::Cos,
+        Func::Tan,
+        Func::Exp,
+        Func::Log,
+        Func::Sqrt,
+        Func::Abs,
+        Func::Sign,
+        Func::Tanh,
+    ];
+
+    /// The name used in expressions.
+    pub fn name(self) -> &'static str {
+        match self {
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Exp => "exp",
+            Func::Log => "log",
+            Func::Sqrt => "sqrt",
+            Func::Abs => "abs",
+            Func::Sign => "sign",
+            Func::Tanh => "tanh",
+        }
+    }
+
+    /// The function with this name, if any.
+    pub fn from_name(name: &str) -> Option<Func> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
+
+    /// Evaluate the function at `x`.
+    pub fn apply(self, x: f64) -> f64 {
+        match self {
+            Func::Sin => x.sin(),
+            Func::Cos => x.cos(),
+            Func::Tan => x.tan(),
+            Func::Exp => x.exp(),
+            Func::Log => x.ln(),
+            Func::Sqrt => x.sqrt(),
+            Func::Abs => x.abs(),
+            Func::Sign => {
+                // `f64::signum` gives 1 at +0; the mathematical sign is 0 there.
+                if x > 0.0 {
+                    1.0
+                } else if x < 0.0 {
+                    -1.0
+                } else {
+                    x
+                }
+            }
+            Func::Tanh => x.tanh(),
+        }
+    }
+}
+
+/// A parsed expression over an ordered list of named variables.
+///
+/// It keeps the tree (for derivatives and printing) and a postfix program compiled from
+/// it (for evaluation: no allocation, no recursion).
+///
+/// ```
+/// use sysid_core::Expr;
+///
+/// let e = Expr::parse("omega*abs(omega) - 2^-1", &["theta", "omega"])?;
+/// assert_eq!(e.eval(&[0.0, -3.0]), -9.5);
+/// assert_eq!(e.derivative(1)?.to_string(), "abs(omega) + omega*sign(omega)");
+/// assert_eq!(e.to_string(), "omega*abs(omega) - 0.5");
+/// # Ok::<(), sysid_core::ExprError>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct Expr {
+    tree: Tree,
+    names: Arc<[String]>,
+    program: Box<[Op]>,
+}
+
+impl PartialEq for Expr {
+    /// Same tree over the same variable names (the program follows from the tree).
+    fn eq(&self, other: &Self) -> bool {
+        self.tree == other.tree && self.names == other.names
+    }
+}
+
+impl Expr {
+    /// Parse `text` with the given variables (index `i` in `variables` is the `i`-th entry
+    /// of the slice passed to [`Expr::eval`]).
+    pub fn parse(text: &str, variables: &[&str]) -> Result<Expr, ExprError> {
+        let names = checked_names(variables)?;
+        let tree = parse::parse_tree(text, variables)?;
+        Ok(Expr::from_tree(tree, names))
+    }
+
+    fn from_tree(tree: Tree, names: Arc<[String]>) -> Expr {
+        let (program, need) = compile(&tree);
+        debug_assert!(need <= STACK, "Sethi-Ullman bound exceeded");
+        Expr {
+            tree,
+            names,
+            program: program.into_boxed_slice(),
+        }
+    }
+
+    /// Evaluate at `vars` (one value per declared variable, in declaration order).
+    ///
+    /// # Panics
+    /// If `vars` is shorter than the highest variable index the expression uses
+    /// (like slice indexing).
+    pub fn eval(&self, vars: &[f64]) -> f64 {
+        self.eval_parts(vars, &[])
+    }
+
+    /// Evaluate with the variables split over two slices: variable `i` is `head[i]` for
+    /// `i < head.len()` and `tail[i - head.len()]` after it. Lets a model evaluate over
+    /// states followed by inputs without copying them into one buffer.
+    ///
+    /// # Panics
+    /// If `head` and `tail` together are shorter than the highest variable index used.
+    pub fn eval_parts(&self, head: &[f64], tail: &[f64]) -> f64 {
+        let mut stack = [0.0_f64; STACK];
+        let mut sp = 0_usize;
+        for op in self.program.iter() {
+            match *op {
+                Op::Const(c) => {
+                    stack[sp] = c;
+                    sp += 1;
+                }
+                Op::Var(i) => {
+                    stack[sp] = if i < head.len() {
+                        head[i]
+                    } else {
+                        tail[i - head.len()]
+                    };
+                    sp += 1;
+                }
+                Op::Neg => stack[sp - 1] = -stack[sp - 1],
+                Op::Square => stack[sp - 1] *= stack[sp - 1],
+                Op::Call(f) => stack[sp - 1] = f.apply(stack[sp - 1]),
+                Op::Bin(op) => {
+                    sp -= 1;
+                    stack[sp - 1] = op.apply(stack[sp - 1], stack[sp]);
+                }
+                Op::BinRev(op) => {
+                    sp -= 1;
+                    stack[sp - 1] = op.apply(stack[sp], stack[sp - 1]);
+                }
+            }
+        }
+        stack[0]
+    }
+
+    /// Symbolic derivative with respect to variable `var` (see the module doc for the
+    /// conventions at non-differentiable points).
+    pub fn derivative(&self, var: usize) -> Result<Expr, ExprError> {
+        if var >= self.names.len() {
+            return Err(ExprError::VariableIndex {
+                index: var,
+                n_variables: self.names.len(),
+            });
+        }
+        Ok(Expr::from_tree(
+            diff(&self.tree, var),
+            Arc::clone(&self.names),
+        ))
+    }
+
+    /// Indices of the variables the expression uses, ascending, without repeats.
+    pub fn variables_used(&self) -> Vec<usize> {
+        let mut used = Vec::new();
+        collect_vars(&self.tree, &mut used);
+        used.sort_unstable();
+        used.dedup();
+        used
+    }
+
+    /// The declared variable names, in order.
+    pub fn variables(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The value, if the expression is a constant.
+    pub fn constant(&self) -> Option<f64> {
+        match self.tree {
+            Tree::Const(c) => Some(c),
+            _ => None,
+        }
+    }
+
+    /// The same function over another variable list, matching variables by name. Fails
+    /// if a used variable is missing from `variables` (unused ones may be dropped).
+    pub fn with_variables(&self, variables: &[&str]) -> Result<Expr, ExprError> {
+        let names = checked_names(variables)?;
+        let mut map = Vec::with_capacity(self.names.len());
+        for name in self.names.iter() {
+            map.push(variables.iter().position(|v| v == name));
+        }
+        for i in self.variables_used() {
+            if map[i].is_none() {
+                return Err(ExprError::MissingVariable {
+                    name: self.names[i].clone(),
+                });
+            }
+        }
+        Ok(Expr::from_tree(remap(&self.tree, &map), names))
+    }
+}
+
+impl fmt::Display for Expr {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write_tree(&self.tree, &self.names, f)
+    }
+}

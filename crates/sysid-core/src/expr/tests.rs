@@ -1,0 +1,376 @@
+//! Unit tests of `Expr`: precedence against hand-evaluated values, error classes and their
+//! columns, canonical printing, and derivative forms at the documented special points.
+
+// Expected values in these tests are exact in binary floating point (or exact IEEE
+// results such as infinities), so they are compared with `==` on purpose.
+#![allow(clippy::float_cmp)]
+
+use super::*;
+
+fn eval0(text: &str) -> f64 {
+    match Expr::parse(text, &[]) {
+        Ok(e) => e.eval(&[]),
+        Err(err) => panic!("{text}: {err}"),
+    }
+}
+
+fn parse(text: &str, vars: &[&str]) -> Expr {
+    match Expr::parse(text, vars) {
+        Ok(e) => e,
+        Err(err) => panic!("{text}: {err}"),
+    }
+}
+
+fn err(text: &str, vars: &[&str]) -> ExprError {
+    match Expr::parse(text, vars) {
+        Ok(e) => panic!("{text} parsed as {e}"),
+        Err(err) => err,
+    }
+}
+
+/// Every value below is exact in binary floating point, so equality is exact.
+#[test]
+fn precedence_and_associativity_match_hand_values() {
+    let cases = [
+        ("2^3^2", 512.0),      // right-associative: 2^(3^2)
+        ("(2^3)^2", 64.0),     //
+        ("-2^2", -4.0),        // ^ binds tighter than unary minus
+        ("(-2)^2", 4.0),       //
+        ("2^-1", 0.5),         // unary minus in an exponent
+        ("-2^-2", -0.25),      // -(2^(-2))
+        ("1-2-3", -4.0),       // left-associative
+        ("1-(2-3)", 2.0),      //
+        ("8/4/2", 1.0),        // left-associative
+        ("8/(4/2)", 4.0),      //
+        ("2+3*4", 14.0),       // * before +
+        ("(2+3)*4", 20.0),     //
+        ("2*3^2", 18.0),       // ^ before *
+        ("-3*-2", 6.0),        // unary minus inside a product
+        ("--3", 3.0),          // nested unary minus
+        ("- - -3", -3.0),      //
+        ("2 - -3", 5.0),       //
+        ("1e-3*1E3", 1.0),     // exponent notation
+        ("2.5e+1 - .5", 24.5), //
+        ("12/3*2", 8.0),       // * and / at the same level, left to right
+        ("4^0.5", 2.0),
+        ("sqrt(16) + abs(-3) + sign(-7) + sign(0)", 6.0),
+        ("exp(0) + log(1) + sin(0) + cos(0) + tan(0) + tanh(0)", 2.0),
+    ];
+    for (text, want) in cases {
+        assert_eq!(eval0(text), want, "{text}");
+    }
+}
+
+#[test]
+fn sign_is_zero_at_zero_and_functions_follow_ieee_outside_their_domain() {
+    assert_eq!(Func::Sign.apply(0.0).abs(), 0.0);
+    assert!(Func::Sign.apply(f64::NAN).is_nan());
+    assert!(Func::Sqrt.apply(-1.0).is_nan());
+    assert!(Func::Log.apply(-1.0).is_nan());
+    // Not folded (the value is not finite), evaluated at run time.
+    let e = parse("log(0)", &[]);
+    assert_eq!(e.to_string(), "log(0)");
+    assert_eq!(e.eval(&[]), f64::NEG_INFINITY);
+}
+
+#[test]
+fn variables_and_their_order() {
+    let e = parse("u*cos(theta)", &["theta", "omega", "u"]);
+    assert_eq!(e.variables_used(), vec![0, 2]);
+    let v = e.eval(&[0.3, 99.0, 2.0]);
+    assert!((v - 2.0 * 0.3_f64.cos()).abs() <= f64::EPSILON * 2.0);
+    // Split evaluation reads the same variables across two slices.
+    assert_eq!(e.eval_parts(&[0.3, 99.0], &[2.0]).to_bits(), v.to_bits());
+    // A variable named like a function is a variable unless a '(' follows.
+    let e = parse("sign*sign(sign)", &["sign"]);
+    assert_eq!(e.eval(&[-2.0]), 2.0);
+}
+
+#[test]
+fn printing_is_canonical_with_minimal_parentheses() {
+    let vars = ["x", "y", "z"];
+    let cases = [
+        ("x + y*z", "x + y*z"),
+        ("(x + y)*z", "(x + y)*z"),
+        ("x - (y - z)", "x - (y - z)"),
+        ("(x - y) - z", "x - y - z"),
+        ("x*(y*z)", "x*(y*z)"),
+        ("x/(y*z)", "x/(y*z)"),
+        ("-x^2", "-x^2"),
+        ("(-x)^2", "(-x)^2"),
+        ("x^y^z", "x^y^z"),
+        ("(x^y)^z", "(x^y)^z"),
+        ("x^-y", "x^(-y)"),
+        ("x*-y", "x*(-y)"),
+        ("-x*y", "-x*y"),
+        ("-(x*y)", "-(x*y)"),
+        ("x - -y", "x + y"),
+        ("x + -y", "x - y"),
+        ("x + -2", "x - 2"),
+        ("x - -2", "x + 2"),
+        ("(-2)^x", "(-2)^x"),
+        ("-2^x", "-2^x"),
+        ("x^(-2)", "x^(-2)"),
+        ("2*3*x", "6*x"),
+        ("0*x + 1*y + z/1 + 0", "y + z"),
+        ("- -x", "x"),
+        ("-1*x", "-x"),
+        ("x^1 + y^0", "x + 1"),
+        ("1e-3*x", "0.001*x"),
+        ("1e-7*x + 2.5e20", "1e-7*x + 2.5e20"),
+        ("sin( x )-x", "sin(x) - x"),
+        ("omega*abs(omega)", "omega*abs(omega)"),
+    ];
+    for (text, want) in cases {
+        let vars: &[&str] = if text.contains("omega") {
+            &["omega"]
+        } else {
+            &vars
+        };
+        let e = parse(text, vars);
+        assert_eq!(e.to_string(), want, "{text}");
+        assert_eq!(
+            parse(want, vars),
+            e,
+            "{want} does not re-parse to the same tree"
+        );
+    }
+}
+
+#[test]
+fn derivative_forms_and_special_points() {
+    let vars = ["x", "y"];
+    let cases = [
+        ("x^3", 0, "3*x^2"),
+        ("x*y", 0, "y"),
+        ("x*y", 1, "x"),
+        ("sin(x)", 0, "cos(x)"),
+        ("cos(x)", 0, "-sin(x)"),
+        ("abs(x)", 0, "sign(x)"),
+        ("sign(x)", 0, "0"),
+        ("exp(2*x)", 0, "exp(2*x)*2"),
+        ("log(x)", 0, "1/x"),
+        ("sqrt(x)", 0, "1/(2*sqrt(x))"),
+        ("tanh(x)", 0, "1 - tanh(x)^2"),
+        ("tan(x)", 0, "1/cos(x)^2"),
+        ("2^x", 0, "2^x*0.6931471805599453"),
+        ("x/y", 1, "-x/y^2"),
+        ("y", 0, "0"),
+    ];
+    for (text, var, want) in cases {
+        let d = parse(text, &vars)
+            .derivative(var)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(d.to_string(), want, "d({text})/d{}", vars[var]);
+    }
+    // d sqrt(x)/dx at 0 is +inf, as documented.
+    let d = parse("sqrt(x)", &vars)
+        .derivative(0)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(d.eval(&[0.0, 0.0]), f64::INFINITY);
+    // d abs(x)/dx at 0 is sign(0) = 0.
+    let d = parse("abs(x)", &vars)
+        .derivative(0)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(d.eval(&[0.0, 0.0]), 0.0);
+    assert_eq!(d.constant(), None);
+    assert_eq!(
+        parse("x", &vars).derivative(2),
+        Err(ExprError::VariableIndex {
+            index: 2,
+            n_variables: 2
+        })
+    );
+}
+
+#[test]
+fn errors_carry_class_and_column() {
+    let v = ["x", "theta"];
+    let unexpected = |column, found: &str, expected| ExprError::UnexpectedToken {
+        column,
+        found: found.to_owned(),
+        expected,
+    };
+    let known = vec!["x".to_owned(), "theta".to_owned()];
+    let cases = [
+        ("", ExprError::Empty { column: 0 }),
+        ("   ", ExprError::Empty { column: 0 }),
+        (
+            "x + y",
+            ExprError::UnknownName {
+                column: 4,
+                name: "y".into(),
+                known: known.clone(),
+            },
+        ),
+        (
+            "θ + x",
+            ExprError::UnknownName {
+                column: 0,
+                name: "θ".into(),
+                known: known.clone(),
+            },
+        ),
+        (
+            "foo(x)",
+            ExprError::UnknownFunction {
+                column: 0,
+                name: "foo".into(),
+            },
+        ),
+        (
+            "2*x(1)",
+            ExprError::UnknownFunction {
+                column: 2,
+                name: "x".into(),
+            },
+        ),
+        ("sin x", unexpected(4, "'x'", "'(' after a function name")),
+        ("x + * x", unexpected(4, "'*'", super::parse::OPERAND)),
+        ("x +", unexpected(3, "end of input", super::parse::OPERAND)),
+        ("()", unexpected(1, "')'", super::parse::OPERAND)),
+        ("(x x)", unexpected(3, "'x'", "')' or an operator")),
+        ("+x", unexpected(0, "'+'", super::parse::OPERAND)),
+        ("(x + 1", ExprError::UnclosedParenthesis { column: 0 }),
+        ("sin(theta", ExprError::UnclosedParenthesis { column: 3 }),
+        ("x + 1)", ExprError::UnmatchedParenthesis { column: 5 }),
+        ("x + )", ExprError::UnmatchedParenthesis { column: 4 }),
+        (
+            "x theta",
+            ExprError::TrailingInput {
+                column: 2,
+                found: "'theta'".into(),
+            },
+        ),
+        (
+            "2x",
+            ExprError::TrailingInput {
+                column: 1,
+                found: "'x'".into(),
+            },
+        ),
+        (
+            "x # 2",
+            ExprError::UnexpectedCharacter {
+                column: 2,
+                character: '#',
+            },
+        ),
+        (
+            "θ·x",
+            ExprError::UnexpectedCharacter {
+                column: 1,
+                character: '·',
+            },
+        ),
+        (
+            "x + 1e",
+            ExprError::InvalidNumber {
+                column: 4,
+                text: "1e".into(),
+                reason: "the exponent has no digits",
+            },
+        ),
+        (
+            "x + .",
+            ExprError::InvalidNumber {
+                column: 4,
+                text: ".".into(),
+                reason: "a number needs at least one digit",
+            },
+        ),
+        (
+            "1e999",
+            ExprError::InvalidNumber {
+                column: 0,
+                text: "1e999".into(),
+                reason: "too large for a 64-bit float",
+            },
+        ),
+    ];
+    for (text, want) in cases {
+        assert_eq!(err(text, &v), want, "{text}");
+    }
+    // Columns count characters, not bytes: 'θ' is two bytes.
+    assert_eq!(
+        err("θ + y", &["θ"]),
+        ExprError::UnknownName {
+            column: 4,
+            name: "y".into(),
+            known: vec!["θ".into()]
+        }
+    );
+}
+
+#[test]
+fn nesting_limit_is_an_error_not_a_stack_overflow() {
+    let deep = format!(
+        "{}x{}",
+        "(".repeat(MAX_DEPTH + 5),
+        ")".repeat(MAX_DEPTH + 5)
+    );
+    assert!(matches!(
+        err(&deep, &["x"]),
+        ExprError::TooDeep {
+            limit: MAX_DEPTH,
+            ..
+        }
+    ));
+    let long_chain = vec!["x"; MAX_DEPTH + 5].join(" - ");
+    assert!(matches!(
+        err(&long_chain, &["x"]),
+        ExprError::TooDeep { .. }
+    ));
+    let minus = format!("{}x", "-".repeat(MAX_DEPTH + 5));
+    assert!(matches!(err(&minus, &["x"]), ExprError::TooDeep { .. }));
+    // Within the limit, deep nesting parses and evaluates.
+    let ok = format!("{}x{}", "sin(".repeat(40), ")".repeat(40));
+    let mut want = 0.5_f64;
+    for _ in 0..40 {
+        want = want.sin();
+    }
+    assert_eq!(parse(&ok, &["x"]).eval(&[0.5]).to_bits(), want.to_bits());
+}
+
+#[test]
+fn declared_variables_are_checked() {
+    assert_eq!(
+        Expr::parse("x", &["x", "x"]),
+        Err(ExprError::DuplicateVariable { name: "x".into() })
+    );
+    for bad in ["", "1x", "a b", "x-y"] {
+        assert_eq!(
+            Expr::parse("1", &[bad]),
+            Err(ExprError::InvalidVariableName { name: bad.into() })
+        );
+    }
+}
+
+#[test]
+fn rebinding_variables_by_name() {
+    let e = parse("sign(omega)*u", &["omega", "u"]);
+    let r = e
+        .with_variables(&["theta", "omega", "h", "u"])
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(r.variables_used(), vec![1, 3]);
+    assert_eq!(r.eval(&[9.0, -2.0, 9.0, 3.0]), -3.0);
+    assert_eq!(r.to_string(), e.to_string());
+    assert_eq!(
+        e.with_variables(&["omega"]),
+        Err(ExprError::MissingVariable { name: "u".into() })
+    );
+}
+
+/// A right-nested chain of non-commutative operators is the worst case for a postfix
+/// stack; with operands emitted deeper-first it still needs only 2 slots.
+#[test]
+fn deep_right_nesting_fits_the_fixed_stack() {
+    let n = MAX_DEPTH / 2 - 2;
+    let text = format!("{}x{}", "x/(".repeat(n), ")".repeat(n));
+    let e = parse(&text, &["x"]);
+    let (_, need) = compile(&e.tree);
+    assert_eq!(need, 2);
+    // x/(x/(x/…x)) alternates between x and 1: n divisions of x = 3 give 1 for even n.
+    let want = if n.is_multiple_of(2) { 3.0 } else { 1.0 };
+    assert!((e.eval(&[3.0]) - want).abs() <= 1e-15 * n as f64);
+}

@@ -1,0 +1,360 @@
+//! The expression tree behind `Expr`: simplifying constructors, symbolic differentiation,
+//! compilation to a postfix program, and canonical printing.
+
+use std::fmt;
+
+use super::Func;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum BinOp {
+    Add,
+    Sub,
+    Mul,
+    Div,
+    Pow,
+}
+
+impl BinOp {
+    pub(super) fn apply(self, a: f64, b: f64) -> f64 {
+        match self {
+            BinOp::Add => a + b,
+            BinOp::Sub => a - b,
+            BinOp::Mul => a * b,
+            BinOp::Div => a / b,
+            // Squares are exact products; `powf` may differ from `a·a` by an ulp.
+            #[allow(clippy::float_cmp)]
+            BinOp::Pow if b == 2.0 => a * a,
+            BinOp::Pow => a.powf(b),
+        }
+    }
+
+    fn symbol(self) -> &'static str {
+        match self {
+            BinOp::Add => " + ",
+            BinOp::Sub => " - ",
+            BinOp::Mul => "*",
+            BinOp::Div => "/",
+            BinOp::Pow => "^",
+        }
+    }
+}
+
+/// Expression tree. Invariant: built only through the simplifying constructors below, so
+/// constants are finite and no rule of the module doc applies to any node.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum Tree {
+    Const(f64),
+    Var(usize),
+    Neg(Box<Tree>),
+    Bin(BinOp, Box<Tree>, Box<Tree>),
+    Call(Func, Box<Tree>),
+}
+
+/// One instruction of the postfix program.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Op {
+    Const(f64),
+    Var(usize),
+    Neg,
+    Square,
+    Call(Func),
+    /// Pops `b` then `a`, pushes `a op b`.
+    Bin(BinOp),
+    /// Pops `a` then `b`, pushes `a op b` (the right operand was evaluated first).
+    BinRev(BinOp),
+}
+
+// ---------------------------------------------------------------------------------------
+// Simplifying constructors.
+
+/// Exact equality with a literal, on purpose (simplification rules fire on exact 0, ±1).
+#[allow(clippy::float_cmp)]
+pub(super) fn is(t: &Tree, value: f64) -> bool {
+    matches!(t, Tree::Const(c) if *c == value)
+}
+
+fn raw(op: BinOp, a: Tree, b: Tree) -> Tree {
+    Tree::Bin(op, Box::new(a), Box::new(b))
+}
+
+pub(super) fn neg(a: Tree) -> Tree {
+    match a {
+        Tree::Const(c) => Tree::Const(-c),
+        Tree::Neg(inner) => *inner,
+        other => Tree::Neg(Box::new(other)),
+    }
+}
+
+pub(super) fn call(f: Func, a: Tree) -> Tree {
+    if let Tree::Const(c) = a {
+        let v = f.apply(c);
+        if v.is_finite() {
+            return Tree::Const(v);
+        }
+    }
+    Tree::Call(f, Box::new(a))
+}
+
+pub(super) fn bin(op: BinOp, a: Tree, b: Tree) -> Tree {
+    if let (Tree::Const(x), Tree::Const(y)) = (&a, &b) {
+        let v = op.apply(*x, *y);
+        if v.is_finite() {
+            return Tree::Const(v);
+        }
+    }
+    match op {
+        BinOp::Add | BinOp::Sub => {
+            if is(&b, 0.0) {
+                return a;
+            }
+            if is(&a, 0.0) {
+                return if op == BinOp::Add { b } else { neg(b) };
+            }
+            let flipped = if op == BinOp::Add {
+                BinOp::Sub
+            } else {
+                BinOp::Add
+            };
+            match b {
+                Tree::Neg(inner) => raw(flipped, a, *inner),
+                Tree::Const(c) if c < 0.0 => raw(flipped, a, Tree::Const(-c)),
+                b => raw(op, a, b),
+            }
+        }
+        BinOp::Mul => {
+            if is(&a, 0.0) || is(&b, 0.0) {
+                Tree::Const(0.0)
+            } else if is(&a, 1.0) {
+                b
+            } else if is(&b, 1.0) {
+                a
+            } else if is(&a, -1.0) {
+                neg(b)
+            } else if is(&b, -1.0) {
+                neg(a)
+            } else {
+                raw(op, a, b)
+            }
+        }
+        BinOp::Div => {
+            if is(&a, 0.0) {
+                Tree::Const(0.0)
+            } else if is(&b, 1.0) {
+                a
+            } else if is(&b, -1.0) {
+                neg(a)
+            } else {
+                raw(op, a, b)
+            }
+        }
+        BinOp::Pow => {
+            if is(&b, 0.0) || is(&a, 1.0) {
+                Tree::Const(1.0)
+            } else if is(&b, 1.0) {
+                a
+            } else {
+                raw(op, a, b)
+            }
+        }
+    }
+}
+
+fn add(a: Tree, b: Tree) -> Tree {
+    bin(BinOp::Add, a, b)
+}
+fn sub(a: Tree, b: Tree) -> Tree {
+    bin(BinOp::Sub, a, b)
+}
+fn mul(a: Tree, b: Tree) -> Tree {
+    bin(BinOp::Mul, a, b)
+}
+fn div(a: Tree, b: Tree) -> Tree {
+    bin(BinOp::Div, a, b)
+}
+pub(super) fn pow(a: Tree, b: Tree) -> Tree {
+    bin(BinOp::Pow, a, b)
+}
+
+// ---------------------------------------------------------------------------------------
+// Derivative, variable walks, compilation.
+
+pub(super) fn diff(t: &Tree, v: usize) -> Tree {
+    match t {
+        Tree::Const(_) => Tree::Const(0.0),
+        Tree::Var(i) => Tree::Const(if *i == v { 1.0 } else { 0.0 }),
+        Tree::Neg(a) => neg(diff(a, v)),
+        Tree::Bin(op, a, b) => {
+            let (da, db) = (diff(a, v), diff(b, v));
+            let (a, b) = (a.as_ref().clone(), b.as_ref().clone());
+            match op {
+                BinOp::Add => add(da, db),
+                BinOp::Sub => sub(da, db),
+                BinOp::Mul => add(mul(da, b), mul(a, db)),
+                BinOp::Div if is(&db, 0.0) => div(da, b),
+                BinOp::Div => div(
+                    sub(mul(da, b.clone()), mul(a, db)),
+                    pow(b, Tree::Const(2.0)),
+                ),
+                BinOp::Pow => match (&a, &b) {
+                    // c·a^(c-1)·da; c - 1 is finite because c is.
+                    (_, Tree::Const(c)) => {
+                        let c = *c;
+                        mul(mul(Tree::Const(c), pow(a, Tree::Const(c - 1.0))), da)
+                    }
+                    // a^b·log(a)·db for a constant base.
+                    (Tree::Const(_), _) => mul(mul(t.clone(), call(Func::Log, a)), db),
+                    _ => {
+                        let inner = add(mul(db, call(Func::Log, a.clone())), div(mul(b, da), a));
+                        mul(t.clone(), inner)
+                    }
+                },
+            }
+        }
+        Tree::Call(f, a) => {
+            let da = diff(a, v);
+            if is(&da, 0.0) {
+                return Tree::Const(0.0);
+            }
+            let a = a.as_ref().clone();
+            match f {
+                Func::Sin => mul(call(Func::Cos, a), da),
+                Func::Cos => neg(mul(call(Func::Sin, a), da)),
+                Func::Tan => div(da, pow(call(Func::Cos, a), Tree::Const(2.0))),
+                Func::Exp => mul(t.clone(), da),
+                Func::Log => div(da, a),
+                Func::Sqrt => div(da, mul(Tree::Const(2.0), t.clone())),
+                Func::Abs => mul(call(Func::Sign, a), da),
+                Func::Sign => Tree::Const(0.0),
+                Func::Tanh => mul(sub(Tree::Const(1.0), pow(t.clone(), Tree::Const(2.0))), da),
+            }
+        }
+    }
+}
+
+pub(super) fn collect_vars(t: &Tree, out: &mut Vec<usize>) {
+    match t {
+        Tree::Const(_) => {}
+        Tree::Var(i) => out.push(*i),
+        Tree::Neg(a) | Tree::Call(_, a) => collect_vars(a, out),
+        Tree::Bin(_, a, b) => {
+            collect_vars(a, out);
+            collect_vars(b, out);
+        }
+    }
+}
+
+/// Re-index variables; `map[i]` is `Some` for every used `i` (checked by the caller).
+pub(super) fn remap(t: &Tree, map: &[Option<usize>]) -> Tree {
+    match t {
+        Tree::Const(c) => Tree::Const(*c),
+        Tree::Var(i) => Tree::Var(map.get(*i).copied().flatten().unwrap_or(*i)),
+        Tree::Neg(a) => Tree::Neg(Box::new(remap(a, map))),
+        Tree::Call(f, a) => Tree::Call(*f, Box::new(remap(a, map))),
+        Tree::Bin(op, a, b) => raw(*op, remap(a, map), remap(b, map)),
+    }
+}
+
+/// Postfix program and the stack slots it needs. Binary operands are emitted
+/// deeper-subtree-first (Sethi–Ullman), which is exact: the operation is the same, only
+/// the evaluation order of independent operands changes.
+pub(super) fn compile(t: &Tree) -> (Vec<Op>, usize) {
+    match t {
+        Tree::Const(c) => (vec![Op::Const(*c)], 1),
+        Tree::Var(i) => (vec![Op::Var(*i)], 1),
+        Tree::Neg(a) | Tree::Call(_, a) => {
+            let (mut p, need) = compile(a);
+            p.push(match t {
+                Tree::Call(f, _) => Op::Call(*f),
+                _ => Op::Neg,
+            });
+            (p, need)
+        }
+        Tree::Bin(BinOp::Pow, a, b) if is(b, 2.0) => {
+            let (mut p, need) = compile(a);
+            p.push(Op::Square);
+            (p, need)
+        }
+        Tree::Bin(op, a, b) => {
+            let (pa, na) = compile(a);
+            let (pb, nb) = compile(b);
+            let need = if na == nb { na + 1 } else { na.max(nb) };
+            let (mut first, second, last) = if nb > na {
+                (pb, pa, Op::BinRev(*op))
+            } else {
+                (pa, pb, Op::Bin(*op))
+            };
+            first.extend(second);
+            first.push(last);
+            (first, need)
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Printing.
+
+const SUM: u8 = 1;
+const PRODUCT: u8 = 2;
+const NEG: u8 = 3;
+const POWER: u8 = 4;
+const ATOM: u8 = 5;
+
+fn precedence(t: &Tree) -> u8 {
+    match t {
+        Tree::Const(c) if c.is_sign_negative() => NEG,
+        Tree::Const(_) | Tree::Var(_) | Tree::Call(..) => ATOM,
+        Tree::Neg(_) => NEG,
+        Tree::Bin(BinOp::Add | BinOp::Sub, ..) => SUM,
+        Tree::Bin(BinOp::Mul | BinOp::Div, ..) => PRODUCT,
+        Tree::Bin(BinOp::Pow, ..) => POWER,
+    }
+}
+
+fn write_operand(
+    t: &Tree,
+    parens: bool,
+    names: &[String],
+    f: &mut fmt::Formatter<'_>,
+) -> fmt::Result {
+    if parens {
+        f.write_str("(")?;
+        write_tree(t, names, f)?;
+        f.write_str(")")
+    } else {
+        write_tree(t, names, f)
+    }
+}
+
+pub(super) fn write_tree(t: &Tree, names: &[String], f: &mut fmt::Formatter<'_>) -> fmt::Result {
+    match t {
+        Tree::Const(c) => {
+            if c.is_sign_negative() {
+                f.write_str("-")?;
+            }
+            // `{:?}` is the shortest text that reads back to the same f64, with an
+            // exponent for very large or small magnitudes; drop its `.0` on integers.
+            let text = format!("{:?}", c.abs());
+            f.write_str(text.strip_suffix(".0").unwrap_or(&text))
+        }
+        Tree::Var(i) => f.write_str(names.get(*i).map_or("?", String::as_str)),
+        Tree::Neg(a) => {
+            f.write_str("-")?;
+            write_operand(a, precedence(a) < POWER, names, f)
+        }
+        Tree::Call(func, a) => {
+            f.write_str(func.name())?;
+            write_operand(a, true, names, f)
+        }
+        Tree::Bin(op, a, b) => {
+            let (left_min, right_min) = match op {
+                BinOp::Add | BinOp::Sub => (SUM, PRODUCT),
+                BinOp::Mul | BinOp::Div => (PRODUCT, POWER),
+                BinOp::Pow => (ATOM, POWER),
+            };
+            write_operand(a, precedence(a) < left_min, names, f)?;
+            f.write_str(op.symbol())?;
+            let pb = precedence(b);
+            write_operand(b, pb < right_min || pb == NEG, names, f)
+        }
+    }
+}
