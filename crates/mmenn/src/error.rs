@@ -1,0 +1,225 @@
+//! The facade's error type: file problems carry the path and, where it applies, the line,
+//! column or matrix; errors of the numerical crates are wrapped with what was being done.
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+/// What is wrong in a CSV data file.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum CsvProblem {
+    /// The file has no header row.
+    #[error("the file is empty (no header row)")]
+    Empty,
+    /// There is no `t` column.
+    #[error("there is no 't' column in the header")]
+    NoTimeColumn,
+    /// A header name appears twice.
+    #[error("column name '{0}' appears twice in the header")]
+    DuplicateColumn(String),
+    /// A header name is empty.
+    #[error("a column name in the header is empty")]
+    EmptyColumnName,
+    /// A row has a different number of fields than the header.
+    #[error("row has {found} fields, the header has {expected}")]
+    Ragged {
+        /// Fields in the header.
+        expected: usize,
+        /// Fields in this row.
+        found: usize,
+    },
+    /// A cell is not a number.
+    #[error("'{text}' is not a number")]
+    NotANumber {
+        /// The cell text.
+        text: String,
+    },
+    /// A cell that must be present (time or an input) is empty or NaN.
+    #[error("the value is missing or NaN, but {kind} must be complete")]
+    Missing {
+        /// `time` or `input`.
+        kind: &'static str,
+    },
+    /// A cell is infinite.
+    #[error("the value is infinite")]
+    Infinite,
+    /// Time does not increase.
+    #[error("time {t} does not increase after {t_prev}")]
+    NonIncreasingTime {
+        /// Previous time, s.
+        t_prev: f64,
+        /// This time, s.
+        t: f64,
+    },
+    /// Time is not uniformly sampled.
+    #[error(
+        "time step {step} s differs from the file's mean step {dt} s: data must be uniformly sampled"
+    )]
+    NonUniformTime {
+        /// Step found, s.
+        step: f64,
+        /// Mean step, s.
+        dt: f64,
+    },
+    /// Fewer than two data rows.
+    #[error("the file has {0} data rows; at least 2 are needed")]
+    TooFewRows(usize),
+    /// A channel the model needs is not in the file.
+    #[error("the model needs a column '{0}', which is not in the header")]
+    MissingChannel(String),
+    /// The CSV parser itself failed (bad quoting, invalid UTF-8).
+    #[error("unreadable CSV: {0}")]
+    Syntax(String),
+}
+
+/// What is wrong in a TOML model file.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ModelProblem {
+    /// TOML syntax or a key of the wrong type / unknown key.
+    #[error("{message}")]
+    Syntax {
+        /// Parser message.
+        message: String,
+    },
+    /// A matrix row has the wrong length.
+    #[error("matrix {matrix}: row {row} has {found} entries, expected {expected}")]
+    RaggedRow {
+        /// Matrix key.
+        matrix: &'static str,
+        /// Row index (0-based).
+        row: usize,
+        /// Entries found.
+        found: usize,
+        /// Entries expected.
+        expected: usize,
+    },
+    /// A matrix has the wrong number of rows.
+    #[error("matrix {matrix} has {found} rows, expected {expected}")]
+    Rows {
+        /// Matrix key.
+        matrix: &'static str,
+        /// Rows found.
+        found: usize,
+        /// Rows expected.
+        expected: usize,
+    },
+    /// A key that is required in this combination is missing.
+    #[error("key '{key}' is required: {why}")]
+    MissingKey {
+        /// The key.
+        key: &'static str,
+        /// Why it is needed.
+        why: &'static str,
+    },
+    /// Keys that exclude each other are both present.
+    #[error("keys '{a}' and '{b}' cannot both be given")]
+    Conflict {
+        /// First key.
+        a: &'static str,
+        /// Second key.
+        b: &'static str,
+    },
+    /// A name in `measured`, `corrected`, `units` or a term is not a state/input.
+    #[error("'{name}' in '{key}' is not a known {kind}")]
+    UnknownName {
+        /// The key where it appears.
+        key: &'static str,
+        /// The name.
+        name: String,
+        /// What it should be.
+        kind: &'static str,
+    },
+    /// `noise_variance` is neither a list nor "auto".
+    #[error("noise_variance must be a list of positive numbers or \"auto\", got \"{0}\"")]
+    NoiseWord(String),
+    /// `noise_variance` has the wrong length.
+    #[error("noise_variance has {found} entries, but there are {expected} measured channels")]
+    NoiseLength {
+        /// Entries found.
+        found: usize,
+        /// Measured channels.
+        expected: usize,
+    },
+    /// A noise variance is not positive.
+    #[error("noise_variance[{index}] = {value} must be positive and finite")]
+    NonPositiveVariance {
+        /// Index.
+        index: usize,
+        /// Value.
+        value: f64,
+    },
+    /// A named term does not parse or names an unknown state or input.
+    #[error(transparent)]
+    Term(Box<sysid_core::TermError>),
+    /// The model is inconsistent (shape, non-finite entry, duplicate name).
+    #[error(transparent)]
+    Model(#[from] sysid_core::CoreError),
+}
+
+impl From<sysid_core::TermError> for ModelProblem {
+    fn from(e: sysid_core::TermError) -> Self {
+        ModelProblem::Term(Box::new(e))
+    }
+}
+
+/// Errors of the facade.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum MmennError {
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A CSV data file is malformed.
+    #[error("{path}:{line}{}: {problem}", column.as_ref().map(|c| format!(", column '{c}'")).unwrap_or_default())]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number (1 = header).
+        line: usize,
+        /// Column name, when one is involved.
+        column: Option<String>,
+        /// What is wrong.
+        problem: CsvProblem,
+    },
+    /// A TOML model file is malformed.
+    #[error("{path}{}: {problem}", line.map(|l| format!(":{l}:{}", column.unwrap_or(0))).unwrap_or_default())]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line, when known.
+        line: Option<usize>,
+        /// 1-based column, when known.
+        column: Option<usize>,
+        /// What is wrong.
+        problem: ModelProblem,
+    },
+    /// A simulated system could not be generated.
+    #[error("simulation: {0}")]
+    Plant(#[from] plants::PlantError),
+    /// A core-vocabulary error while doing something named.
+    #[error("{context}: {source}")]
+    Core {
+        /// What was being done.
+        context: &'static str,
+        /// The error.
+        #[source]
+        source: sysid_core::CoreError,
+    },
+    /// Drawing a figure failed.
+    #[error("drawing a figure: {0}")]
+    Plot(String),
+    /// JSON serialisation failed.
+    #[error("writing JSON: {0}")]
+    Json(#[from] serde_json::Error),
+}
+
+/// Result alias of the facade.
+pub type Result<T, E = MmennError> = std::result::Result<T, E>;

@@ -1,0 +1,16 @@
+#![doc = include_str!("../README.md")]
+
+pub mod atomic;
+pub mod data_file;
+pub mod error;
+pub mod model_file;
+pub mod plot;
+pub mod simulate;
+
+pub use error::{CsvProblem, MmennError, ModelProblem, Result};
+pub use model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
+
+/// The simulated truth systems and experiment recipes.
+pub use plants;
+/// The shared vocabulary (datasets, traits, linear model, integrators, metrics).
+pub use sysid_core;

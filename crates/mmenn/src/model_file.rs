@@ -1,0 +1,563 @@
+//! The TOML model file of SPEC §5. Its keys are a contract (extend, never rename):
+//! `states`, `inputs`, `A`, `B`, `measured` or `C` + `outputs`, `corrected`,
+//! `noise_variance` (list or `"auto"`), `units`, and `[[terms]]` (`state`, `effect`,
+//! `term`, `coefficient`).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use sysid_core::{LinearModel, ModelNames, TermModel};
+
+use crate::atomic::write_atomic;
+use crate::error::{MmennError, ModelProblem, Result};
+
+impl ModelSpec {
+    /// The assumed model with its named terms, as `Dynamics` (the linear model alone when
+    /// there are no terms). Errors name the term and, for expressions, the column.
+    pub fn term_model(&self) -> Result<TermModel, ModelProblem> {
+        let specs = self.terms.iter().map(|t| {
+            (
+                t.state.as_str(),
+                t.effect.as_str(),
+                t.term.as_str(),
+                t.coefficient,
+            )
+        });
+        Ok(TermModel::from_specs(self.linear.clone(), specs)?)
+    }
+}
+
+/// Measurement noise variance: given per measured channel, or to be estimated.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NoiseVariance {
+    /// One positive variance per measured channel, in the channel's unit squared.
+    Given(Vec<f64>),
+    /// Estimate from the data.
+    Auto,
+}
+
+/// A named nonlinear term as written in the file (validated against the model's names;
+/// the expression itself is compiled by `sysid_core::terms`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TermEntry {
+    /// State equation it enters.
+    pub state: String,
+    /// Catalogue name of the effect.
+    pub effect: String,
+    /// The expression, in state and input names.
+    pub term: String,
+    /// Coefficient multiplying the expression.
+    pub coefficient: f64,
+}
+
+/// A model file in memory: the assumed linear model, noise, units and named terms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelSpec {
+    /// The assumed linear model (names: states, inputs, outputs, corrected states).
+    pub linear: LinearModel,
+    /// Measurement noise variance.
+    pub noise_variance: NoiseVariance,
+    /// Units by state/input/output name.
+    pub units: BTreeMap<String, String>,
+    /// Named nonlinear terms.
+    pub terms: Vec<TermEntry>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+enum NoiseToml {
+    Values(Vec<f64>),
+    Word(String),
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelToml {
+    states: Vec<String>,
+    #[serde(default)]
+    inputs: Vec<String>,
+    #[serde(rename = "A")]
+    a: Vec<Vec<f64>>,
+    #[serde(rename = "B", default, skip_serializing_if = "Option::is_none")]
+    b: Option<Vec<Vec<f64>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    measured: Option<Vec<String>>,
+    #[serde(rename = "C", default, skip_serializing_if = "Option::is_none")]
+    c: Option<Vec<Vec<f64>>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    outputs: Option<Vec<String>>,
+    #[serde(default)]
+    corrected: Vec<String>,
+    noise_variance: NoiseToml,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    units: BTreeMap<String, String>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    terms: Vec<TermEntry>,
+}
+
+fn matrix(
+    key: &'static str,
+    rows: &[Vec<f64>],
+    n_rows: usize,
+    n_cols: usize,
+) -> Result<DMatrix<f64>, ModelProblem> {
+    if rows.len() != n_rows {
+        return Err(ModelProblem::Rows {
+            matrix: key,
+            found: rows.len(),
+            expected: n_rows,
+        });
+    }
+    for (i, r) in rows.iter().enumerate() {
+        if r.len() != n_cols {
+            return Err(ModelProblem::RaggedRow {
+                matrix: key,
+                row: i,
+                found: r.len(),
+                expected: n_cols,
+            });
+        }
+    }
+    Ok(DMatrix::from_fn(n_rows, n_cols, |i, j| rows[i][j]))
+}
+
+fn selection(
+    key: &'static str,
+    names: &[String],
+    states: &[String],
+    rows: bool,
+) -> Result<DMatrix<f64>, ModelProblem> {
+    let n = states.len();
+    let mut m = if rows {
+        DMatrix::zeros(names.len(), n)
+    } else {
+        DMatrix::zeros(n, names.len())
+    };
+    for (k, name) in names.iter().enumerate() {
+        let i = states
+            .iter()
+            .position(|s| s == name)
+            .ok_or_else(|| ModelProblem::UnknownName {
+                key,
+                name: name.clone(),
+                kind: "state",
+            })?;
+        if rows {
+            m[(k, i)] = 1.0;
+        } else {
+            m[(i, k)] = 1.0;
+        }
+    }
+    Ok(m)
+}
+
+fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
+    let n = raw.states.len();
+    let m = raw.inputs.len();
+    let a = matrix("A", &raw.a, n, n)?;
+    let b = match (&raw.b, m) {
+        (Some(b), _) => matrix("B", b, n, m)?,
+        (None, 0) => DMatrix::zeros(n, 0),
+        (None, _) => {
+            return Err(ModelProblem::MissingKey {
+                key: "B",
+                why: "the model has inputs",
+            });
+        }
+    };
+    let (c, outputs) = match (&raw.measured, &raw.c) {
+        (Some(_), Some(_)) => {
+            return Err(ModelProblem::Conflict {
+                a: "measured",
+                b: "C",
+            });
+        }
+        (None, None) => {
+            return Err(ModelProblem::MissingKey {
+                key: "measured",
+                why: "say which states are measured (or give C and outputs)",
+            });
+        }
+        (Some(meas), None) => (
+            selection("measured", meas, &raw.states, true)?,
+            meas.clone(),
+        ),
+        (None, Some(c)) => {
+            let outputs = raw.outputs.clone().ok_or(ModelProblem::MissingKey {
+                key: "outputs",
+                why: "C is given, so its rows need names",
+            })?;
+            (matrix("C", c, outputs.len(), n)?, outputs)
+        }
+    };
+    let e = selection("corrected", &raw.corrected, &raw.states, false)?;
+    let noise_variance = match raw.noise_variance {
+        NoiseToml::Word(w) if w == "auto" => NoiseVariance::Auto,
+        NoiseToml::Word(w) => return Err(ModelProblem::NoiseWord(w)),
+        NoiseToml::Values(v) => {
+            if v.len() != outputs.len() {
+                return Err(ModelProblem::NoiseLength {
+                    found: v.len(),
+                    expected: outputs.len(),
+                });
+            }
+            if let Some((index, &value)) = v
+                .iter()
+                .enumerate()
+                .find(|(_, x)| !(x.is_finite() && **x > 0.0))
+            {
+                return Err(ModelProblem::NonPositiveVariance { index, value });
+            }
+            NoiseVariance::Given(v)
+        }
+    };
+    for name in raw.units.keys() {
+        let is_correction = name
+            .strip_prefix("d_")
+            .is_some_and(|s| raw.states.iter().any(|c| c == s));
+        if !raw.states.contains(name)
+            && !raw.inputs.contains(name)
+            && !outputs.contains(name)
+            && !is_correction
+        {
+            return Err(ModelProblem::UnknownName {
+                key: "units",
+                name: name.clone(),
+                kind: "state, input, output or d_<state>",
+            });
+        }
+    }
+    for t in &raw.terms {
+        if !raw.states.contains(&t.state) {
+            return Err(ModelProblem::UnknownName {
+                key: "terms.state",
+                name: t.state.clone(),
+                kind: "state",
+            });
+        }
+    }
+    let names = ModelNames {
+        states: raw.states.clone(),
+        inputs: raw.inputs.clone(),
+        outputs,
+        corrections: raw.corrected.clone(),
+    };
+    let linear = LinearModel::with_names(a, b, c, e, names)?;
+    let spec = ModelSpec {
+        linear,
+        noise_variance,
+        units: raw.units,
+        terms: raw.terms,
+    };
+    spec.term_model()?;
+    Ok(spec)
+}
+
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+/// Parse a model file's text; `path` is only used in errors.
+pub fn parse_model(path: &Path, text: &str) -> Result<ModelSpec> {
+    let err = |line, column, problem| MmennError::Model {
+        path: path.to_path_buf(),
+        line,
+        column,
+        problem,
+    };
+    let raw: ModelToml = toml::from_str(text).map_err(|e| {
+        let (line, col) = e
+            .span()
+            .map(|s| line_col(text, s.start))
+            .map_or((None, None), |(l, c)| (Some(l), Some(c)));
+        err(
+            line,
+            col,
+            ModelProblem::Syntax {
+                message: e.message().trim().to_string(),
+            },
+        )
+    })?;
+    build(raw).map_err(|p| err(None, None, p))
+}
+
+/// Read a model file.
+pub fn read_model(path: &Path) -> Result<ModelSpec> {
+    let text = std::fs::read_to_string(path).map_err(|source| MmennError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_model(path, &text)
+}
+
+fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
+    (0..m.nrows())
+        .map(|i| m.row(i).iter().copied().collect())
+        .collect()
+}
+
+/// Render a model as TOML text in the contract's keys: `measured` when `C` is a selection
+/// (else `C` + `outputs`); `corrected` from `E`, which must be a selection.
+pub fn format_model(spec: &ModelSpec) -> Result<String> {
+    let lin = &spec.linear;
+    let states = lin.state_names().to_vec();
+    let (measured, c, outputs) = match lin.measured_states() {
+        Some(idx)
+            if idx
+                .iter()
+                .zip(lin.output_names())
+                .all(|(&i, o)| &states[i] == o) =>
+        {
+            (
+                Some(idx.iter().map(|&i| states[i].clone()).collect()),
+                None,
+                None,
+            )
+        }
+        _ => (
+            None,
+            Some(rows_of(lin.c())),
+            Some(lin.output_names().to_vec()),
+        ),
+    };
+    let corrected = match lin.corrected_states() {
+        Some(idx) => idx.iter().map(|&i| states[i].clone()).collect(),
+        None => {
+            return Err(MmennError::Model {
+                path: "<model being written>".into(),
+                line: None,
+                column: None,
+                problem: ModelProblem::MissingKey {
+                    key: "corrected",
+                    why: "the model file can only express E as a selection of corrected states",
+                },
+            });
+        }
+    };
+    let raw = ModelToml {
+        states,
+        inputs: lin.input_names().to_vec(),
+        a: rows_of(lin.a()),
+        b: if lin.n_inputs() > 0 {
+            Some(rows_of(lin.b()))
+        } else {
+            None
+        },
+        measured,
+        c,
+        outputs,
+        corrected,
+        noise_variance: match &spec.noise_variance {
+            NoiseVariance::Auto => NoiseToml::Word("auto".into()),
+            NoiseVariance::Given(v) => NoiseToml::Values(v.clone()),
+        },
+        units: spec.units.clone(),
+        terms: spec.terms.clone(),
+    };
+    toml::to_string(&raw).map_err(|e| MmennError::Model {
+        path: "<model being written>".into(),
+        line: None,
+        column: None,
+        problem: ModelProblem::Syntax {
+            message: e.to_string(),
+        },
+    })
+}
+
+/// Write a model file atomically.
+pub fn write_model(path: &Path, spec: &ModelSpec) -> Result<()> {
+    write_atomic(path, format_model(spec)?.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SPEC_EXAMPLE: &str = r#"
+states = ["theta", "omega"]          # state names, in order
+inputs = ["u"]
+A = [[0.0, 1.0], [-9.81, 0.0]]       # n×n
+B = [[0.0], [-1.0]]                  # n×m
+measured = ["theta"]
+corrected = ["omega"]
+noise_variance = [1e-4]
+units = { theta = "rad", omega = "rad/s", u = "m/s^2" }
+
+[[terms]]
+state = "omega"
+effect = "coulomb_friction"
+term = "sign(omega)"
+coefficient = -0.3
+"#;
+
+    fn problem(text: &str) -> ModelProblem {
+        match parse_model(Path::new("m.toml"), text) {
+            Err(MmennError::Model { problem, .. }) => problem,
+            other => panic!("expected a model error, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn spec_example_parses_and_round_trips() {
+        let spec = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+        assert!((spec.linear.a()[(1, 0)] + 9.81).abs() < 1e-15);
+        assert_eq!(spec.linear.c(), &DMatrix::from_row_slice(1, 2, &[1.0, 0.0]));
+        assert_eq!(spec.linear.e(), &DMatrix::from_row_slice(2, 1, &[0.0, 1.0]));
+        assert_eq!(spec.linear.correction_names(), &["omega".to_string()]);
+        assert_eq!(spec.noise_variance, NoiseVariance::Given(vec![1e-4]));
+        assert_eq!(spec.terms[0].term, "sign(omega)");
+        let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+        assert_eq!(spec, again);
+    }
+
+    #[test]
+    fn general_c_and_auto_noise_round_trip() {
+        let text = r#"
+states = ["x1", "x2"]
+A = [[0.0, 1.0], [-1.0, -0.1]]
+C = [[1.0, 1.0]]
+outputs = ["s"]
+corrected = ["x2"]
+noise_variance = "auto"
+"#;
+        let spec = parse_model(Path::new("m.toml"), text).unwrap();
+        assert_eq!(spec.noise_variance, NoiseVariance::Auto);
+        assert_eq!(spec.linear.n_inputs(), 0);
+        let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+        assert_eq!(spec, again);
+    }
+
+    #[test]
+    fn every_bad_input_class_is_typed() {
+        let base = |a: &str, b: &str| {
+            SPEC_EXAMPLE
+                .replace("A = [[0.0, 1.0], [-9.81, 0.0]]", a)
+                .replace("noise_variance = [1e-4]", b)
+        };
+        assert!(matches!(
+            problem(&base(
+                "A = [[0.0, 1.0, 2.0], [-9.81, 0.0, 1.0]]",
+                "noise_variance = [1e-4]"
+            )),
+            ModelProblem::RaggedRow {
+                matrix: "A",
+                row: 0,
+                ..
+            }
+        ));
+        assert!(matches!(
+            problem(&base("A = [[0.0, 1.0]]", "noise_variance = [1e-4]")),
+            ModelProblem::Rows { matrix: "A", .. }
+        ));
+        assert!(matches!(
+            problem(&base(
+                "A = [[0.0, 1.0], [-9.81, 0.0]]",
+                "noise_variance = [0.0]"
+            )),
+            ModelProblem::NonPositiveVariance { index: 0, .. }
+        ));
+        assert!(matches!(
+            problem(&base(
+                "A = [[0.0, 1.0], [-9.81, 0.0]]",
+                "noise_variance = [-1.0]"
+            )),
+            ModelProblem::NonPositiveVariance { .. }
+        ));
+        assert!(matches!(
+            problem(&base(
+                "A = [[0.0, 1.0], [-9.81, 0.0]]",
+                "noise_variance = [1.0, 2.0]"
+            )),
+            ModelProblem::NoiseLength {
+                found: 2,
+                expected: 1
+            }
+        ));
+        assert!(matches!(
+            problem(&base(
+                "A = [[0.0, 1.0], [-9.81, 0.0]]",
+                "noise_variance = \"guess\""
+            )),
+            ModelProblem::NoiseWord(_)
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("B = [[0.0], [-1.0]]", "B = [[0.0, 1.0], [-1.0, 1.0]]")),
+            ModelProblem::RaggedRow { matrix: "B", .. }
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("measured = [\"theta\"]", "measured = [\"phi\"]")),
+            ModelProblem::UnknownName {
+                key: "measured",
+                ..
+            }
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("corrected = [\"omega\"]", "corrected = [\"w\"]")),
+            ModelProblem::UnknownName {
+                key: "corrected",
+                ..
+            }
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("state = \"omega\"", "state = \"w\"")),
+            ModelProblem::UnknownName {
+                key: "terms.state",
+                ..
+            }
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("B = [[0.0], [-1.0]]", "")),
+            ModelProblem::MissingKey { key: "B", .. }
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace(
+                "measured = [\"theta\"]",
+                "measured = [\"theta\"]\nC = [[1.0, 0.0]]"
+            )),
+            ModelProblem::Conflict { .. }
+        ));
+        let dup = "states = [\"x\", \"x\"]\nA = [[0.0, 1.0], [0.0, 0.0]]\nmeasured = [\"x\"]\nnoise_variance = [1.0]\n";
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("sign(omega)", "sign(omega")),
+            ModelProblem::Term(e) if matches!(*e, sysid_core::TermError::Expression { .. })
+        ));
+        assert!(matches!(
+            problem(&SPEC_EXAMPLE.replace("sign(omega)", "sign(phi)")),
+            ModelProblem::Term(_)
+        ));
+        assert!(matches!(
+            problem(dup),
+            ModelProblem::Model(sysid_core::CoreError::DuplicateName { .. })
+        ));
+    }
+
+    #[test]
+    fn syntax_errors_carry_line_and_column() {
+        let text = SPEC_EXAMPLE.replace("inputs = [\"u\"]", "inputs = [\"u\"\nmesured = 3");
+        match parse_model(Path::new("m.toml"), &text) {
+            Err(MmennError::Model {
+                line: Some(l),
+                column: Some(_),
+                problem: ModelProblem::Syntax { .. },
+                ..
+            }) => assert!(l >= 3),
+            other => panic!("expected a located syntax error, got {other:?}"),
+        }
+        match parse_model(
+            Path::new("m.toml"),
+            &format!("{SPEC_EXAMPLE}\nmesured = 1\n"),
+        ) {
+            Err(MmennError::Model {
+                problem: ModelProblem::Syntax { message },
+                ..
+            }) => assert!(message.contains("mesured"), "{message}"),
+            other => panic!("expected unknown key error, got {other:?}"),
+        }
+    }
+}

@@ -1,0 +1,3 @@
+//! Integration tests of the facade: every workflow end to end through files.
+
+mod simulate;
