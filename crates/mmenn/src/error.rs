@@ -216,6 +216,12 @@ pub enum MmennError {
     /// Drawing a figure failed.
     #[error("drawing a figure: {0}")]
     Plot(String),
+    /// The MME estimator failed.
+    #[error("MME: {0}")]
+    Mme(#[from] mme_core::MmeError),
+    /// A network could not be built or trained.
+    #[error("network: {0}")]
+    Nn(#[from] nn::NnError),
     /// JSON serialisation failed.
     #[error("writing JSON: {0}")]
     Json(#[from] serde_json::Error),

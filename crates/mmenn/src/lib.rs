@@ -3,6 +3,8 @@
 pub mod atomic;
 pub mod data_file;
 pub mod error;
+pub mod estimate;
+pub mod fit;
 pub mod model_file;
 pub mod plot;
 pub mod simulate;
@@ -10,6 +12,10 @@ pub mod simulate;
 pub use error::{CsvProblem, MmennError, ModelProblem, Result};
 pub use model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
 
+/// The Minimum Model Error estimator.
+pub use mme_core;
+/// Feed-forward networks.
+pub use nn;
 /// The simulated truth systems and experiment recipes.
 pub use plants;
 /// The shared vocabulary (datasets, traits, linear model, integrators, metrics).

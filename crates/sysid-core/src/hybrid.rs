@@ -31,13 +31,25 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
     /// outputs `y = C x` named `output_names`.
     ///
     /// Defaults: `x0 = 0`, RK4 with 4 sub-steps per sample, blow-up bound 1e12.
-    pub fn new(base: F, correction: G, e: DMatrix<f64>, c: DMatrix<f64>, output_names: Vec<String>) -> Result<Self> {
+    pub fn new(
+        base: F,
+        correction: G,
+        e: DMatrix<f64>,
+        c: DMatrix<f64>,
+        output_names: Vec<String>,
+    ) -> Result<Self> {
         let n = base.n_states();
         let m = base.n_inputs();
         let q = correction.n_outputs();
         let shape = |matrix, r: usize, cc: usize, er, ec| {
             if r != er || cc != ec {
-                Err(CoreError::Shape { matrix, rows: r, cols: cc, expected_rows: er, expected_cols: ec })
+                Err(CoreError::Shape {
+                    matrix,
+                    rows: r,
+                    cols: cc,
+                    expected_rows: er,
+                    expected_cols: ec,
+                })
             } else {
                 Ok(())
             }
@@ -45,10 +57,18 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
         shape("E", e.nrows(), e.ncols(), n, q)?;
         shape("C", c.nrows(), c.ncols(), output_names.len(), n)?;
         if correction.n_states() != n {
-            return Err(CoreError::Length { what: "states read by the correction", found: correction.n_states(), expected: n });
+            return Err(CoreError::Length {
+                what: "states read by the correction",
+                found: correction.n_states(),
+                expected: n,
+            });
         }
         if correction.n_inputs() != m {
-            return Err(CoreError::Length { what: "inputs read by the correction", found: correction.n_inputs(), expected: m });
+            return Err(CoreError::Length {
+                what: "inputs read by the correction",
+                found: correction.n_inputs(),
+                expected: m,
+            });
         }
         Ok(Self {
             base,
@@ -73,7 +93,13 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
     }
 
     /// Free-run states over an input sequence (`m × N`), from `x0`, `n × N`.
-    pub fn simulate_states(&self, x0: &[f64], t0: f64, dt: f64, inputs: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    pub fn simulate_states(
+        &self,
+        x0: &[f64],
+        t0: f64,
+        dt: f64,
+        inputs: &DMatrix<f64>,
+    ) -> Result<DMatrix<f64>> {
         simulate(self, x0, t0, dt, inputs, &self.integrator, self.blow_up)
     }
 }
@@ -115,8 +141,17 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
 
     /// Free-run simulation from `self.x0` over the experiment's inputs.
     fn simulate(&self, experiment: &crate::Experiment) -> Result<Prediction> {
-        let xs = self.simulate_states(&self.x0, experiment.t0(), experiment.dt(), experiment.inputs())?;
-        Ok(Prediction { horizon: Horizon::FreeRun, outputs: &self.c * xs, initial_samples: 0 })
+        let xs = self.simulate_states(
+            &self.x0,
+            experiment.t0(),
+            experiment.dt(),
+            experiment.inputs(),
+        )?;
+        Ok(Prediction {
+            horizon: Horizon::FreeRun,
+            outputs: &self.c * xs,
+            initial_samples: 0,
+        })
     }
 
     /// k-step prediction needs a state estimate at every sample, which only full-state
@@ -143,12 +178,24 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
                 x[state] = y[row];
             }
             for j in start..k {
-                crate::integrate::integrate_interval(self, experiment.time(j), experiment.time(j + 1), &mut x, experiment.input(j), &self.integrator, &mut ws)?;
+                crate::integrate::integrate_interval(
+                    self,
+                    experiment.time(j),
+                    experiment.time(j + 1),
+                    &mut x,
+                    experiment.input(j),
+                    &self.integrator,
+                    &mut ws,
+                )?;
             }
             let yk = &self.c * nalgebra::DVector::from_column_slice(&x);
             out.column_mut(k).copy_from(&yk);
         }
-        Ok(Prediction { horizon: Horizon::Steps(steps), outputs: out, initial_samples: steps })
+        Ok(Prediction {
+            horizon: Horizon::Steps(steps),
+            outputs: out,
+            initial_samples: steps,
+        })
     }
 }
 
@@ -220,14 +267,32 @@ mod tests {
     #[test]
     fn exact_correction_reproduces_the_truth() {
         let lin = assumed();
-        let mut hybrid = CorrectedModel::new(lin.clone(), Cubic { c: 0.1, k: 0.5 }, lin.e().clone(), lin.c().clone(), vec!["x".into()]).unwrap();
+        let mut hybrid = CorrectedModel::new(
+            lin.clone(),
+            Cubic { c: 0.1, k: 0.5 },
+            lin.e().clone(),
+            lin.c().clone(),
+            vec!["x".into()],
+        )
+        .unwrap();
         hybrid.x0 = vec![1.5, 0.0];
         hybrid.integrator = Integrator::Rk4 { substeps: 8 };
         let u = DMatrix::from_fn(1, 500, |_, k| (0.01 * k as f64).sin());
         let exp = crate::Experiment::new(0.0, 0.01, u.clone(), DMatrix::zeros(1, 500)).unwrap();
         let pred = hybrid.simulate(&exp).unwrap();
-        let truth = simulate(&Truth, &[1.5, 0.0], 0.0, 0.01, &u, &Integrator::Rk4 { substeps: 8 }, 1e12).unwrap();
-        let err = (0..500).map(|k| (pred.outputs[(0, k)] - truth[(0, k)]).abs()).fold(0.0, f64::max);
+        let truth = simulate(
+            &Truth,
+            &[1.5, 0.0],
+            0.0,
+            0.01,
+            &u,
+            &Integrator::Rk4 { substeps: 8 },
+            1e12,
+        )
+        .unwrap();
+        let err = (0..500)
+            .map(|k| (pred.outputs[(0, k)] - truth[(0, k)]).abs())
+            .fold(0.0, f64::max);
         assert!(err < 1e-12, "max error {err}");
         assert_eq!(pred.horizon, Horizon::FreeRun);
     }
@@ -235,12 +300,29 @@ mod tests {
     #[test]
     fn wrong_shapes_and_divergence_are_errors() {
         let lin = assumed();
-        let bad = CorrectedModel::new(lin.clone(), Cubic { c: 0.1, k: 0.5 }, DMatrix::zeros(3, 1), lin.c().clone(), vec!["x".into()]);
+        let bad = CorrectedModel::new(
+            lin.clone(),
+            Cubic { c: 0.1, k: 0.5 },
+            DMatrix::zeros(3, 1),
+            lin.c().clone(),
+            vec!["x".into()],
+        );
         assert!(matches!(bad, Err(CoreError::Shape { matrix: "E", .. })));
         // A destabilising correction (negative damping, anti-spring) must blow up with a typed error.
-        let mut wild = CorrectedModel::new(lin.clone(), Cubic { c: -5.0, k: -5.0 }, lin.e().clone(), lin.c().clone(), vec!["x".into()]).unwrap();
+        let mut wild = CorrectedModel::new(
+            lin.clone(),
+            Cubic { c: -5.0, k: -5.0 },
+            lin.e().clone(),
+            lin.c().clone(),
+            vec!["x".into()],
+        )
+        .unwrap();
         wild.x0 = vec![2.0, 0.0];
-        let exp = crate::Experiment::new(0.0, 0.1, DMatrix::zeros(1, 200), DMatrix::zeros(1, 200)).unwrap();
-        assert!(matches!(wild.simulate(&exp), Err(CoreError::Diverged { .. })));
+        let exp = crate::Experiment::new(0.0, 0.1, DMatrix::zeros(1, 200), DMatrix::zeros(1, 200))
+            .unwrap();
+        assert!(matches!(
+            wild.simulate(&exp),
+            Err(CoreError::Diverged { .. })
+        ));
     }
 }

@@ -18,6 +18,27 @@ struct Cli {
 enum Command {
     /// Simulate a built-in system: writes data.csv, truth.csv and model.toml.
     Simulate(SimulateArgs),
+    /// Minimum Model Error estimate: smooth states and the model correction d(t).
+    Estimate(EstimateArgs),
+}
+
+#[derive(Debug, Args)]
+struct EstimateArgs {
+    /// Data file(s) (CSV); several files are several experiments.
+    #[arg(long, required = true, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    model: PathBuf,
+    /// Correction weight W: "auto" (covariance constraint) or a positive number (W = value·I).
+    #[arg(long, default_value = "auto")]
+    w: mmenn::estimate::WeightChoice,
+    /// Sub-steps per sample interval (default: chosen from the model).
+    #[arg(long)]
+    substeps: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Debug, Args)]
@@ -108,9 +129,35 @@ fn simulate(args: SimulateArgs) -> Result<()> {
     Ok(())
 }
 
+#[allow(clippy::print_stdout)]
+fn estimate(args: EstimateArgs) -> Result<()> {
+    let opts = mmenn::estimate::EstimateOptions {
+        w: args.w,
+        substeps: args.substeps,
+    };
+    let s = mmenn::estimate::run_estimate(&args.data, &args.model, &opts, &args.out)?;
+    println!(
+        "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
+        s.samples
+    );
+    for (name, nv) in &s.noise_variance {
+        println!(
+            "  {name}: noise variance {nv:.4e} ({:?}), residual variance {:.4e} (ratio {:.3})",
+            s.noise_method, s.residual_variance[name], s.residual_to_noise[name]
+        );
+    }
+    println!("  W diagonal: {:?}", s.w_by_correction);
+    if let Some(r) = s.sweep_samples_per_second {
+        println!("  final sweep: {:.3e} samples/s", r);
+    }
+    println!("wrote {} files into {}", s.files.len(), args.out.display());
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Simulate(a) => simulate(a),
+        Command::Estimate(a) => estimate(a),
     }
 }

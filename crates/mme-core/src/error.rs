@@ -1,0 +1,139 @@
+//! The one error type of `mme-core`: every variant says what is wrong and where (matrix,
+//! channel, experiment, sample).
+
+use sysid_core::CoreError;
+use thiserror::Error;
+
+/// Errors raised by the MME estimator. Not converging is *not* an error: it is reported
+/// in [`sysid_core::SolveReport::termination`].
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum MmeError {
+    /// An error from the shared vocabulary (model shapes, data, integration).
+    #[error(transparent)]
+    Core(#[from] CoreError),
+    /// A channel the model needs is not in the dataset.
+    #[error("the model's {kind} channel '{name}' is not in the dataset")]
+    UnknownChannel {
+        /// `input` or `output`.
+        kind: &'static str,
+        /// Channel name.
+        name: String,
+    },
+    /// A noise variance is not positive and finite.
+    #[error("noise variance of channel '{channel}' must be positive and finite, got {value}")]
+    NonPositiveVariance {
+        /// Model output channel name.
+        channel: String,
+        /// Value given.
+        value: f64,
+    },
+    /// A weight matrix is not symmetric positive definite.
+    #[error("weight matrix {matrix} is not symmetric positive definite ({reason})")]
+    NotPositiveDefinite {
+        /// Which matrix (`W`, `W shape`).
+        matrix: &'static str,
+        /// What failed.
+        reason: &'static str,
+    },
+    /// A matrix or vector given in the configuration has the wrong size.
+    #[error("{what} has size {rows}x{cols}, expected {expected_rows}x{expected_cols}")]
+    Dimension {
+        /// What was given (`W`, `noise variance`, `initial state`, …).
+        what: &'static str,
+        /// Rows found.
+        rows: usize,
+        /// Columns found.
+        cols: usize,
+        /// Rows expected.
+        expected_rows: usize,
+        /// Columns expected.
+        expected_cols: usize,
+    },
+    /// A scalar setting is outside its valid range.
+    #[error("setting {name} = {value} is invalid: {reason}")]
+    InvalidSetting {
+        /// Setting name.
+        name: &'static str,
+        /// Value given.
+        value: f64,
+        /// What is required.
+        reason: &'static str,
+    },
+    /// The dataset has no experiments.
+    #[error("the dataset has no experiments")]
+    NoExperiments,
+    /// An experiment is too short.
+    #[error("experiment {experiment} has {found} samples, need at least {needed}")]
+    TooFewSamples {
+        /// Experiment index.
+        experiment: usize,
+        /// Samples found.
+        found: usize,
+        /// Samples needed.
+        needed: usize,
+    },
+    /// A measured channel has no (non-missing) samples where some are needed.
+    #[error("channel '{channel}' has {found} measured samples, need at least {needed}")]
+    TooFewMeasurements {
+        /// Model output channel name.
+        channel: String,
+        /// Non-missing samples found.
+        found: usize,
+        /// Needed.
+        needed: usize,
+    },
+    /// The initial state is not determined by the data (the information matrix of the
+    /// free initial state is not positive definite).
+    #[error(
+        "experiment {experiment}: the initial state is not observable from the measurements \
+         (pivot {pivot} of the initial-state information matrix is {value:e}, relative to its \
+         largest diagonal entry)"
+    )]
+    NotObservable {
+        /// Experiment index.
+        experiment: usize,
+        /// Pivot index (state) where the Cholesky factorisation failed.
+        pivot: usize,
+        /// Relative pivot value found.
+        value: f64,
+    },
+    /// A sweep lost positive definiteness or produced non-finite numbers (ill-conditioned
+    /// problem, or a diverged nonlinear trajectory).
+    #[error("experiment {experiment}: numerical breakdown at step {step} ({what})")]
+    Breakdown {
+        /// Experiment index.
+        experiment: usize,
+        /// Sub-step index.
+        step: usize,
+        /// What went wrong.
+        what: &'static str,
+    },
+    /// The nonlinear model's trajectory diverged (non-finite or beyond the blow-up bound).
+    #[error(
+        "experiment {experiment}: nonlinear trajectory diverged at t = {time} s (state {state})"
+    )]
+    Diverged {
+        /// Experiment index.
+        experiment: usize,
+        /// Time, s.
+        time: f64,
+        /// State index.
+        state: usize,
+    },
+    /// A regression for the model update has too few usable rows or a singular regressor.
+    #[error(
+        "model update regression for correction '{correction}' is singular or has too few rows ({rows} rows, {columns} regressors)"
+    )]
+    SingularRegression {
+        /// Correction name.
+        correction: String,
+        /// Rows used.
+        rows: usize,
+        /// Regressors.
+        columns: usize,
+    },
+}
+
+/// Result alias for `mme-core`.
+pub type Result<T, E = MmeError> = std::result::Result<T, E>;

@@ -1,0 +1,30 @@
+#![doc = include_str!("../README.md")]
+
+mod binding;
+pub mod config;
+pub mod discretize;
+pub mod error;
+mod estimate;
+mod evaluate;
+mod kernel;
+mod linear;
+mod linearize;
+pub mod noise;
+pub mod nonlinear;
+pub mod result;
+mod sweep;
+pub mod tune_w;
+pub mod update;
+
+pub use config::{
+    AutoWeight, InitialState, IterationOptions, MmeConfig, NoiseSpec, WeightShape, WeightSpec,
+};
+pub use discretize::default_substeps;
+pub use error::{MmeError, Result};
+pub use estimate::{estimate, estimate_with_report};
+pub use nonlinear::{NonlinearModel, estimate_nonlinear, estimate_nonlinear_with_report};
+pub use result::{MmeOutput, NoiseMethod, NoiseReport, WCurvePoint, WSearch};
+pub use update::{
+    Coefficient, CorrectionRegression, Intercept, ModelUpdate, RegressionPoints, UpdateConfig,
+    update_model,
+};

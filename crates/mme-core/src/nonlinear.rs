@@ -1,0 +1,723 @@
+//! MME with a nonlinear assumed model `ẋ = f(t, x, u) + E d`, `y = C x`: iterated
+//! linearisation (Gauss–Newton, in the closed-loop iLQR form).
+//!
+//! Each iteration linearises the RK4 sub-step map `x_{j+1} = F(x_j, u_k, d_j)` about the
+//! current trajectory (`Φ_j`, `Γ_j` from the private module `linearize`, affine offset
+//! `c_j = F(x̄_j, d̄_j) − Φ_j x̄_j − Γ_j d̄_j`), solves the time-varying linear–quadratic
+//! problem exactly with the sweep, and rolls the *nonlinear* map out with the sweep's
+//! feedback: `d_j = d̄_j + t(d*_j − d̄_j) − F_j(x_j − x̄_j − t(x*_j − x̄_j))`,
+//! `x_0 = x̄_0 + t(x*_0 − x̄_0)`, halving `t` until the true `J` decreases by at least
+//! 1e-4 of the predicted decrease (Armijo). The feedback keeps long rollouts next to the
+//! data (Li & Todorov 2004; Tassa, Erez & Todorov 2012). For a linear `f` the first full
+//! step is the exact optimum of the RK4-discretised problem.
+//!
+//! Termination: `Converged` when an iteration lowers `J` by less than
+//! `cost_tolerance·J` (or the predicted decrease is that small), `LineSearchFailed` when
+//! no step length lowers `J` although the linearisation predicts a decrease,
+//! `MaxIterations` otherwise.
+
+use nalgebra::DMatrix;
+use sysid_core::{
+    Dataset, Dynamics, ExperimentEstimate, IterationRecord, MmeEstimate, ModelNames, SolveReport,
+    Termination,
+};
+
+use crate::binding::{Binding, bind};
+use crate::config::{InitialState, IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight};
+use crate::config::{check_iterations, check_noise, resolve_weight};
+use crate::discretize::{default_substeps, substeps_for};
+use crate::error::{MmeError, Result};
+use crate::estimate::{Phases, assemble, resolve_noise};
+use crate::evaluate::{Solve, Summary};
+use crate::linearize::Rk4;
+use crate::result::MmeOutput;
+use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains, sweep};
+use crate::tune_w::tune;
+
+/// A nonlinear assumed model `ẋ = f(t, x, u) + E d`, `y = C x`, with names.
+#[derive(Debug, Clone)]
+pub struct NonlinearModel<F> {
+    dynamics: F,
+    c: DMatrix<f64>,
+    e: DMatrix<f64>,
+    names: ModelNames,
+}
+
+impl<F: Dynamics> NonlinearModel<F> {
+    /// Build and check shapes: `C` is `p × n`, `E` is `n × q`, names match
+    /// (`n = dynamics.n_states()`, `m = dynamics.n_inputs()`).
+    pub fn new(dynamics: F, c: DMatrix<f64>, e: DMatrix<f64>, names: ModelNames) -> Result<Self> {
+        let (n, m) = (dynamics.n_states(), dynamics.n_inputs());
+        let dim = |what, rows, cols, er, ec| {
+            if rows != er || cols != ec {
+                Err(MmeError::Dimension {
+                    what,
+                    rows,
+                    cols,
+                    expected_rows: er,
+                    expected_cols: ec,
+                })
+            } else {
+                Ok(())
+            }
+        };
+        dim("C", c.nrows(), c.ncols(), names.outputs.len(), n)?;
+        dim("E", e.nrows(), e.ncols(), n, names.corrections.len())?;
+        dim("state names", names.states.len(), 1, n, 1)?;
+        dim("input names", names.inputs.len(), 1, m, 1)?;
+        for (kind, list) in [
+            ("state", &names.states),
+            ("input", &names.inputs),
+            ("output", &names.outputs),
+            ("correction", &names.corrections),
+        ] {
+            sysid_core::dataset::check_unique(kind, list.iter().map(String::as_str))?;
+        }
+        sysid_core::error::check_finite("C", &c)?;
+        sysid_core::error::check_finite("E", &e)?;
+        Ok(Self {
+            dynamics,
+            c,
+            e,
+            names,
+        })
+    }
+
+    /// The right-hand side `f`.
+    pub fn dynamics(&self) -> &F {
+        &self.dynamics
+    }
+    /// `C`.
+    pub fn c(&self) -> &DMatrix<f64> {
+        &self.c
+    }
+    /// `E`.
+    pub fn e(&self) -> &DMatrix<f64> {
+        &self.e
+    }
+    /// Names of states, inputs, outputs and corrections.
+    pub fn names(&self) -> &ModelNames {
+        &self.names
+    }
+}
+
+/// MME estimate with a nonlinear assumed model; see [`estimate_nonlinear_with_report`].
+pub fn estimate_nonlinear<F: Dynamics>(
+    model: &NonlinearModel<F>,
+    data: &Dataset,
+    config: &MmeConfig,
+) -> Result<MmeEstimate> {
+    estimate_nonlinear_with_report(model, data, config).map(|o| o.estimate)
+}
+
+/// MME estimate with a nonlinear assumed model, with the `W` curve and noise report.
+///
+/// `report.iterations` is the Gauss–Newton history of the final solve (at the final `W`);
+/// `report.termination` is its ending when it did not converge, otherwise the `W`
+/// search's ending (or `Converged` for a fixed `W`). The automatic `W` and the noise
+/// likelihood warm-start every solve from the previous trajectory; the likelihood uses the
+/// linearisation at the converged trajectory (Laplace approximation).
+pub fn estimate_nonlinear_with_report<F: Dynamics>(
+    model: &NonlinearModel<F>,
+    data: &Dataset,
+    config: &MmeConfig,
+) -> Result<MmeOutput> {
+    let mut clock = Phases::new();
+    let weight = resolve_weight(&config.w, model.e.ncols())?;
+    if let NoiseSpec::Given(v) = &config.noise_variance {
+        check_noise(v, &model.names.outputs)?;
+    }
+    check_iterations(&config.iterations)?;
+    let mut run = NonlinearRun::new(model, data, config)?;
+    clock.mark("validate");
+
+    let noise = resolve_noise(&mut run, &weight, config, data, &model.names.outputs)?;
+    clock.mark("noise");
+    let inv_r: Vec<f64> = noise.variance.iter().map(|v| 1.0 / v).collect();
+    let mut w_curve = Vec::new();
+    let (w, w_search) = match &weight {
+        ResolvedWeight::Fixed(w) => (w.clone(), None),
+        ResolvedWeight::Auto { shape, opts } => {
+            let search = tune(&mut run, shape, &inv_r, opts, &mut w_curve)?;
+            (shape * search.alpha, Some(search))
+        }
+    };
+    clock.mark("tune_w");
+    let summary = run.solve(&w, &inv_r, LogDet::Skip)?;
+    clock.mark("gauss_newton");
+
+    let termination = match (run.termination, &w_search) {
+        (Termination::Converged, Some(s)) => s.termination,
+        (t, _) => t,
+    };
+    let experiments = run.estimates(data);
+    let names = &model.names;
+    let estimate = assemble(
+        &names.states,
+        &names.corrections,
+        &names.outputs,
+        experiments,
+        w,
+        &noise,
+        &summary,
+        SolveReport {
+            termination: Some(termination),
+            iterations: run.history.clone(),
+            phase_seconds: clock.done(),
+        },
+    );
+    Ok(MmeOutput {
+        estimate,
+        w_curve,
+        w_search,
+        noise,
+    })
+}
+
+/// One experiment's grid.
+#[derive(Debug, Clone, Copy)]
+struct Grid {
+    samples: usize,
+    substeps: usize,
+    h: f64,
+    t0: f64,
+    steps: usize,
+}
+
+/// A trajectory: states at every sub-step (`n × (steps+1)`) and pieces (`q × steps`).
+#[derive(Debug, Clone)]
+struct Traj {
+    x: Vec<f64>,
+    d: Vec<f64>,
+    /// Whether `x` is a rollout of the model with `d` (false for the data-based start).
+    consistent: bool,
+}
+
+/// The cost of a trajectory.
+#[derive(Debug, Clone)]
+struct Eval {
+    sse: Vec<f64>,
+    count: Vec<usize>,
+    correction_cost: f64,
+    cost: f64,
+}
+
+struct NonlinearRun<'a, F> {
+    model: &'a NonlinearModel<F>,
+    data: &'a Dataset,
+    binding: Binding,
+    grids: Vec<Grid>,
+    trajs: Vec<Traj>,
+    opts: IterationOptions,
+    rk: Rk4,
+    ws: Workspace,
+    history: Vec<IterationRecord>,
+    termination: Termination,
+}
+
+impl<'a, F: Dynamics> NonlinearRun<'a, F> {
+    fn new(model: &'a NonlinearModel<F>, data: &'a Dataset, config: &MmeConfig) -> Result<Self> {
+        let binding = bind(&model.names.inputs, &model.names.outputs, data)?;
+        let (n, q) = (model.dynamics.n_states(), model.e.ncols());
+        let m = model.dynamics.n_inputs();
+        let mut run = Self {
+            model,
+            data,
+            grids: Vec::new(),
+            trajs: Vec::new(),
+            opts: config.iterations,
+            rk: Rk4::new(n, m, q),
+            ws: Workspace::default(),
+            history: Vec::new(),
+            termination: Termination::MaxIterations,
+            binding,
+        };
+        if let InitialState::Given(x0s) = &config.initial_state
+            && x0s.len() != data.experiments().len()
+        {
+            return Err(MmeError::Dimension {
+                what: "initial states",
+                rows: x0s.len(),
+                cols: 1,
+                expected_rows: data.experiments().len(),
+                expected_cols: 1,
+            });
+        }
+        for (e, exp) in data.experiments().iter().enumerate() {
+            let x_first = run.data_states(e, 0);
+            let s = match config.substeps {
+                Some(_) => substeps_for(config.substeps, &DMatrix::zeros(n, n), exp.dt())?,
+                None => {
+                    let mut a = DMatrix::zeros(n, n);
+                    let mut b = DMatrix::zeros(n, m);
+                    let u = run.input(e, 0);
+                    model
+                        .dynamics
+                        .jacobians(exp.t0(), &x_first, &u, &mut a, &mut b);
+                    default_substeps(&a, exp.dt())
+                }
+            };
+            let steps = (exp.len() - 1) * s;
+            run.grids.push(Grid {
+                samples: exp.len(),
+                substeps: s,
+                h: exp.dt() / s as f64,
+                t0: exp.t0(),
+                steps,
+            });
+            let traj = match &config.initial_state {
+                InitialState::FromData => run.data_trajectory(e),
+                InitialState::Given(x0s) => {
+                    if x0s[e].len() != n {
+                        return Err(MmeError::Dimension {
+                            what: "initial state",
+                            rows: x0s[e].len(),
+                            cols: 1,
+                            expected_rows: n,
+                            expected_cols: 1,
+                        });
+                    }
+                    run.open_loop(e, &x0s[e])?
+                }
+            };
+            run.trajs.push(traj);
+        }
+        Ok(run)
+    }
+
+    fn input(&self, e: usize, k: usize) -> Vec<f64> {
+        let exp = &self.data.experiments()[e];
+        self.binding
+            .inputs
+            .iter()
+            .map(|&row| exp.inputs()[(row, k)])
+            .collect()
+    }
+
+    /// Minimum-norm state reproducing the observed outputs at sample `k` (0 if none).
+    fn data_states(&self, e: usize, k: usize) -> Vec<f64> {
+        let exp = &self.data.experiments()[e];
+        let n = self.model.dynamics.n_states();
+        let rows: Vec<usize> = (0..self.binding.outputs.len())
+            .filter(|&i| !exp.outputs()[(self.binding.outputs[i], k)].is_nan())
+            .collect();
+        if rows.is_empty() {
+            return vec![0.0; n];
+        }
+        let c = DMatrix::from_fn(rows.len(), n, |r, j| self.model.c[(rows[r], j)]);
+        let y = nalgebra::DVector::from_iterator(
+            rows.len(),
+            rows.iter()
+                .map(|&i| exp.outputs()[(self.binding.outputs[i], k)]),
+        );
+        match c.pseudo_inverse(1e-12) {
+            Ok(pinv) => (pinv * y).iter().copied().collect(),
+            Err(_) => vec![0.0; n],
+        }
+    }
+
+    /// Data-based start: `C⁺ỹ` at samples (previous value where nothing is observed),
+    /// linear between samples, `d = 0`.
+    fn data_trajectory(&self, e: usize) -> Traj {
+        let g = self.grids[e];
+        let n = self.model.dynamics.n_states();
+        let exp = &self.data.experiments()[e];
+        let mut at: Vec<Vec<f64>> = Vec::with_capacity(g.samples);
+        for k in 0..g.samples {
+            let any = self
+                .binding
+                .outputs
+                .iter()
+                .any(|&row| !exp.outputs()[(row, k)].is_nan());
+            let v = if any || k == 0 {
+                self.data_states(e, k)
+            } else {
+                at[k - 1].clone()
+            };
+            at.push(v);
+        }
+        let mut x = vec![0.0; n * (g.steps + 1)];
+        for j in 0..=g.steps {
+            let k = (j / g.substeps).min(g.samples - 1);
+            let frac = (j - k * g.substeps) as f64 / g.substeps as f64;
+            let next = (k + 1).min(g.samples - 1);
+            for i in 0..n {
+                x[j * n + i] = at[k][i] + frac * (at[next][i] - at[k][i]);
+            }
+        }
+        Traj {
+            x,
+            d: vec![0.0; self.model.e.ncols() * g.steps],
+            consistent: false,
+        }
+    }
+
+    fn open_loop(&mut self, e: usize, x0: &[f64]) -> Result<Traj> {
+        let g = self.grids[e];
+        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
+        let mut x = vec![0.0; n * (g.steps + 1)];
+        x[..n].copy_from_slice(x0);
+        let zero = vec![0.0; q];
+        let mut cur = x0.to_vec();
+        for j in 0..g.steps {
+            let u = self.input(e, j / g.substeps);
+            let t = g.t0 + j as f64 * g.h;
+            self.rk.step(
+                &self.model.dynamics,
+                &self.model.e,
+                t,
+                g.h,
+                &mut cur,
+                &u,
+                &zero,
+            );
+            if let Some(state) = cur
+                .iter()
+                .position(|v| !v.is_finite() || v.abs() > self.opts.blow_up)
+            {
+                return Err(MmeError::Diverged {
+                    experiment: e,
+                    time: t + g.h,
+                    state,
+                });
+            }
+            x[(j + 1) * n..(j + 2) * n].copy_from_slice(&cur);
+        }
+        Ok(Traj {
+            x,
+            d: vec![0.0; q * g.steps],
+            consistent: true,
+        })
+    }
+
+    /// Residuals and correction cost of a trajectory.
+    fn evaluate(&self, e: usize, traj: &Traj, w: &DMatrix<f64>, inv_r: &[f64]) -> Eval {
+        let g = self.grids[e];
+        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
+        let p = inv_r.len();
+        let exp = &self.data.experiments()[e];
+        let mut sse = vec![0.0; p];
+        let mut count = vec![0usize; p];
+        for k in 0..g.samples {
+            let x = &traj.x[k * g.substeps * n..(k * g.substeps + 1) * n];
+            for i in 0..p {
+                let y = exp.outputs()[(self.binding.outputs[i], k)];
+                if !y.is_nan() {
+                    let r = y - (0..n).map(|a| self.model.c[(i, a)] * x[a]).sum::<f64>();
+                    sse[i] += r * r;
+                    count[i] += 1;
+                }
+            }
+        }
+        let mut correction_cost = 0.0;
+        for j in 0..g.steps {
+            let d = &traj.d[j * q..(j + 1) * q];
+            for a in 0..q {
+                for b in 0..q {
+                    correction_cost += g.h * d[a] * w[(a, b)] * d[b];
+                }
+            }
+        }
+        let cost = sse.iter().zip(inv_r).map(|(s, r)| s * r).sum::<f64>() + correction_cost;
+        Eval {
+            sse,
+            count,
+            correction_cost,
+            cost,
+        }
+    }
+
+    /// Linearise about `traj` into `(Φ_j, Γ_j, c_j)` for every step.
+    fn linearise(&mut self, e: usize, traj: &Traj) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let g = self.grids[e];
+        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
+        let mut phi = vec![0.0; g.steps * n * n];
+        let mut gamma = vec![0.0; g.steps * n * q];
+        let mut offset = vec![0.0; g.steps * n];
+        let mut xn = vec![0.0; n];
+        for j in 0..g.steps {
+            let u = self.input(e, j / g.substeps);
+            let t = g.t0 + j as f64 * g.h;
+            let x = &traj.x[j * n..(j + 1) * n];
+            let d = &traj.d[j * q..(j + 1) * q];
+            let (ph, ga) = (
+                &mut phi[j * n * n..(j + 1) * n * n],
+                &mut gamma[j * n * q..(j + 1) * n * q],
+            );
+            self.rk.step_jacobians(
+                &self.model.dynamics,
+                &self.model.e,
+                t,
+                g.h,
+                x,
+                &u,
+                d,
+                &mut xn,
+                ph,
+                ga,
+            );
+            for r in 0..n {
+                let lin: f64 = (0..n).map(|c| ph[c * n + r] * x[c]).sum::<f64>()
+                    + (0..q).map(|c| ga[c * n + r] * d[c]).sum::<f64>();
+                offset[j * n + r] = xn[r] - lin;
+            }
+        }
+        (phi, gamma, offset)
+    }
+
+    /// Solve the linearised problem of experiment `e`; returns the LQ optimum
+    /// `(x* at every sub-step, d*, J_lq, logdets)`; the gains stay in `self.ws`.
+    fn lq_step(
+        &mut self,
+        e: usize,
+        traj: &Traj,
+        w: &DMatrix<f64>,
+        inv_r: &[f64],
+        logdet: LogDet,
+    ) -> Result<(Traj, f64, f64, f64)> {
+        let g = self.grids[e];
+        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
+        let (phi, gamma, offset) = self.linearise(e, traj);
+        let exp = &self.data.experiments()[e];
+        let pr = Problem {
+            n,
+            q,
+            samples: g.samples,
+            substeps: g.substeps,
+            h: g.h,
+            w,
+            c: &self.model.c,
+            inv_r,
+            outputs: exp.outputs(),
+            out_map: &self.binding.outputs,
+            experiment: e,
+            steady: SteadyState::Never,
+        };
+        let steps = StepModel::Tv {
+            phi: &phi,
+            gamma: &gamma,
+            offset: &offset,
+        };
+        let mut states = vec![0.0; n * g.samples];
+        let mut d = vec![0.0; q * g.steps];
+        let out = sweep(&pr, &steps, &mut self.ws, &mut states, &mut d, logdet)?;
+        // x* at every sub-step from the linear recursion.
+        let mut x = vec![0.0; n * (g.steps + 1)];
+        x[..n].copy_from_slice(&states[..n]);
+        for j in 0..g.steps {
+            for r in 0..n {
+                let v = offset[j * n + r]
+                    + (0..n)
+                        .map(|c| phi[j * n * n + c * n + r] * x[j * n + c])
+                        .sum::<f64>()
+                    + (0..q)
+                        .map(|c| gamma[j * n * q + c * n + r] * d[j * q + c])
+                        .sum::<f64>();
+                x[(j + 1) * n + r] = v;
+            }
+        }
+        Ok((
+            Traj {
+                x,
+                d,
+                consistent: false,
+            },
+            out.cost(inv_r),
+            out.logdet_s,
+            out.logdet_p0,
+        ))
+    }
+
+    /// Closed-loop rollout at step length `t`; `None` if it diverges.
+    fn rollout(&mut self, e: usize, cur: &Traj, star: &Traj, t: f64) -> Option<Traj> {
+        let g = self.grids[e];
+        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
+        let mut x = vec![0.0; n * (g.steps + 1)];
+        let mut d = vec![0.0; q * g.steps];
+        for ((xi, c), st) in x.iter_mut().zip(&cur.x).zip(&star.x).take(n) {
+            *xi = c + t * (st - c);
+        }
+        let mut xc: Vec<f64> = x[..n].to_vec();
+        let mut dev = vec![0.0; n];
+        for j in 0..g.steps {
+            let (fg, _) = gains(&self.ws, g.steps, n, q, j);
+            for i in 0..n {
+                let target = cur.x[j * n + i] + t * (star.x[j * n + i] - cur.x[j * n + i]);
+                dev[i] = xc[i] - target;
+            }
+            for a in 0..q {
+                let base = cur.d[j * q + a] + t * (star.d[j * q + a] - cur.d[j * q + a]);
+                let fb: f64 = (0..n).map(|c| fg[c * q + a] * dev[c]).sum();
+                d[j * q + a] = base - fb;
+            }
+            let u = self.input(e, j / g.substeps);
+            let time = g.t0 + j as f64 * g.h;
+            self.rk.step(
+                &self.model.dynamics,
+                &self.model.e,
+                time,
+                g.h,
+                &mut xc,
+                &u,
+                &d[j * q..(j + 1) * q],
+            );
+            if xc
+                .iter()
+                .any(|v| !v.is_finite() || v.abs() > self.opts.blow_up)
+            {
+                return None;
+            }
+            x[(j + 1) * n..(j + 2) * n].copy_from_slice(&xc);
+        }
+        Some(Traj {
+            x,
+            d,
+            consistent: true,
+        })
+    }
+
+    fn estimates(&self, data: &Dataset) -> Vec<ExperimentEstimate> {
+        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
+        data.experiments()
+            .iter()
+            .zip(&self.grids)
+            .zip(&self.trajs)
+            .map(|((exp, g), tr)| ExperimentEstimate {
+                t0: exp.t0(),
+                dt: exp.dt(),
+                substeps: g.substeps,
+                states: DMatrix::from_fn(n, g.samples, |i, k| tr.x[k * g.substeps * n + i]),
+                corrections: DMatrix::from_column_slice(q, g.steps, &tr.d),
+            })
+            .collect()
+    }
+}
+
+impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
+    fn n_states(&self) -> usize {
+        self.model.dynamics.n_states()
+    }
+
+    fn n_corrections(&self) -> usize {
+        self.model.e.ncols()
+    }
+
+    fn pieces(&self) -> Vec<(usize, f64)> {
+        self.grids.iter().map(|g| (g.steps, g.h)).collect()
+    }
+
+    fn solve(&mut self, w: &DMatrix<f64>, inv_r: &[f64], logdet: LogDet) -> Result<Summary> {
+        let experiments = self.trajs.len();
+        let tol = self.opts.cost_tolerance;
+        let mut costs: Vec<f64> = (0..experiments)
+            .map(|e| {
+                let tr = &self.trajs[e];
+                if tr.consistent {
+                    self.evaluate(e, tr, w, inv_r).cost
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
+        self.history.clear();
+        self.termination = Termination::MaxIterations;
+        for iteration in 1..=self.opts.max_iterations {
+            let before: f64 = costs.iter().sum();
+            let (mut step_norm, mut step_length) = (0.0, 1.0_f64);
+            let mut failed = false;
+            let mut small_prediction = true;
+            for (e, cost_e) in costs.iter_mut().enumerate() {
+                let cur = self.trajs[e].clone();
+                let (star, j_lq, _, _) = self.lq_step(e, &cur, w, inv_r, LogDet::Skip)?;
+                let predicted = *cost_e - j_lq;
+                // A NaN prediction counts as large.
+                let small = predicted <= tol * j_lq.abs().max(f64::MIN_POSITIVE);
+                small_prediction &= small;
+                let mut t = 1.0;
+                let mut accepted = None;
+                for _ in 0..=self.opts.max_halvings {
+                    if let Some(tr) = self.rollout(e, &cur, &star, t) {
+                        let j_new = self.evaluate(e, &tr, w, inv_r).cost;
+                        let enough = if cost_e.is_finite() {
+                            j_new <= *cost_e - 1e-4 * t * predicted.max(0.0) && j_new < *cost_e
+                        } else {
+                            j_new.is_finite()
+                        };
+                        if enough {
+                            accepted = Some((tr, j_new));
+                            break;
+                        }
+                    }
+                    t *= 0.5;
+                }
+                match accepted {
+                    Some((tr, j_new)) => {
+                        let dx0: f64 = (0..self.n_states())
+                            .map(|i| (tr.x[i] - cur.x[i]).powi(2))
+                            .sum();
+                        let dd: f64 = tr.d.iter().zip(&cur.d).map(|(a, b)| (a - b).powi(2)).sum();
+                        step_norm += dx0 + dd;
+                        step_length = step_length.min(t);
+                        self.trajs[e] = tr;
+                        *cost_e = j_new;
+                    }
+                    None => {
+                        failed = true;
+                        step_length = 0.0;
+                    }
+                }
+            }
+            let after: f64 = costs.iter().sum();
+            self.history.push(IterationRecord {
+                iteration,
+                cost: after,
+                step_norm: step_norm.sqrt(),
+                step_length,
+            });
+            if failed && !small_prediction {
+                self.termination = Termination::LineSearchFailed;
+                break;
+            }
+            if !after.is_finite() {
+                continue;
+            }
+            if small_prediction || (before - after).abs() <= tol * after.abs() {
+                self.termination = Termination::Converged;
+                break;
+            }
+        }
+        // Summary of the final trajectories.
+        let p = inv_r.len();
+        let mut total = Summary {
+            sse: vec![0.0; p],
+            count: vec![0; p],
+            correction_cost: 0.0,
+            cost: 0.0,
+            logdet_s: 0.0,
+            logdet_p0: 0.0,
+        };
+        for e in 0..experiments {
+            let tr = self.trajs[e].clone();
+            if !tr.consistent {
+                return Err(MmeError::Breakdown {
+                    experiment: e,
+                    step: 0,
+                    what: "no finite rollout found",
+                });
+            }
+            let ev = self.evaluate(e, &tr, w, inv_r);
+            for i in 0..p {
+                total.sse[i] += ev.sse[i];
+                total.count[i] += ev.count[i];
+            }
+            total.correction_cost += ev.correction_cost;
+            total.cost += ev.cost;
+            if logdet == LogDet::Accumulate {
+                let (_, _, ls, lp) = self.lq_step(e, &tr, w, inv_r, LogDet::Accumulate)?;
+                total.logdet_s += ls;
+                total.logdet_p0 += lp;
+            }
+        }
+        Ok(total)
+    }
+}

@@ -1,0 +1,12 @@
+//! Test modules and their shared helpers.
+
+pub mod common;
+
+mod auto_w;
+mod brute;
+mod errors;
+mod limits;
+mod msd;
+mod noise;
+mod nonlinear;
+mod update;

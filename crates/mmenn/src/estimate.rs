@@ -1,0 +1,404 @@
+//! `mmenn estimate`: run MME on data files with a model file and write `estimate.csv`,
+//! `summary.json`, figures and `report.md`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use mme_core::{MmeConfig, MmeOutput, NoiseSpec, NonlinearModel, WeightSpec};
+use serde::Serialize;
+use sysid_core::{Dataset, MmeEstimate};
+
+use crate::atomic::{ensure_dir, write_atomic};
+use crate::data_file::{read_dataset, write_csv};
+use crate::error::Result;
+use crate::model_file::{ModelSpec, NoiseVariance, read_model};
+use crate::plot::{Figure, Series};
+
+/// How `W` is chosen on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum WeightChoice {
+    /// By the covariance constraint.
+    #[default]
+    Auto,
+    /// `W = value·I` (per unit time).
+    Value(f64),
+}
+
+impl std::str::FromStr for WeightChoice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(Self::Value(v)),
+            _ => Err(format!("'{s}' is neither \"auto\" nor a positive number")),
+        }
+    }
+}
+
+/// Options of [`run_estimate`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct EstimateOptions {
+    /// `W`.
+    pub w: WeightChoice,
+    /// Sub-steps per sample interval (`None`: chosen from the model).
+    pub substeps: Option<usize>,
+}
+
+/// The MME configuration a model file and options imply.
+pub fn mme_config(spec: &ModelSpec, opts: &EstimateOptions) -> MmeConfig {
+    MmeConfig {
+        w: match opts.w {
+            WeightChoice::Auto => WeightSpec::default(),
+            WeightChoice::Value(v) => WeightSpec::Scalar(v),
+        },
+        noise_variance: match &spec.noise_variance {
+            NoiseVariance::Given(v) => NoiseSpec::Given(v.clone()),
+            NoiseVariance::Auto => NoiseSpec::Auto,
+        },
+        substeps: opts.substeps,
+        ..MmeConfig::default()
+    }
+}
+
+/// Run MME with the model file's assumed model: the exact linear sweep, or the
+/// iterated-linearisation estimator when the model has named terms.
+pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Result<MmeOutput> {
+    if spec.terms.is_empty() {
+        return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
+    }
+    let dynamics = spec
+        .term_model()
+        .map_err(|problem| crate::error::MmennError::Model {
+            path: "<model>".into(),
+            line: None,
+            column: None,
+            problem,
+        })?;
+    let lin = &spec.linear;
+    let names = sysid_core::ModelNames {
+        states: lin.state_names().to_vec(),
+        inputs: lin.input_names().to_vec(),
+        outputs: lin.output_names().to_vec(),
+        corrections: lin.correction_names().to_vec(),
+    };
+    let model = NonlinearModel::new(dynamics, lin.c().clone(), lin.e().clone(), names)?;
+    Ok(mme_core::estimate_nonlinear_with_report(
+        &model, data, config,
+    )?)
+}
+
+/// The JSON summary of an estimate (stable field names).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EstimateSummary {
+    /// `W` used, rows of the `q × q` matrix (per unit time).
+    pub w: Vec<Vec<f64>>,
+    /// Diagonal of `W` by corrected state.
+    pub w_by_correction: BTreeMap<String, f64>,
+    /// Noise variance used, per measured channel.
+    pub noise_variance: BTreeMap<String, f64>,
+    /// How the noise variance was obtained (`given` or `marginal_likelihood`).
+    pub noise_method: mme_core::NoiseMethod,
+    /// Sample variance of measurement minus estimate, per measured channel.
+    pub residual_variance: BTreeMap<String, f64>,
+    /// Residual variance divided by noise variance, per measured channel (≈ 1 when the
+    /// covariance constraint holds).
+    pub residual_to_noise: BTreeMap<String, f64>,
+    /// How the automatic `W` search ended, when it ran.
+    pub w_search: Option<mme_core::WSearch>,
+    /// Sub-steps per sample interval.
+    pub substeps: usize,
+    /// Value of the MME cost at the optimum.
+    pub cost: f64,
+    /// The solver's report (termination, iterations, phase times).
+    pub report: sysid_core::SolveReport,
+    /// Number of samples over all experiments.
+    pub samples: usize,
+    /// Wall time per phase of the whole command, seconds.
+    pub phase_seconds: BTreeMap<String, f64>,
+    /// Samples per second of the final sweep (samples / time of the sweep phase).
+    pub sweep_samples_per_second: Option<f64>,
+    /// Files written.
+    pub files: Vec<String>,
+}
+
+fn by_name(names: &[String], v: &[f64]) -> BTreeMap<String, f64> {
+    names.iter().cloned().zip(v.iter().copied()).collect()
+}
+
+fn row(m: &nalgebra::DMatrix<f64>, i: usize) -> Vec<f64> {
+    m.row(i).iter().copied().collect()
+}
+
+/// Write one experiment's estimate as CSV: `t`, every state, `d_<state>` per corrected state.
+pub fn write_estimate_csv(path: &Path, est: &MmeEstimate, experiment: usize) -> Result<()> {
+    let e = &est.experiments[experiment];
+    let t: Vec<f64> = (0..e.len()).map(|k| e.t0 + k as f64 * e.dt).collect();
+    let d = e.corrections_at_samples();
+    let mut header = vec!["t".to_string()];
+    header.extend(est.state_names.iter().cloned());
+    header.extend(est.correction_names.iter().map(|c| format!("d_{c}")));
+    let cols: Vec<Vec<f64>> = (0..e.states.nrows())
+        .map(|i| row(&e.states, i))
+        .chain((0..d.nrows()).map(|i| row(&d, i)))
+        .collect();
+    let mut refs: Vec<&[f64]> = vec![&t];
+    refs.extend(cols.iter().map(Vec::as_slice));
+    write_csv(path, &header, &refs)
+}
+
+/// Figures of an estimate (first experiment): measurement vs estimate per measured
+/// channel, every state, `d̂` vs time, `d̂` against each state and input, and the W curve.
+pub fn estimate_figures(
+    out: &MmeOutput,
+    data: &Dataset,
+    spec: &ModelSpec,
+    dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    let est = &out.estimate;
+    let (e, exp) = (&est.experiments[0], &data.experiments()[0]);
+    let t: Vec<f64> = exp.times();
+    let unit = |n: &str| {
+        spec.units
+            .get(n)
+            .map(|u| format!("{n} ({u})"))
+            .unwrap_or_else(|| n.to_string())
+    };
+    let mut written = Vec::new();
+    let mut save = |name: String, fig: Figure| -> Result<()> {
+        let p = dir.join(name);
+        fig.write(&p)?;
+        written.push(p);
+        Ok(())
+    };
+    let y_hat = spec.linear.c() * &e.states;
+    for (i, name) in est.output_names.iter().enumerate() {
+        let Ok(j) = data.output_index(name) else {
+            continue;
+        };
+        let fig = Figure {
+            title: format!("{name}: measurement and MME estimate"),
+            x_label: "t (s)".into(),
+            y_label: unit(name),
+            series: vec![
+                Series::points("measured", t.clone(), row(exp.outputs(), j)),
+                Series::line("MME estimate", t.clone(), row(&y_hat, i)),
+            ],
+            bands: vec![],
+        };
+        save(format!("measured_{name}.svg"), fig)?;
+    }
+    let fig = Figure {
+        title: "estimated states".into(),
+        x_label: "t (s)".into(),
+        y_label: "state".into(),
+        series: est
+            .state_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| Series::line(unit(n), t.clone(), row(&e.states, i)))
+            .collect(),
+        bands: vec![],
+    };
+    save("states.svg".into(), fig)?;
+    let d = e.corrections_at_samples();
+    let fig = Figure {
+        title: "model correction d̂(t)".into(),
+        x_label: "t (s)".into(),
+        y_label: "d̂".into(),
+        series: est
+            .correction_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| Series::line(format!("d_{n}"), t.clone(), row(&d, i)))
+            .collect(),
+        bands: vec![],
+    };
+    save("d_vs_time.svg".into(), fig)?;
+    for (ci, cname) in est.correction_names.iter().enumerate() {
+        let dv = row(&d, ci);
+        let against: Vec<(String, Vec<f64>)> = est
+            .state_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.clone(), row(&e.states, i)))
+            .chain(spec.linear.input_names().iter().filter_map(|n| {
+                data.input_index(n)
+                    .ok()
+                    .map(|j| (n.clone(), row(exp.inputs(), j)))
+            }))
+            .collect();
+        for (vname, v) in against {
+            let fig = Figure {
+                title: format!("d_{cname} against {vname}"),
+                x_label: unit(&vname),
+                y_label: format!("d_{cname}"),
+                series: vec![Series::points("MME estimate", v, dv.clone())],
+                bands: vec![],
+            };
+            save(format!("d_{cname}_vs_{vname}.svg"), fig)?;
+        }
+    }
+    if !out.w_curve.is_empty() {
+        let x: Vec<f64> = out.w_curve.iter().map(|p| p.alpha.log10()).collect();
+        let mut series: Vec<Series> = est
+            .output_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                Series::line(
+                    format!("{n}: residual / noise variance"),
+                    x.clone(),
+                    out.w_curve
+                        .iter()
+                        .map(|p| p.residual_variance[i] / out.noise.variance[i])
+                        .collect(),
+                )
+            })
+            .collect();
+        series.push(Series::points(
+            "constraint ratio",
+            x.clone(),
+            out.w_curve.iter().map(|p| p.ratio).collect(),
+        ));
+        let fig = Figure {
+            title: "covariance constraint: residual variance against W".into(),
+            x_label: "log10 α  (W = α·shape)".into(),
+            y_label: "residual variance / noise variance".into(),
+            series,
+            bands: vec![("target 1".into(), 1.0)],
+        };
+        save("w_curve.svg".into(), fig)?;
+    }
+    Ok(written)
+}
+
+/// Read data and model files, run MME, write every output into `out`.
+pub fn run_estimate(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    opts: &EstimateOptions,
+    out: &Path,
+) -> Result<EstimateSummary> {
+    let mut phases = BTreeMap::new();
+    let clock = Instant::now();
+    let spec = read_model(model_path)?;
+    let data = read_dataset(
+        data_paths,
+        spec.linear.input_names(),
+        spec.linear.output_names(),
+        &spec.units,
+    )?;
+    phases.insert("read".to_string(), clock.elapsed().as_secs_f64());
+
+    let clock = Instant::now();
+    let result = estimate_spec(&spec, &data, &mme_config(&spec, opts))?;
+    phases.insert("estimate".to_string(), clock.elapsed().as_secs_f64());
+
+    let clock = Instant::now();
+    ensure_dir(out)?;
+    let est = &result.estimate;
+    let mut files = Vec::new();
+    for i in 0..est.experiments.len() {
+        let name = if i == 0 {
+            "estimate.csv".to_string()
+        } else {
+            format!("estimate_{i}.csv")
+        };
+        write_estimate_csv(&out.join(&name), est, i)?;
+        files.push(name);
+    }
+    for p in estimate_figures(&result, &data, &spec, out)? {
+        files.push(
+            p.file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        );
+    }
+    let samples = data.total_samples();
+    let sweep_time = est
+        .report
+        .phase_seconds
+        .iter()
+        .find(|(n, _)| n == "sweep" || n == "gauss_newton")
+        .map(|(_, s)| *s);
+    let w_diag: Vec<f64> = (0..est.w.nrows()).map(|i| est.w[(i, i)]).collect();
+    let ratio: Vec<f64> = est
+        .residual_variance
+        .iter()
+        .zip(&est.noise_variance)
+        .map(|(r, n)| r / n)
+        .collect();
+    files.push("summary.json".into());
+    files.push("report.md".into());
+    let mut summary = EstimateSummary {
+        w: (0..est.w.nrows()).map(|i| row(&est.w, i)).collect(),
+        w_by_correction: by_name(&est.correction_names, &w_diag),
+        noise_variance: by_name(&est.output_names, &est.noise_variance),
+        noise_method: result.noise.method,
+        residual_variance: by_name(&est.output_names, &est.residual_variance),
+        residual_to_noise: by_name(&est.output_names, &ratio),
+        w_search: result.w_search.clone(),
+        substeps: est.experiments.first().map_or(1, |e| e.substeps),
+        cost: est.cost,
+        report: est.report.clone(),
+        samples,
+        phase_seconds: phases,
+        sweep_samples_per_second: sweep_time.filter(|s| *s > 0.0).map(|s| samples as f64 / s),
+        files,
+    };
+    write_atomic(
+        &out.join("report.md"),
+        estimate_report(&summary, &spec).as_bytes(),
+    )?;
+    summary
+        .phase_seconds
+        .insert("write".to_string(), clock.elapsed().as_secs_f64());
+    write_atomic(
+        &out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    Ok(summary)
+}
+
+fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
+    let mut r = String::from("# MME estimate\n\n");
+    r.push_str(&format!(
+        "Assumed model: {} states ({}), corrected equations: {}; {} named terms. {} samples, {} sub-steps per sample interval.\n\n",
+        spec.linear.n_states(),
+        spec.linear.state_names().join(", "),
+        spec.linear.correction_names().join(", "),
+        spec.terms.len(),
+        s.samples,
+        s.substeps
+    ));
+    r.push_str("| channel | noise variance | residual variance | ratio |\n|---|---|---|---|\n");
+    for (name, nv) in &s.noise_variance {
+        r.push_str(&format!(
+            "| {name} | {nv:.4e} | {:.4e} | {:.3} |\n",
+            s.residual_variance[name], s.residual_to_noise[name]
+        ));
+    }
+    r.push_str(&format!("\nNoise variance: {:?}. ", s.noise_method));
+    match &s.w_search {
+        Some(w) => r.push_str(&format!(
+            "W chosen by the covariance constraint: α = {:.4e}, ratio {:.4} ({:?}, {} sweeps).\n",
+            w.alpha, w.ratio, w.termination, w.evaluations
+        )),
+        None => r.push_str("W given by the user.\n"),
+    }
+    r.push_str(&format!(
+        "\nW diagonal: {:?}. Cost J = {:.6e}. Termination: {:?}.\n",
+        s.w_by_correction, s.cost, s.report.termination
+    ));
+    if !s.report.iterations.is_empty() {
+        r.push_str(&format!(
+            "Gauss–Newton iterations: {}.\n",
+            s.report.iterations.len()
+        ));
+    }
+    r.push_str("\nFigures: `measured_*.svg` (measurement vs estimate), `states.svg`, `d_vs_time.svg`, `d_*_vs_*.svg` (d̂ against each state and input), `w_curve.svg`.\n");
+    r
+}

@@ -1,0 +1,672 @@
+//! `mmenn fit` and `mmenn predict`: the MME/NN hybrid model (thesis ch. 4). MME gives
+//! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; the plant model
+//! `ẋ = f(x, u) + E·NN(x, u)` then predicts free-run from an initial state.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use nalgebra::DMatrix;
+use nn::{Mlp, NetCorrection, SweepConfig, SweepRow};
+use serde::{Deserialize, Serialize};
+use sysid_core::{
+    ChannelMetrics, CorrectedModel, Dataset, Experiment, Horizon, InitialStateFit, MmeEstimate,
+    TermModel, channel_metrics, fit_initial_state,
+};
+
+use crate::atomic::{ensure_dir, write_atomic};
+use crate::data_file::{read_dataset, read_table, table_to_experiment, write_csv};
+use crate::error::{MmennError, Result};
+use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
+use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
+use crate::plot::{Figure, Series};
+
+/// Format tag of `model.json`.
+pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
+
+/// The hybrid model as saved in `model.json`: the assumed model (model-file TOML text),
+/// the trained network, the training initial state and the integration settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HybridFile {
+    /// Always [`HYBRID_FORMAT`].
+    pub format: String,
+    /// The assumed model, in the model-file format.
+    pub model_toml: String,
+    /// The network `(x, u) → d` (inputs: states then inputs; outputs: corrections).
+    pub network: Mlp,
+    /// Initial state of the training record (MME's `x̂(t0)`).
+    pub x0: Vec<f64>,
+    /// Sample period of the training data, s.
+    pub dt: f64,
+    /// RK4 sub-steps per sample interval in free-run simulation.
+    pub substeps: usize,
+}
+
+/// The completed plant model: assumed dynamics (with named terms) plus the network.
+pub type HybridModel = CorrectedModel<TermModel, NetCorrection>;
+
+impl HybridFile {
+    /// The model-file part.
+    pub fn spec(&self) -> Result<ModelSpec> {
+        parse_model(Path::new("model.json:model_toml"), &self.model_toml)
+    }
+
+    /// Build the simulatable hybrid model.
+    pub fn model(&self) -> Result<HybridModel> {
+        let spec = self.spec()?;
+        hybrid_model(&spec, self.network.clone(), &self.x0, self.substeps)
+    }
+}
+
+fn model_problem(problem: crate::error::ModelProblem) -> MmennError {
+    MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    }
+}
+
+/// Build `ẋ = f(x, u) + E·NN(x, u)` from a model file and a network.
+pub fn hybrid_model(
+    spec: &ModelSpec,
+    network: Mlp,
+    x0: &[f64],
+    substeps: usize,
+) -> Result<HybridModel> {
+    let lin = &spec.linear;
+    let base = spec.term_model().map_err(model_problem)?;
+    let corr = NetCorrection::new(network, lin.n_states())?;
+    let mut model = CorrectedModel::new(
+        base,
+        corr,
+        lin.e().clone(),
+        lin.c().clone(),
+        lin.output_names().to_vec(),
+    )
+    .map_err(|source| MmennError::Core {
+        context: "building the hybrid model",
+        source,
+    })?;
+    model.x0 = x0.to_vec();
+    model.integrator = sysid_core::Integrator::Rk4 {
+        substeps: substeps.max(1),
+    };
+    Ok(model)
+}
+
+/// How many hidden units the network gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HiddenChoice {
+    /// The sizing sweep (thesis §3.1: 1–10 units × 10 initialisations) picks.
+    #[default]
+    Auto,
+    /// This many units (still the best of several initialisations).
+    Fixed(usize),
+}
+
+impl std::str::FromStr for HiddenChoice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<usize>() {
+            Ok(n) if n > 0 => Ok(Self::Fixed(n)),
+            _ => Err(format!("'{s}' is neither \"auto\" nor a positive integer")),
+        }
+    }
+}
+
+/// Options of [`run_fit`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitOptions {
+    /// MME's `W` and sub-steps.
+    pub estimate: EstimateOptions,
+    /// Network size.
+    pub hidden: HiddenChoice,
+    /// Initialisations per size.
+    pub inits: usize,
+    /// Seed of every random choice (initialisations, validation split).
+    pub seed: u64,
+    /// Fraction of samples dropped at each end of every record before training (the
+    /// smoother's end effects make `d̂` least reliable there). Default 0.02.
+    pub trim_fraction: f64,
+    /// RK4 sub-steps per sample interval in free-run simulation. Default 4.
+    pub substeps: usize,
+    /// Samples used to fit the initial state of validation records. Default 200.
+    pub x0_window: usize,
+}
+
+impl Default for FitOptions {
+    fn default() -> Self {
+        Self {
+            estimate: EstimateOptions::default(),
+            hidden: HiddenChoice::Auto,
+            inits: 10,
+            seed: 1,
+            trim_fraction: 0.02,
+            substeps: 4,
+            x0_window: 200,
+        }
+    }
+}
+
+/// Training pairs `([x̂; u], d̂)` from an estimate, ends trimmed.
+pub fn training_pairs(
+    est: &MmeEstimate,
+    data: &Dataset,
+    trim_fraction: f64,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let n = est.state_names.len();
+    let m = data.input_channels().len();
+    let q = est.correction_names.len();
+    let mut cols_x = Vec::new();
+    let mut cols_d = Vec::new();
+    for (e, exp) in est.experiments.iter().zip(data.experiments()) {
+        let d = e.corrections_at_samples();
+        let len = e.len();
+        let cut = ((len as f64) * trim_fraction).floor() as usize;
+        for k in cut..len.saturating_sub(cut) {
+            cols_x.extend(e.states.column(k).iter().copied());
+            cols_x.extend(exp.input(k).iter().copied());
+            cols_d.extend(d.column(k).iter().copied());
+        }
+    }
+    let count = cols_x.len() / (n + m).max(1);
+    (
+        DMatrix::from_column_slice(n + m, count, &cols_x),
+        DMatrix::from_column_slice(q, count, &cols_d),
+    )
+}
+
+/// Free-run metrics of a hybrid model per measured channel of one experiment.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FreeRunReport {
+    /// Always free-run simulation.
+    pub horizon: Horizon,
+    /// Initial state used.
+    pub x0: Vec<f64>,
+    /// How the initial state was obtained.
+    pub x0_source: String,
+    /// Metrics per channel present in the data.
+    pub channels: BTreeMap<String, ChannelMetrics>,
+}
+
+fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
+    m.row(i).iter().copied().collect()
+}
+
+/// Simulate free-run over an experiment's inputs from `x0`; metrics for `channels`
+/// (name, row of the model state/output matrix) against the experiment's outputs.
+fn free_run(model: &HybridModel, exp: &Experiment, x0: &[f64]) -> Result<DMatrix<f64>> {
+    model
+        .simulate_states(x0, exp.t0(), exp.dt(), exp.inputs())
+        .map_err(|source| MmennError::Core {
+            context: "free-run simulation of the hybrid model",
+            source,
+        })
+}
+
+/// What `mmenn fit` reports.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FitSummary {
+    /// Hidden units of the chosen network.
+    pub hidden: usize,
+    /// The chosen sweep row.
+    pub chosen: SweepRow,
+    /// Number of training pairs.
+    pub training_pairs: usize,
+    /// Where the sweep's test MSE came from.
+    pub test_source: String,
+    /// MME's `W` diagonal on the training data.
+    pub w_by_correction: BTreeMap<String, f64>,
+    /// Free-run on the training record(s), first experiment.
+    pub train: FreeRunReport,
+    /// Free-run on the validation record, when given.
+    pub validation: Option<FreeRunReport>,
+    /// Files written.
+    pub files: Vec<String>,
+}
+
+fn metrics_for(
+    names: &[String],
+    c: &DMatrix<f64>,
+    xs: &DMatrix<f64>,
+    exp: &Experiment,
+) -> Result<BTreeMap<String, ChannelMetrics>> {
+    let y = c * xs;
+    let mut out = BTreeMap::new();
+    for (i, name) in names.iter().enumerate() {
+        let measured = row(exp.outputs(), i);
+        let m = channel_metrics(&measured, &row(&y, i)).map_err(|source| MmennError::Core {
+            context: "free-run metrics",
+            source,
+        })?;
+        out.insert(name.clone(), m);
+    }
+    Ok(out)
+}
+
+/// Run MME on the data, train the network (sweep or fixed size), build the hybrid model,
+/// judge it free-run on the training and (if given) validation data, and write
+/// `model.json`, `sweep.csv`, `summary.json`, figures and `report.md` into `out`.
+pub fn run_fit(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &FitOptions,
+    out: &Path,
+) -> Result<FitSummary> {
+    let spec = read_model(model_path)?;
+    let lin = spec.linear.clone();
+    let data = read_dataset(
+        data_paths,
+        lin.input_names(),
+        lin.output_names(),
+        &spec.units,
+    )?;
+    let config = mme_config(&spec, &opts.estimate);
+    let result = estimate_spec(&spec, &data, &config)?;
+    let est = &result.estimate;
+    let (x_train, d_train) = training_pairs(est, &data, opts.trim_fraction);
+
+    // The sweep's test set: MME on the validation data at the training W and noise, or the
+    // last 20 % of the training pairs when there is no validation data.
+    let val = if val_paths.is_empty() {
+        None
+    } else {
+        Some(read_dataset(
+            val_paths,
+            lin.input_names(),
+            lin.output_names(),
+            &spec.units,
+        )?)
+    };
+    let (x_fit, d_fit, x_test, d_test, test_source, val_est) = match &val {
+        Some(v) => {
+            let mut vconf = config.clone();
+            vconf.w = mme_core::WeightSpec::Matrix(est.w.clone());
+            vconf.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
+            let vres = estimate_spec(&spec, v, &vconf)?;
+            let (xv, dv) = training_pairs(&vres.estimate, v, opts.trim_fraction);
+            (
+                x_train.clone(),
+                d_train.clone(),
+                xv,
+                dv,
+                "MME on the validation data at the training W and noise".to_string(),
+                Some(vres.estimate),
+            )
+        }
+        None => {
+            let k = x_train.ncols();
+            let cut = k - k / 5;
+            (
+                x_train.columns(0, cut).into_owned(),
+                d_train.columns(0, cut).into_owned(),
+                x_train.columns(cut, k - cut).into_owned(),
+                d_train.columns(cut, k - cut).into_owned(),
+                "last 20 % of the training pairs (no validation data given)".to_string(),
+                None,
+            )
+        }
+    };
+    let sweep_config = SweepConfig {
+        hidden_sizes: match opts.hidden {
+            HiddenChoice::Auto => (1..=10).collect(),
+            HiddenChoice::Fixed(h) => vec![h],
+        },
+        inits: opts.inits,
+        seed: opts.seed,
+        ..SweepConfig::default()
+    };
+    let sweep = nn::sizing_sweep(&x_fit, &d_fit, &x_test, &d_test, &sweep_config, None)?;
+    let network = sweep.chosen_network().clone();
+    let x0: Vec<f64> = est.experiments[0]
+        .states
+        .column(0)
+        .iter()
+        .copied()
+        .collect();
+    let hybrid = hybrid_model(&spec, network.clone(), &x0, opts.substeps)?;
+
+    ensure_dir(out)?;
+    let mut files = Vec::new();
+    let exp0 = &data.experiments()[0];
+    let xs = free_run(&hybrid, exp0, &x0)?;
+    let train = FreeRunReport {
+        horizon: Horizon::FreeRun,
+        x0: x0.clone(),
+        x0_source: "MME estimate x̂(t0) of the training record".into(),
+        channels: metrics_for(lin.output_names(), lin.c(), &xs, exp0)?,
+    };
+    compare_figure(&spec, exp0, &xs, &train, "training")?.write(&out.join("compare_train.svg"))?;
+    files.push("compare_train.svg".to_string());
+    let validation = match (&val, &val_est) {
+        (Some(v), Some(ve)) => {
+            let vexp = &v.experiments()[0];
+            let guess: Vec<f64> = ve.experiments[0].states.column(0).iter().copied().collect();
+            let fit = InitialStateFit {
+                window: opts.x0_window,
+                integrator: hybrid.integrator,
+                ..InitialStateFit::default()
+            };
+            let vx0 =
+                fit_initial_state(&hybrid, lin.c(), vexp, &guess, &fit).map_err(|source| {
+                    MmennError::Core {
+                        context: "fitting the validation initial state",
+                        source,
+                    }
+                })?;
+            let vxs = free_run(&hybrid, vexp, &vx0)?;
+            let report = FreeRunReport {
+                horizon: Horizon::FreeRun,
+                x0: vx0,
+                x0_source: format!(
+                    "least-squares fit of the free response to the first {} validation samples",
+                    opts.x0_window.min(vexp.len())
+                ),
+                channels: metrics_for(lin.output_names(), lin.c(), &vxs, vexp)?,
+            };
+            compare_figure(&spec, vexp, &vxs, &report, "validation")?
+                .write(&out.join("compare_validation.svg"))?;
+            files.push("compare_validation.svg".to_string());
+            Some(report)
+        }
+        _ => None,
+    };
+
+    // d̂ and the network's fit of it on the training record.
+    let pred = network.predict(&x_train)?;
+    for (i, name) in lin.correction_names().iter().enumerate() {
+        let idx: Vec<f64> = (0..x_train.ncols()).map(|k| k as f64).collect();
+        let fig = Figure {
+            title: format!("d_{name}: MME estimate and network"),
+            x_label: "training pair".into(),
+            y_label: format!("d_{name}"),
+            series: vec![
+                Series::points("MME d̂", idx.clone(), row(&d_train, i)),
+                Series::line("NN(x̂, u)", idx, row(&pred, i)),
+            ],
+            bands: vec![],
+        };
+        fig.write(&out.join(format!("nn_d_{name}.svg")))?;
+        files.push(format!("nn_d_{name}.svg"));
+    }
+    write_sweep(&out.join("sweep.csv"), &sweep.rows)?;
+    files.push("sweep.csv".into());
+    sweep_figure(&sweep.rows).write(&out.join("sweep.svg"))?;
+    files.push("sweep.svg".into());
+
+    let file = HybridFile {
+        format: HYBRID_FORMAT.into(),
+        model_toml: format_model(&spec)?,
+        network,
+        x0,
+        dt: exp0.dt(),
+        substeps: opts.substeps,
+    };
+    write_atomic(
+        &out.join("model.json"),
+        serde_json::to_string_pretty(&file)?.as_bytes(),
+    )?;
+    files.push("model.json".into());
+    files.push("summary.json".into());
+    files.push("report.md".into());
+    let w_by_correction = lin
+        .correction_names()
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.clone(), est.w[(i, i)]))
+        .collect();
+    let summary = FitSummary {
+        hidden: sweep.chosen_row().hidden,
+        chosen: sweep.chosen_row().clone(),
+        training_pairs: x_train.ncols(),
+        test_source,
+        w_by_correction,
+        train,
+        validation,
+        files,
+    };
+    write_atomic(
+        &out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    write_atomic(&out.join("report.md"), fit_report(&summary).as_bytes())?;
+    Ok(summary)
+}
+
+fn compare_figure(
+    spec: &ModelSpec,
+    exp: &Experiment,
+    xs: &DMatrix<f64>,
+    rep: &FreeRunReport,
+    which: &str,
+) -> Result<Figure> {
+    let t = exp.times();
+    let y = spec.linear.c() * xs;
+    let mut series = Vec::new();
+    for (i, name) in spec.linear.output_names().iter().enumerate() {
+        series.push(Series::points(
+            format!("{name} measured"),
+            t.clone(),
+            row(exp.outputs(), i),
+        ));
+        let fit = rep.channels.get(name).map_or(f64::NAN, |m| m.fit_percent);
+        series.push(Series::line(
+            format!("{name} MME/NN free-run (fit {fit:.1} %)"),
+            t.clone(),
+            row(&y, i),
+        ));
+    }
+    Ok(Figure {
+        title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
+        x_label: "t (s)".into(),
+        y_label: "output".into(),
+        series,
+        bands: vec![],
+    })
+}
+
+fn sweep_figure(rows: &[SweepRow]) -> Figure {
+    let h: Vec<f64> = rows.iter().map(|r| r.hidden as f64).collect();
+    Figure {
+        title: "network sizing sweep (thesis Figs. 4.5, 4.9)".into(),
+        x_label: "hidden units".into(),
+        y_label: "log10 MSE of d".into(),
+        series: vec![
+            Series::points(
+                "training",
+                h.clone(),
+                rows.iter().map(|r| r.train_mse.log10()).collect(),
+            ),
+            Series::points("test", h, rows.iter().map(|r| r.test_mse.log10()).collect()),
+        ],
+        bands: vec![],
+    }
+}
+
+fn write_sweep(path: &Path, rows: &[SweepRow]) -> Result<()> {
+    let header: Vec<String> = [
+        "hidden",
+        "init",
+        "seed",
+        "train_mse",
+        "val_mse",
+        "test_mse",
+        "epochs",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let cols: Vec<Vec<f64>> = vec![
+        rows.iter().map(|r| r.hidden as f64).collect(),
+        rows.iter().map(|r| r.init as f64).collect(),
+        rows.iter().map(|r| r.seed as f64).collect(),
+        rows.iter().map(|r| r.train_mse).collect(),
+        rows.iter().map(|r| r.val_mse.unwrap_or(f64::NAN)).collect(),
+        rows.iter().map(|r| r.test_mse).collect(),
+        rows.iter().map(|r| r.epochs as f64).collect(),
+    ];
+    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
+    write_csv(path, &header, &refs)
+}
+
+fn metrics_table(rep: &FreeRunReport) -> String {
+    let mut s =
+        String::from("| channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|\n");
+    for (n, m) in &rep.channels {
+        s.push_str(&format!(
+            "| {n} | {:.2} | {:.5} | {:.4e} | {:.4e} |\n",
+            m.fit_percent, m.r2, m.rmse, m.error_variance
+        ));
+    }
+    s
+}
+
+fn fit_report(s: &FitSummary) -> String {
+    let mut r = String::from("# MME/NN hybrid model\n\n");
+    r.push_str(&format!(
+        "Network: {} hidden tanh units (sizing sweep; test MSE of d from {}). {} training pairs. MME W: {:?}.\n\n",
+        s.hidden, s.test_source, s.training_pairs, s.w_by_correction
+    ));
+    r.push_str(&format!(
+        "## Training data — {} ({})\n\n",
+        s.train.horizon, s.train.x0_source
+    ));
+    r.push_str(&metrics_table(&s.train));
+    if let Some(v) = &s.validation {
+        r.push_str(&format!(
+            "\n## Validation data — {} ({})\n\n",
+            v.horizon, v.x0_source
+        ));
+        r.push_str(&metrics_table(v));
+    }
+    r.push_str(
+        "\nFigures: `compare_*.svg`, `nn_d_*.svg`, `sweep.svg`; the sweep table is `sweep.csv`.\n",
+    );
+    r
+}
+
+/// How `mmenn predict` gets its initial state.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub enum InitialChoice {
+    /// Fit it to the first samples of the data's measured channels (starting from the
+    /// training `x0`).
+    #[default]
+    Fit,
+    /// Use this state.
+    Given(Vec<f64>),
+}
+
+/// What `mmenn predict` reports.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PredictSummary {
+    /// Always free-run simulation, with the initial state and metrics per channel present
+    /// in the data (states by name, or model outputs).
+    pub free_run: FreeRunReport,
+    /// Files written.
+    pub files: Vec<String>,
+}
+
+/// Load `model.json`, simulate free-run over the data's inputs, compare with every state
+/// or output column the data has, and write `prediction.csv` and `summary.json`.
+pub fn run_predict(
+    model_json: &Path,
+    data_path: &Path,
+    x0: &InitialChoice,
+    window: usize,
+    out: &Path,
+) -> Result<PredictSummary> {
+    let text = std::fs::read_to_string(model_json).map_err(|source| MmennError::Io {
+        path: model_json.to_path_buf(),
+        source,
+    })?;
+    let file: HybridFile = serde_json::from_str(&text).map_err(|e| MmennError::Model {
+        path: model_json.to_path_buf(),
+        line: Some(e.line()),
+        column: Some(e.column()),
+        problem: crate::error::ModelProblem::Syntax {
+            message: e.to_string(),
+        },
+    })?;
+    let spec = file.spec()?;
+    let model = file.model()?;
+    let lin = &spec.linear;
+    let table = read_table(data_path)?;
+    // Compare with every state present by name, else with every model output present.
+    let states: Vec<(String, usize)> = lin
+        .state_names()
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| table.column_index(n).is_some())
+        .map(|(i, n)| (n.clone(), i))
+        .collect();
+    let names: Vec<String> = states.iter().map(|(n, _)| n.clone()).collect();
+    let exp = table_to_experiment(&table, lin.input_names(), &names)?;
+    let sel = DMatrix::from_fn(states.len(), lin.n_states(), |r, c| {
+        if states[r].1 == c { 1.0 } else { 0.0 }
+    });
+    let (x0, source) = match x0 {
+        InitialChoice::Given(v) => (v.clone(), "given by --x0".to_string()),
+        InitialChoice::Fit if !states.is_empty() => {
+            let fit = InitialStateFit {
+                window,
+                integrator: model.integrator,
+                ..InitialStateFit::default()
+            };
+            let v = fit_initial_state(&model, &sel, &exp, &file.x0, &fit).map_err(|source| {
+                MmennError::Core {
+                    context: "fitting the initial state",
+                    source,
+                }
+            })?;
+            (
+                v,
+                format!(
+                    "least-squares fit of the free response to the first {} samples",
+                    window.min(exp.len())
+                ),
+            )
+        }
+        InitialChoice::Fit => (
+            file.x0.clone(),
+            "the training record's x0 (no state columns in the data to fit)".to_string(),
+        ),
+    };
+    if x0.len() != lin.n_states() {
+        return Err(MmennError::Core {
+            context: "--x0",
+            source: sysid_core::CoreError::Length {
+                what: "initial state",
+                found: x0.len(),
+                expected: lin.n_states(),
+            },
+        });
+    }
+    let xs = free_run(&model, &exp, &x0)?;
+    ensure_dir(out)?;
+    let t = exp.times();
+    let mut header = vec!["t".to_string()];
+    header.extend(lin.state_names().iter().cloned());
+    let cols: Vec<Vec<f64>> = (0..xs.nrows()).map(|i| row(&xs, i)).collect();
+    let mut refs: Vec<&[f64]> = vec![&t];
+    refs.extend(cols.iter().map(Vec::as_slice));
+    write_csv(&out.join("prediction.csv"), &header, &refs)?;
+    let free_run = FreeRunReport {
+        horizon: Horizon::FreeRun,
+        x0,
+        x0_source: source,
+        channels: metrics_for(&names, &sel, &xs, &exp)?,
+    };
+    let summary = PredictSummary {
+        free_run,
+        files: vec!["prediction.csv".into(), "summary.json".into()],
+    };
+    write_atomic(
+        &out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    Ok(summary)
+}
