@@ -135,6 +135,32 @@ pub struct FitOptions {
     pub substeps: usize,
     /// Samples used to fit the initial state of validation records. Default 200.
     pub x0_window: usize,
+    /// Largest network tried by the automatic sizing sweep. Default 10 (thesis §3.1).
+    pub max_hidden: usize,
+    /// Whether to update the assumed model by regression first (thesis §4.3.3).
+    pub update: ModelUpdateChoice,
+}
+
+impl std::str::FromStr for ModelUpdateChoice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "none" => Ok(Self::None),
+            "regression" => Ok(Self::Regression),
+            _ => Err(format!("'{s}' is neither \"none\" nor \"regression\"")),
+        }
+    }
+}
+
+/// Whether `fit` first updates the assumed model by regressing `d̂` on `[x̂, u]`
+/// (thesis §4.3.3: ignorance model → updated model), then reruns MME with it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ModelUpdateChoice {
+    /// Use the assumed model as given.
+    #[default]
+    None,
+    /// Regression update of the corrected rows of A and B, then MME again.
+    Regression,
 }
 
 impl Default for FitOptions {
@@ -147,6 +173,8 @@ impl Default for FitOptions {
             trim_fraction: 0.02,
             substeps: 4,
             x0_window: 200,
+            max_hidden: 10,
+            update: ModelUpdateChoice::None,
         }
     }
 }
@@ -220,6 +248,8 @@ pub struct FitSummary {
     pub test_source: String,
     /// MME's `W` diagonal on the training data.
     pub w_by_correction: BTreeMap<String, f64>,
+    /// The regression update of the assumed model, when asked for (coefficients ± σ).
+    pub model_update: Option<Vec<mme_core::CorrectionRegression>>,
     /// Free-run on the training record(s), first experiment.
     pub train: FreeRunReport,
     /// Free-run on the validation record, when given.
@@ -257,16 +287,18 @@ pub fn run_fit(
     opts: &FitOptions,
     out: &Path,
 ) -> Result<FitSummary> {
-    let spec = read_model(model_path)?;
-    let lin = spec.linear.clone();
-    let data = read_dataset(
-        data_paths,
-        lin.input_names(),
-        lin.output_names(),
-        &spec.units,
-    )?;
+    let mut spec = read_model(model_path)?;
+    let data = read_dataset(data_paths, spec.linear.input_names(), spec.linear.output_names(), &spec.units)?;
     let config = mme_config(&spec, &opts.estimate);
-    let result = estimate_spec(&spec, &data, &config)?;
+    let mut result = estimate_spec(&spec, &data, &config)?;
+    let mut update_report = None;
+    if opts.update == ModelUpdateChoice::Regression {
+        let up = mme_core::update_model(&spec.linear, &data, &result.estimate, &mme_core::UpdateConfig::default())?;
+        spec.linear = up.model.clone();
+        result = estimate_spec(&spec, &data, &config)?;
+        update_report = Some(up.regressions);
+    }
+    let lin = spec.linear.clone();
     let est = &result.estimate;
     let (x_train, d_train) = training_pairs(est, &data, opts.trim_fraction);
 
@@ -313,7 +345,7 @@ pub fn run_fit(
     };
     let sweep_config = SweepConfig {
         hidden_sizes: match opts.hidden {
-            HiddenChoice::Auto => (1..=10).collect(),
+            HiddenChoice::Auto => (1..=opts.max_hidden.max(1)).collect(),
             HiddenChoice::Fixed(h) => vec![h],
         },
         inits: opts.inits,
@@ -425,6 +457,7 @@ pub fn run_fit(
         training_pairs: x_train.ncols(),
         test_source,
         w_by_correction,
+        model_update: update_report,
         train,
         validation,
         files,

@@ -1,6 +1,6 @@
 //! `mmenn simulate`: generate a built-in system's data set and write `data.csv` (t,
-//! inputs, measured states with noise), `truth.csv` (t, every true state, `d_<state>`
-//! truth corrections) and `model.toml` (the system's assumed model).
+//! inputs, measured states with noise), `truth.csv` (t, inputs, every true state,
+//! `d_<state>` truth corrections) and `model.toml` (the system's assumed model).
 
 use std::path::{Path, PathBuf};
 
@@ -51,10 +51,12 @@ pub fn write_simulation(sim: &SimulatedData, out: &Path) -> Result<SimulateOutpu
     let n = truth.states.ncols();
     let t: Vec<f64> = (0..n).map(|k| truth.t0 + k as f64 * truth.dt).collect();
     let mut header = vec!["t".to_string()];
+    header.extend(sim.data.input_names());
     header.extend(truth.state_names.iter().cloned());
     header.extend(truth.correction_names.iter().cloned());
-    let rows: Vec<Vec<f64>> = (0..truth.states.nrows())
-        .map(|i| truth.states.row(i).iter().copied().collect())
+    let rows: Vec<Vec<f64>> = (0..truth.inputs.nrows())
+        .map(|i| truth.inputs.row(i).iter().copied().collect())
+        .chain((0..truth.states.nrows()).map(|i| truth.states.row(i).iter().copied().collect()))
         .chain(
             (0..truth.corrections.nrows())
                 .map(|i| truth.corrections.row(i).iter().copied().collect()),

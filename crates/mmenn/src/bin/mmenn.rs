@@ -20,6 +20,63 @@ enum Command {
     Simulate(SimulateArgs),
     /// Minimum Model Error estimate: smooth states and the model correction d(t).
     Estimate(EstimateArgs),
+    /// Fit the MME/NN hybrid model: MME, network sizing sweep, free-run validation.
+    Fit(FitArgs),
+    /// Free-run prediction of a fitted hybrid model (model.json) on new inputs.
+    Predict(PredictArgs),
+}
+
+#[derive(Debug, Args)]
+struct FitArgs {
+    /// Training data file(s) (CSV).
+    #[arg(long, required = true, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    model: PathBuf,
+    /// Validation data file(s): the sweep's test set and a free-run check.
+    #[arg(long, num_args = 1..)]
+    val: Vec<PathBuf>,
+    /// Hidden units: "auto" (sizing sweep 1–10 × inits) or a number.
+    #[arg(long, default_value = "auto")]
+    hidden: mmenn::fit::HiddenChoice,
+    /// Initialisations per network size.
+    #[arg(long, default_value_t = 10)]
+    inits: usize,
+    /// Largest network of the automatic sizing sweep.
+    #[arg(long, default_value_t = 10)]
+    max_hidden: usize,
+    /// Update the assumed model by regression on d̂ first: none or regression (thesis §4.3.3).
+    #[arg(long, default_value = "none")]
+    update_model: mmenn::fit::ModelUpdateChoice,
+    /// Correction weight W for MME: "auto" or a positive number.
+    #[arg(long, default_value = "auto")]
+    w: mmenn::estimate::WeightChoice,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+struct PredictArgs {
+    /// Fitted hybrid model (model.json written by `mmenn fit`).
+    #[arg(long)]
+    model: PathBuf,
+    /// Data file with the inputs (and, optionally, state columns to compare with).
+    #[arg(long)]
+    data: PathBuf,
+    /// Initial state, comma-separated (default: fitted to the first samples).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    x0: Option<Vec<f64>>,
+    /// Samples used to fit the initial state.
+    #[arg(long, default_value_t = 200)]
+    x0_window: usize,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Debug, Args)]
@@ -154,10 +211,51 @@ fn estimate(args: EstimateArgs) -> Result<()> {
     Ok(())
 }
 
+#[allow(clippy::print_stdout)]
+fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
+    println!("{label} — {} from x0 = {:?} ({}):", r.horizon, r.x0, r.x0_source);
+    for (name, m) in &r.channels {
+        println!("  {name}: fit {:.2} %, R² {:.5}, RMSE {:.4e}, error variance {:.4e}", m.fit_percent, m.r2, m.rmse, m.error_variance);
+    }
+}
+
+#[allow(clippy::print_stdout)]
+fn fit(args: FitArgs) -> Result<()> {
+    let opts = mmenn::fit::FitOptions {
+        estimate: mmenn::estimate::EstimateOptions { w: args.w, substeps: None },
+        hidden: args.hidden,
+        inits: args.inits,
+        max_hidden: args.max_hidden,
+        update: args.update_model,
+        seed: args.seed,
+        ..Default::default()
+    };
+    let s = mmenn::fit::run_fit(&args.data, &args.model, &args.val, &opts, &args.out)?;
+    println!("network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)", s.hidden, s.chosen.train_mse, s.chosen.test_mse);
+    print_free_run("training data", &s.train);
+    if let Some(v) = &s.validation {
+        print_free_run("validation data", v);
+    }
+    println!("wrote {} files into {}", s.files.len(), args.out.display());
+    Ok(())
+}
+
+fn predict(args: PredictArgs) -> Result<()> {
+    let x0 = match args.x0 {
+        Some(v) => mmenn::fit::InitialChoice::Given(v),
+        None => mmenn::fit::InitialChoice::Fit,
+    };
+    let s = mmenn::fit::run_predict(&args.model, &args.data, &x0, args.x0_window, &args.out)?;
+    print_free_run("prediction", &s.free_run);
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Simulate(a) => simulate(a),
         Command::Estimate(a) => estimate(a),
+        Command::Fit(a) => fit(a),
+        Command::Predict(a) => predict(a),
     }
 }
