@@ -1,3 +1,4 @@
 //! Integration tests of the facade: every workflow end to end through files.
 
+mod fit;
 mod simulate;

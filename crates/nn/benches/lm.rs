@@ -38,5 +38,42 @@ fn bench_lm(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_lm);
+/// Issue 5's grid: 3 inputs, 1 output, N = 2,000 and 20,000 samples, H = 1…10 hidden
+/// units, 20 LM epochs each (time per network at a fixed amount of work; compare with
+/// MINPACK's LM from scipy on the same data, measured elsewhere at 0.02–0.07 s for
+/// N = 2,000 and 0.28–0.75 s for N = 20,000 to convergence).
+fn bench_lm_grid(c: &mut Criterion) {
+    let mut group = c.benchmark_group("lm_grid");
+    group.sample_size(10);
+    for n in [2_000usize, 20_000] {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let x = DMatrix::<f64>::from_fn(3, n, |_, _| rng.random_range(-2.0..2.0));
+        let t = DMatrix::from_fn(1, n, |_, k| {
+            (x[(0, k)]).sin() * (0.5 * x[(1, k)]).cos() + 0.3 * x[(2, k)].tanh()
+        });
+        for h in [1usize, 2, 4, 6, 8, 10] {
+            let net = Mlp::for_data(&x, &t, &[h], 11).expect("valid data");
+            let config = LmConfig {
+                max_epochs: 20,
+                validation: ValidationSplit::None,
+                min_gradient: 0.0,
+                ..LmConfig::default()
+            };
+            group.bench_with_input(
+                BenchmarkId::new(format!("N{n}"), format!("H{h}")),
+                &(x.clone(), t.clone()),
+                |b, (x, t)| {
+                    b.iter(|| {
+                        let mut trained = net.clone();
+                        let report = train_lm(&mut trained, x, t, &config, None).expect("valid");
+                        black_box(report.train_mse)
+                    })
+                },
+            );
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_lm, bench_lm_grid);
 criterion_main!(benches);

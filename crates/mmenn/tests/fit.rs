@@ -1,0 +1,219 @@
+//! MME/NN hybrid model end to end (thesis ch. 4): simulate, fit on the training recipe,
+//! predict free-run on the test recipe (a different input), judge against the truth.
+//! Sweeps are reduced (sizes 1–5 × 3 initialisations) to keep CI short; the full
+//! 1–10 × 10 sweep runs in `cargo xtask reproduce`.
+
+use std::path::{Path, PathBuf};
+
+use mmenn::fit::{FitOptions, InitialChoice, ModelUpdateChoice, run_fit, run_predict};
+use mmenn::plants::{Recipe, SimulationRequest};
+use mmenn::simulate::run_simulate;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mmenn-fit-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+fn sim(
+    dir: &Path,
+    system: &str,
+    recipe: Recipe,
+    noise: Option<f64>,
+    fs: Option<f64>,
+) -> mmenn::simulate::SimulateOutput {
+    let req = SimulationRequest {
+        system: system.into(),
+        recipe,
+        noise_variance: noise,
+        fs,
+        seed: 5,
+        ..Default::default()
+    };
+    run_simulate(&req, dir).unwrap()
+}
+
+fn quick(update: ModelUpdateChoice) -> FitOptions {
+    FitOptions {
+        max_hidden: 5,
+        inits: 3,
+        update,
+        ..FitOptions::default()
+    }
+}
+
+/// Free-run prediction on the test recipe's truth, from the true initial state.
+fn predict_truth(
+    fit_dir: &Path,
+    test: &mmenn::simulate::SimulateOutput,
+    out: &Path,
+) -> mmenn::fit::PredictSummary {
+    let truth = mmenn::data_file::read_table(&test.truth).unwrap();
+    let spec = mmenn::read_model(&test.model).unwrap();
+    let x0: Vec<f64> = spec
+        .linear
+        .state_names()
+        .iter()
+        .map(|s| truth.columns[truth.column_index(s).unwrap()][0])
+        .collect();
+    run_predict(
+        &fit_dir.join("model.json"),
+        &test.truth,
+        &InitialChoice::Given(x0),
+        200,
+        out,
+    )
+    .unwrap()
+}
+
+#[test]
+fn clean_single_pendulum_predicts_the_test_input() {
+    let dir = scratch("pend-clean");
+    let train = sim(
+        &dir.join("train"),
+        "pendulum",
+        Recipe::Train,
+        Some(0.0),
+        None,
+    );
+    let test = sim(&dir.join("test"), "pendulum", Recipe::Test, Some(0.0), None);
+    run_fit(
+        &[train.data.clone()],
+        &train.model,
+        &[test.data.clone()],
+        &quick(ModelUpdateChoice::None),
+        &dir.join("fit"),
+    )
+    .unwrap();
+    let p = predict_truth(&dir.join("fit"), &test, &dir.join("pred"));
+    for state in ["theta", "omega"] {
+        let r2 = p.free_run.channels[state].r2;
+        assert!(r2 >= 0.999, "{state}: free-run R² {r2} on the test input");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn noisy_single_pendulum_predicts_the_truth_better_than_the_noise() {
+    // Thesis §4.1 with measurement noise (variance 0.01 rad²): the hybrid model's error
+    // against the truth must be smaller than its error against the noisy measurements
+    // (which carry the noise on top) — i.e. it learned the system, not the noise.
+    let dir = scratch("pend-noisy");
+    let train = sim(
+        &dir.join("train"),
+        "pendulum",
+        Recipe::Train,
+        Some(0.01),
+        None,
+    );
+    let test = sim(
+        &dir.join("test"),
+        "pendulum",
+        Recipe::Test,
+        Some(0.01),
+        None,
+    );
+    run_fit(
+        &[train.data.clone()],
+        &train.model,
+        &[test.data.clone()],
+        &quick(ModelUpdateChoice::None),
+        &dir.join("fit"),
+    )
+    .unwrap();
+    let vs_truth = predict_truth(&dir.join("fit"), &test, &dir.join("pred_truth"));
+    let spec = mmenn::read_model(&test.model).unwrap();
+    let vs_meas = run_predict(
+        &dir.join("fit/model.json"),
+        &test.data,
+        &InitialChoice::Given(vs_truth.free_run.x0.clone()),
+        200,
+        &dir.join("pred_meas"),
+    )
+    .unwrap();
+    for name in spec.linear.output_names() {
+        let (t, m) = (
+            vs_truth.free_run.channels[name].error_variance,
+            vs_meas.free_run.channels[name].error_variance,
+        );
+        assert!(
+            t < m,
+            "{name}: error variance vs truth {t} not below vs measurements {m}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn two_tank_at_every_thesis_sample_rate() {
+    for fs in [10.0, 5.0, 1.0, 0.5] {
+        let dir = scratch(&format!("tank-{fs}"));
+        let train = sim(
+            &dir.join("train"),
+            "two_tank",
+            Recipe::Train,
+            None,
+            Some(fs),
+        );
+        let test = sim(&dir.join("test"), "two_tank", Recipe::Test, None, Some(fs));
+        run_fit(
+            &[train.data.clone()],
+            &train.model,
+            &[test.data.clone()],
+            &quick(ModelUpdateChoice::None),
+            &dir.join("fit"),
+        )
+        .unwrap();
+        let p = predict_truth(&dir.join("fit"), &test, &dir.join("pred"));
+        for (state, m) in &p.free_run.channels {
+            assert!(m.r2 >= 0.95, "fs {fs} Hz, {state}: free-run R² {}", m.r2);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
+
+#[test]
+fn double_pendulum_with_regression_updated_model() {
+    let dir = scratch("dpend");
+    let train = sim(
+        &dir.join("train"),
+        "double_pendulum",
+        Recipe::Train,
+        None,
+        None,
+    );
+    let test = sim(
+        &dir.join("test"),
+        "double_pendulum",
+        Recipe::Test,
+        None,
+        None,
+    );
+    // The corrections of the double pendulum need larger networks than the single
+    // pendulum's: the full size range, with 2 initialisations per size to keep CI short.
+    let opts = FitOptions {
+        max_hidden: 10,
+        inits: 2,
+        update: ModelUpdateChoice::Regression,
+        ..FitOptions::default()
+    };
+    let s = run_fit(
+        &[train.data.clone()],
+        &train.model,
+        &[test.data.clone()],
+        &opts,
+        &dir.join("fit"),
+    )
+    .unwrap();
+    assert!(s.model_update.is_some());
+    let p = predict_truth(&dir.join("fit"), &test, &dir.join("pred"));
+    assert_eq!(p.free_run.channels.len(), 4);
+    for (state, m) in &p.free_run.channels {
+        assert!(
+            m.r2 >= 0.95,
+            "{state}: free-run R² {} on the test input",
+            m.r2
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
