@@ -222,9 +222,22 @@ pub enum MmennError {
     /// A network could not be built or trained.
     #[error("network: {0}")]
     Nn(#[from] nn::NnError),
+    /// Condition monitoring failed.
+    #[error("condition monitoring: {0}")]
+    Condmon(#[from] condmon::CondmonError),
     /// JSON serialisation failed.
     #[error("writing JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// A real benchmark's data folder is in none of the places searched.
+    #[error(
+        "benchmark data '{benchmark}' not found (looked in: {searched:?}); pass --data-dir or set MMENN_DATA_DIR"
+    )]
+    BenchmarkMissing {
+        /// The benchmark's folder name.
+        benchmark: &'static str,
+        /// The data folders searched, in order.
+        searched: Vec<PathBuf>,
+    },
 }
 
 /// Result alias of the facade.

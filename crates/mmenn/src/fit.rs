@@ -288,12 +288,22 @@ pub fn run_fit(
     out: &Path,
 ) -> Result<FitSummary> {
     let mut spec = read_model(model_path)?;
-    let data = read_dataset(data_paths, spec.linear.input_names(), spec.linear.output_names(), &spec.units)?;
+    let data = read_dataset(
+        data_paths,
+        spec.linear.input_names(),
+        spec.linear.output_names(),
+        &spec.units,
+    )?;
     let config = mme_config(&spec, &opts.estimate);
     let mut result = estimate_spec(&spec, &data, &config)?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
-        let up = mme_core::update_model(&spec.linear, &data, &result.estimate, &mme_core::UpdateConfig::default())?;
+        let up = mme_core::update_model(
+            &spec.linear,
+            &data,
+            &result.estimate,
+            &mme_core::UpdateConfig::default(),
+        )?;
         spec.linear = up.model.clone();
         result = estimate_spec(&spec, &data, &config)?;
         update_report = Some(up.regressions);

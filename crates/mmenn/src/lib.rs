@@ -1,11 +1,13 @@
 #![doc = include_str!("../README.md")]
 
 pub mod atomic;
+pub mod benchmarks;
 pub mod data_file;
 pub mod error;
 pub mod estimate;
 pub mod fit;
 pub mod model_file;
+pub mod monitor;
 pub mod plot;
 pub mod simulate;
 

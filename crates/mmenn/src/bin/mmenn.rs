@@ -24,6 +24,49 @@ enum Command {
     Fit(FitArgs),
     /// Free-run prediction of a fitted hybrid model (model.json) on new inputs.
     Predict(PredictArgs),
+    /// Condition monitoring from identified models.
+    #[command(subcommand)]
+    Monitor(MonitorCommand),
+}
+
+#[derive(Debug, Subcommand)]
+enum MonitorCommand {
+    /// Identify every labelled record and train the classifiers.
+    Train(MonitorTrainArgs),
+    /// Identify one record and classify its condition.
+    Classify(MonitorClassifyArgs),
+}
+
+#[derive(Debug, Args)]
+struct MonitorTrainArgs {
+    /// A condition and its records: NAME=FILE[,FILE…] (repeat per condition).
+    #[arg(long = "class", required = true)]
+    classes: Vec<String>,
+    /// Model file (TOML).
+    #[arg(long)]
+    model: PathBuf,
+    /// Features: raw, canonical, physical or canonical+physical.
+    #[arg(long, default_value = "canonical+physical")]
+    features: mmenn::monitor::FeatureKind,
+    /// Hidden units of each record's network.
+    #[arg(long, default_value_t = 3)]
+    hidden: usize,
+    /// Seed of the networks.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+struct MonitorClassifyArgs {
+    /// Directory written by `monitor train`.
+    #[arg(long)]
+    monitor: PathBuf,
+    /// Data file to classify.
+    #[arg(long)]
+    data: PathBuf,
 }
 
 #[derive(Debug, Args)]
@@ -213,16 +256,25 @@ fn estimate(args: EstimateArgs) -> Result<()> {
 
 #[allow(clippy::print_stdout)]
 fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
-    println!("{label} — {} from x0 = {:?} ({}):", r.horizon, r.x0, r.x0_source);
+    println!(
+        "{label} — {} from x0 = {:?} ({}):",
+        r.horizon, r.x0, r.x0_source
+    );
     for (name, m) in &r.channels {
-        println!("  {name}: fit {:.2} %, R² {:.5}, RMSE {:.4e}, error variance {:.4e}", m.fit_percent, m.r2, m.rmse, m.error_variance);
+        println!(
+            "  {name}: fit {:.2} %, R² {:.5}, RMSE {:.4e}, error variance {:.4e}",
+            m.fit_percent, m.r2, m.rmse, m.error_variance
+        );
     }
 }
 
 #[allow(clippy::print_stdout)]
 fn fit(args: FitArgs) -> Result<()> {
     let opts = mmenn::fit::FitOptions {
-        estimate: mmenn::estimate::EstimateOptions { w: args.w, substeps: None },
+        estimate: mmenn::estimate::EstimateOptions {
+            w: args.w,
+            substeps: None,
+        },
         hidden: args.hidden,
         inits: args.inits,
         max_hidden: args.max_hidden,
@@ -231,7 +283,10 @@ fn fit(args: FitArgs) -> Result<()> {
         ..Default::default()
     };
     let s = mmenn::fit::run_fit(&args.data, &args.model, &args.val, &opts, &args.out)?;
-    println!("network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)", s.hidden, s.chosen.train_mse, s.chosen.test_mse);
+    println!(
+        "network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)",
+        s.hidden, s.chosen.train_mse, s.chosen.test_mse
+    );
     print_free_run("training data", &s.train);
     if let Some(v) = &s.validation {
         print_free_run("validation data", v);
@@ -250,6 +305,56 @@ fn predict(args: PredictArgs) -> Result<()> {
     Ok(())
 }
 
+#[allow(clippy::print_stdout)]
+fn monitor(cmd: MonitorCommand) -> Result<()> {
+    match cmd {
+        MonitorCommand::Train(a) => {
+            let mut classes = Vec::new();
+            for c in &a.classes {
+                let Some((name, files)) = c.split_once('=') else {
+                    bail!("--class '{c}': expected NAME=FILE[,FILE…]");
+                };
+                classes.push((
+                    name.to_string(),
+                    files.split(',').map(PathBuf::from).collect::<Vec<_>>(),
+                ));
+            }
+            let opts = mmenn::monitor::MonitorOptions {
+                features: a.features,
+                hidden: a.hidden,
+                seed: a.seed,
+                ..Default::default()
+            };
+            let m = mmenn::monitor::train_monitor(&classes, &a.model, &opts, &a.out)?;
+            println!(
+                "trained on {} records; classify will use {} with {}",
+                m.rows.len(),
+                m.classifier.label(),
+                m.preprocessing.label()
+            );
+            println!("cross-validated error % ({}):", m.table.columns.join(" | "));
+            for (i, row) in m.table.rows.iter().enumerate() {
+                let cells: Vec<String> = (0..m.table.columns.len())
+                    .filter_map(|j| m.table.cell(i, j))
+                    .map(|c| format!("{:.1}", c.error_percent()))
+                    .collect();
+                println!("  {row}: {}", cells.join(" | "));
+            }
+        }
+        MonitorCommand::Classify(a) => {
+            let c = mmenn::monitor::classify(&a.monitor, &a.data)?;
+            println!(
+                "condition: {} ({}; {})",
+                c.condition, c.classifier, c.score_kind
+            );
+            for (name, s) in &c.scores {
+                println!("  {name}: {s:.3}");
+            }
+        }
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -257,5 +362,6 @@ fn main() -> Result<()> {
         Command::Estimate(a) => estimate(a),
         Command::Fit(a) => fit(a),
         Command::Predict(a) => predict(a),
+        Command::Monitor(c) => monitor(c),
     }
 }

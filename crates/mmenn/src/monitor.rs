@@ -1,0 +1,352 @@
+//! `mmenn monitor`: condition monitoring from identified models (thesis ch. 6). Each
+//! labelled record is identified (MME, then a small network on `d̂`, and the regression
+//! update's coefficients); features from those models train the classifiers; a new record
+//! is identified the same way and classified.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use condmon::{
+    ClassifierSpec, CvConfig, CvScheme, ErrorTable, KnnConfig, NamedFeatures, Preprocessing,
+    TrainedPipeline,
+};
+use nalgebra::DMatrix;
+use nn::{LmConfig, Mlp};
+use serde::{Deserialize, Serialize};
+
+use crate::atomic::{ensure_dir, write_atomic};
+use crate::data_file::read_dataset;
+use crate::error::{MmennError, Result};
+use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
+use crate::fit::training_pairs;
+use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
+
+/// Which features describe an identified model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FeatureKind {
+    /// The network's flat weights (the thesis).
+    Raw,
+    /// Weights with the tanh sign and hidden-unit permutation symmetries removed.
+    Canonical,
+    /// The regression update's coefficients of `d̂` on `[x̂, u]` (identified physics).
+    Physical,
+    /// Canonical weights and physical coefficients together.
+    #[default]
+    CanonicalAndPhysical,
+}
+
+impl std::str::FromStr for FeatureKind {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "raw" => Ok(Self::Raw),
+            "canonical" => Ok(Self::Canonical),
+            "physical" => Ok(Self::Physical),
+            "canonical+physical" => Ok(Self::CanonicalAndPhysical),
+            _ => Err(format!(
+                "'{s}' is not one of raw, canonical, physical, canonical+physical"
+            )),
+        }
+    }
+}
+
+/// Options of [`train_monitor`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct MonitorOptions {
+    /// Features.
+    pub features: FeatureKind,
+    /// Hidden units of each record's network (thesis: 3 or 1 for the mass–spring–damper).
+    pub hidden: usize,
+    /// Seed of the networks' initialisation.
+    pub seed: u64,
+    /// MME settings.
+    pub estimate: EstimateOptions,
+}
+
+impl Default for MonitorOptions {
+    fn default() -> Self {
+        Self {
+            features: FeatureKind::default(),
+            hidden: 3,
+            seed: 1,
+            estimate: EstimateOptions::default(),
+        }
+    }
+}
+
+/// A trained monitor as saved in `monitor.json`: the model file, the feature recipe, the
+/// training features and labels, the classifier chosen by cross-validation, and the
+/// cross-validated error table. Classifiers are refitted from the stored features when
+/// classifying (they are cheap; condmon's fitted models are not serialisable).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MonitorFile {
+    /// Always `mmenn-monitor/1`.
+    pub format: String,
+    /// The assumed model (model-file TOML).
+    pub model_toml: String,
+    /// Feature recipe.
+    pub features: FeatureKind,
+    /// Hidden units per network.
+    pub hidden: usize,
+    /// Seed of the networks.
+    pub seed: u64,
+    /// Class names; label `i` is `classes[i]`.
+    pub classes: Vec<String>,
+    /// Feature names.
+    pub feature_names: Vec<String>,
+    /// Training features, one row per record.
+    pub rows: Vec<Vec<f64>>,
+    /// Label of each row.
+    pub labels: Vec<usize>,
+    /// The classifier used by `classify`.
+    pub classifier: ClassifierSpec,
+    /// Its preprocessing.
+    pub preprocessing: Preprocessing,
+    /// Cross-validated error table of every classifier × preprocessing.
+    pub table: ErrorTable,
+}
+
+/// Identify one record and return its features.
+pub fn record_features(
+    spec: &ModelSpec,
+    path: &Path,
+    opts: &MonitorOptions,
+) -> Result<NamedFeatures> {
+    let lin = &spec.linear;
+    let data = read_dataset(
+        &[path.to_path_buf()],
+        lin.input_names(),
+        lin.output_names(),
+        &spec.units,
+    )?;
+    let out = estimate_spec(spec, &data, &mme_config(spec, &opts.estimate))?;
+    let mut parts: Vec<NamedFeatures> = Vec::new();
+    if opts.features != FeatureKind::Physical {
+        let (x, d) = training_pairs(&out.estimate, &data, 0.02);
+        let mut net = Mlp::for_data(&x, &d, &[opts.hidden], opts.seed)?;
+        nn::train_lm(&mut net, &x, &d, &LmConfig::default(), None)?;
+        parts.push(match opts.features {
+            FeatureKind::Raw => condmon::raw_weights(&net),
+            _ => condmon::canonical_weights(&net)?,
+        });
+    }
+    if matches!(
+        opts.features,
+        FeatureKind::Physical | FeatureKind::CanonicalAndPhysical
+    ) {
+        let up = mme_core::update_model(
+            lin,
+            &data,
+            &out.estimate,
+            &mme_core::UpdateConfig::default(),
+        )?;
+        let mut named: Vec<(String, Vec<f64>)> = Vec::new();
+        for reg in &up.regressions {
+            for c in &reg.coefficients {
+                named.push((format!("{}:{}", reg.correction, c.regressor), vec![c.value]));
+            }
+        }
+        let refs: Vec<(&str, &[f64])> = named
+            .iter()
+            .map(|(n, v)| (n.as_str(), v.as_slice()))
+            .collect();
+        parts.push(condmon::physical_features(&refs)?);
+    }
+    let mut it = parts.into_iter();
+    let first = it.next().ok_or(MmennError::Core {
+        context: "monitor features",
+        source: sysid_core::CoreError::TooFewSamples {
+            what: "feature groups",
+            found: 0,
+            needed: 1,
+        },
+    })?;
+    Ok(it.fold(first, |a, b| a.concat(&b)))
+}
+
+fn to_matrix(rows: &[Vec<f64>]) -> DMatrix<f64> {
+    let p = rows.first().map_or(0, Vec::len);
+    DMatrix::from_fn(rows.len(), p, |i, j| rows[i][j])
+}
+
+/// Train a monitor from labelled records: `classes` maps each condition name to its files.
+pub fn train_monitor(
+    classes: &[(String, Vec<PathBuf>)],
+    model_path: &Path,
+    opts: &MonitorOptions,
+    out: &Path,
+) -> Result<MonitorFile> {
+    let spec = read_model(model_path)?;
+    let mut samples = Vec::new();
+    let mut labels = Vec::new();
+    for (label, (_, files)) in classes.iter().enumerate() {
+        for f in files {
+            samples.push(record_features(&spec, f, opts)?);
+            labels.push(label);
+        }
+    }
+    let matrix = condmon::stack(&samples)?;
+    let (names, x) = matrix.into_parts();
+    let n = x.nrows();
+    let min_class = (0..classes.len())
+        .map(|c| labels.iter().filter(|&&l| l == c).count())
+        .min()
+        .unwrap_or(0);
+    let scheme = if min_class >= 5 {
+        CvScheme::KFold {
+            folds: 5.min(min_class),
+            seed: opts.seed,
+        }
+    } else {
+        CvScheme::LeaveOneOut
+    };
+    let knn_k = 3.min(n.saturating_sub(1)).max(1);
+    let classifiers = vec![
+        ClassifierSpec::Lda(Default::default()),
+        ClassifierSpec::Qda(Default::default()),
+        ClassifierSpec::Knn(KnnConfig {
+            k: knn_k,
+            ..KnnConfig::default()
+        }),
+        ClassifierSpec::NaiveBayes(Default::default()),
+    ];
+    let columns = vec![Preprocessing::default(), Preprocessing::pca_fraction(0.95)];
+    let table = condmon::error_table(
+        &x,
+        &labels,
+        &classifiers,
+        &columns,
+        &CvConfig {
+            scheme,
+            ..CvConfig::default()
+        },
+    )?;
+    let pct = table.percentages();
+    let (mut best, mut best_err) = ((0, 0), f64::INFINITY);
+    for i in 0..pct.nrows() {
+        for j in 0..pct.ncols() {
+            if pct[(i, j)] < best_err {
+                best_err = pct[(i, j)];
+                best = (i, j);
+            }
+        }
+    }
+    let file = MonitorFile {
+        format: "mmenn-monitor/1".into(),
+        model_toml: format_model(&spec)?,
+        features: opts.features,
+        hidden: opts.hidden,
+        seed: opts.seed,
+        classes: classes.iter().map(|(n, _)| n.clone()).collect(),
+        feature_names: names,
+        rows: (0..n).map(|i| x.row(i).iter().copied().collect()).collect(),
+        labels,
+        classifier: classifiers[best.0].clone(),
+        preprocessing: columns[best.1],
+        table,
+    };
+    ensure_dir(out)?;
+    write_atomic(
+        &out.join("monitor.json"),
+        serde_json::to_string_pretty(&file)?.as_bytes(),
+    )?;
+    write_atomic(&out.join("report.md"), monitor_report(&file).as_bytes())?;
+    Ok(file)
+}
+
+fn monitor_report(m: &MonitorFile) -> String {
+    let mut r = format!(
+        "# Condition monitor\n\n{} records in {} classes ({}); features: {:?} ({} values per record; networks with {} hidden units).\n\n",
+        m.rows.len(),
+        m.classes.len(),
+        m.classes.join(", "),
+        m.features,
+        m.feature_names.len(),
+        m.hidden
+    );
+    r.push_str("Cross-validated error % (95 % Wilson interval):\n\n| classifier |");
+    for c in &m.table.columns {
+        r.push_str(&format!(" {c} |"));
+    }
+    r.push_str("\n|---|");
+    r.push_str(&"---|".repeat(m.table.columns.len()));
+    r.push('\n');
+    for (i, row) in m.table.rows.iter().enumerate() {
+        r.push_str(&format!("| {row} |"));
+        for j in 0..m.table.columns.len() {
+            if let Some(cell) = m.table.cell(i, j) {
+                r.push_str(&format!(
+                    " {:.1} [{:.1}, {:.1}] |",
+                    cell.error_percent(),
+                    100.0 * cell.interval.lower,
+                    100.0 * cell.interval.upper
+                ));
+            }
+        }
+        r.push('\n');
+    }
+    r.push_str(&format!(
+        "\n`classify` uses {} with {}.\n",
+        m.classifier.label(),
+        m.preprocessing.label()
+    ));
+    r
+}
+
+/// The verdict on one record.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Classification {
+    /// Predicted condition.
+    pub condition: String,
+    /// Score per condition (posterior probability or k-NN vote share, see `score_kind`).
+    pub scores: BTreeMap<String, f64>,
+    /// What the scores are.
+    pub score_kind: String,
+    /// Classifier used.
+    pub classifier: String,
+}
+
+/// Classify one record with a trained monitor directory.
+pub fn classify(monitor_dir: &Path, data: &Path) -> Result<Classification> {
+    let path = monitor_dir.join("monitor.json");
+    let text = std::fs::read_to_string(&path).map_err(|source| MmennError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    let m: MonitorFile = serde_json::from_str(&text).map_err(|e| MmennError::Model {
+        path: path.clone(),
+        line: Some(e.line()),
+        column: Some(e.column()),
+        problem: crate::error::ModelProblem::Syntax {
+            message: e.to_string(),
+        },
+    })?;
+    let spec = parse_model(&path, &m.model_toml)?;
+    let opts = MonitorOptions {
+        features: m.features,
+        hidden: m.hidden,
+        seed: m.seed,
+        estimate: EstimateOptions::default(),
+    };
+    let f = record_features(&spec, data, &opts)?;
+    let pipeline = TrainedPipeline::fit(
+        &m.preprocessing,
+        &m.classifier,
+        &to_matrix(&m.rows),
+        &m.labels,
+    )?;
+    let p = pipeline.predict(&DMatrix::from_row_slice(1, f.len(), f.values()))?;
+    let scores = p
+        .classes
+        .iter()
+        .enumerate()
+        .map(|(j, &c)| (m.classes[c].clone(), p.scores[(0, j)]))
+        .collect();
+    Ok(Classification {
+        condition: m.classes[p.labels[0]].clone(),
+        scores,
+        score_kind: format!("{:?}", p.kind),
+        classifier: m.classifier.label(),
+    })
+}
