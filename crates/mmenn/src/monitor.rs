@@ -205,10 +205,7 @@ pub fn train_monitor(
     let classifiers = vec![
         ClassifierSpec::Lda(Default::default()),
         ClassifierSpec::Qda(Default::default()),
-        ClassifierSpec::Knn(KnnConfig {
-            k: knn_k,
-            ..KnnConfig::default()
-        }),
+        ClassifierSpec::Knn(KnnConfig { k: knn_k }),
         ClassifierSpec::NaiveBayes(Default::default()),
     ];
     let columns = vec![Preprocessing::default(), Preprocessing::pca_fraction(0.95)];

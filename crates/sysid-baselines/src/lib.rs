@@ -1,0 +1,44 @@
+#![doc = include_str!("../README.md")]
+
+pub mod correlation;
+pub mod error;
+pub mod evaluate;
+pub mod free_params;
+pub mod lags;
+mod lsq;
+pub mod narx;
+pub mod narx_model;
+pub mod oe;
+pub mod oe_model;
+mod oe_sim;
+pub mod projection;
+pub mod regressors;
+pub mod residuals;
+
+pub use correlation::{
+    CorrelationKind, Correlogram, autocorrelation, cross_correlation, pacf_from_acf,
+    partial_autocorrelation,
+};
+pub use error::{BaselineError, Result};
+pub use evaluate::{
+    ChannelEvaluation, Evaluation, EvaluationTable, TableRow, evaluate, predictions,
+};
+pub use free_params::{FreeParameter, StateMatrix, parse_free_parameters};
+pub use lags::{
+    InputOutputXcf, LagCandidate, LagGrid, LagOutcome, LagSearch, LagSearchConfig, LagSuggestion,
+    OutputPacf, SuggestionConfig, search_lags, suggest_lags,
+};
+pub use narx::{
+    NarxConfig, NarxFit, NetworkChoice, Projection, RestartRecord, RestartSelection, fit_narx,
+};
+pub use narx_model::NarxModel;
+pub use oe::{
+    InitialStateFit, OeConfig, OeFit, ParameterEstimate, Stability, StabilityVerdict, fit_oe,
+};
+pub use oe_model::{OeModel, X0Policy};
+pub use projection::RegressorProjection;
+pub use regressors::NarxOrders;
+pub use residuals::{
+    InputCorrelation, ResidualAnalysis, ResidualChannel, ResidualConfig, analyse_prediction,
+    residual_analysis,
+};

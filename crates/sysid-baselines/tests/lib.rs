@@ -1,0 +1,16 @@
+//! Integration tests of `sysid-baselines`: correlation against closed forms and simulated
+//! processes, output-error fits against known parameters, NARX on the pendulum truth,
+//! evaluation and residual analysis, and input validation.
+
+#[path = "cases/common.rs"]
+mod common;
+#[path = "cases/correlation.rs"]
+mod correlation;
+#[path = "cases/errors.rs"]
+mod errors;
+#[path = "cases/evaluation.rs"]
+mod evaluation;
+#[path = "cases/narx.rs"]
+mod narx;
+#[path = "cases/oe.rs"]
+mod oe;
