@@ -225,6 +225,9 @@ pub enum MmennError {
     /// Condition monitoring failed.
     #[error("condition monitoring: {0}")]
     Condmon(#[from] condmon::CondmonError),
+    /// A baseline model failed.
+    #[error("baseline model: {0}")]
+    Baseline(#[from] sysid_baselines::BaselineError),
     /// JSON serialisation failed.
     #[error("writing JSON: {0}")]
     Json(#[from] serde_json::Error),

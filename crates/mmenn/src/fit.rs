@@ -139,6 +139,73 @@ pub struct FitOptions {
     pub max_hidden: usize,
     /// Whether to update the assumed model by regression first (thesis §4.3.3).
     pub update: ModelUpdateChoice,
+    /// How the network is picked from the sweep.
+    pub selection: NetworkSelection,
+}
+
+impl std::str::FromStr for NetworkSelection {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "d-mse" => Ok(Self::CorrectionMse),
+            "free-run" => Ok(Self::FreeRun),
+            _ => Err(format!("'{s}' is neither \"d-mse\" nor \"free-run\"")),
+        }
+    }
+}
+
+/// How `fit` picks the network among the sweep's trained networks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NetworkSelection {
+    /// The sweep's rule on the test MSE of `d` (thesis §3.1).
+    #[default]
+    CorrectionMse,
+    /// The network whose hybrid model has the smallest free-run output error on the
+    /// training record (what the model is for; thesis §7.1 suggests judging the network by
+    /// the state predictions). Diverging candidates are skipped.
+    FreeRun,
+}
+
+/// Index of the network whose hybrid model simulates the training record best free-run,
+/// and its sum of squared output errors (observed samples of every channel, first
+/// experiment).
+fn select_by_free_run(
+    spec: &ModelSpec,
+    networks: &[Mlp],
+    data: &Dataset,
+    x0: &[f64],
+    substeps: usize,
+) -> Result<(usize, f64)> {
+    let exp = &data.experiments()[0];
+    let c = spec.linear.c();
+    let mut best: Option<(usize, f64)> = None;
+    for (i, net) in networks.iter().enumerate() {
+        let model = hybrid_model(spec, net.clone(), x0, substeps)?;
+        let Ok(xs) = model.simulate_states(x0, exp.t0(), exp.dt(), exp.inputs()) else {
+            continue;
+        };
+        let y = c * xs;
+        let mut sse = 0.0;
+        for k in 0..exp.len() {
+            for (j, m) in exp.output(k).iter().enumerate() {
+                if !m.is_nan() {
+                    sse += (m - y[(j, k)]).powi(2);
+                }
+            }
+        }
+        if sse.is_finite() && best.is_none_or(|(_, b)| sse < b) {
+            best = Some((i, sse));
+        }
+    }
+    best.ok_or(MmennError::Core {
+        context: "choosing the network by free-run error",
+        source: sysid_core::CoreError::Diverged {
+            t: exp.t0(),
+            state: 0,
+            value: f64::NAN,
+        },
+    })
 }
 
 impl std::str::FromStr for ModelUpdateChoice {
@@ -175,6 +242,7 @@ impl Default for FitOptions {
             x0_window: 200,
             max_hidden: 10,
             update: ModelUpdateChoice::None,
+            selection: NetworkSelection::CorrectionMse,
         }
     }
 }
@@ -242,6 +310,11 @@ pub struct FitSummary {
     pub hidden: usize,
     /// The chosen sweep row.
     pub chosen: SweepRow,
+    /// How it was chosen.
+    pub selection: NetworkSelection,
+    /// Free-run sum of squared output errors on the training record of the chosen network
+    /// (when chosen by free-run error).
+    pub free_run_sse: Option<f64>,
     /// Number of training pairs.
     pub training_pairs: usize,
     /// Where the sweep's test MSE came from.
@@ -363,13 +436,20 @@ pub fn run_fit(
         ..SweepConfig::default()
     };
     let sweep = nn::sizing_sweep(&x_fit, &d_fit, &x_test, &d_test, &sweep_config, None)?;
-    let network = sweep.chosen_network().clone();
     let x0: Vec<f64> = est.experiments[0]
         .states
         .column(0)
         .iter()
         .copied()
         .collect();
+    let (chosen, free_run_sse) = match opts.selection {
+        NetworkSelection::CorrectionMse => (sweep.chosen, None),
+        NetworkSelection::FreeRun => {
+            let (i, sse) = select_by_free_run(&spec, &sweep.networks, &data, &x0, opts.substeps)?;
+            (i, Some(sse))
+        }
+    };
+    let network = sweep.networks[chosen].clone();
     let hybrid = hybrid_model(&spec, network.clone(), &x0, opts.substeps)?;
 
     ensure_dir(out)?;
@@ -462,8 +542,10 @@ pub fn run_fit(
         .map(|(i, n)| (n.clone(), est.w[(i, i)]))
         .collect();
     let summary = FitSummary {
-        hidden: sweep.chosen_row().hidden,
-        chosen: sweep.chosen_row().clone(),
+        hidden: sweep.rows[chosen].hidden,
+        chosen: sweep.rows[chosen].clone(),
+        selection: opts.selection,
+        free_run_sse,
         training_pairs: x_train.ncols(),
         test_source,
         w_by_correction,

@@ -2,6 +2,7 @@
 
 pub mod atomic;
 pub mod benchmarks;
+pub mod compare;
 pub mod data_file;
 pub mod error;
 pub mod estimate;

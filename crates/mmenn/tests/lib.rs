@@ -1,5 +1,6 @@
 //! Integration tests of the facade: every workflow end to end through files.
 
+mod compare;
 mod fit;
 mod monitor;
 mod simulate;

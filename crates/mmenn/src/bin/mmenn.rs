@@ -24,9 +24,39 @@ enum Command {
     Fit(FitArgs),
     /// Free-run prediction of a fitted hybrid model (model.json) on new inputs.
     Predict(PredictArgs),
+    /// Compare the assumed model, linear OE, NARX and MME/NN on the same data (free-run).
+    Compare(CompareArgs),
     /// Condition monitoring from identified models.
     #[command(subcommand)]
     Monitor(MonitorCommand),
+}
+
+#[derive(Debug, Args)]
+struct CompareArgs {
+    /// Estimation data file(s) (CSV).
+    #[arg(long, required = true, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    model: PathBuf,
+    /// Validation data file(s).
+    #[arg(long, num_args = 1..)]
+    val: Vec<PathBuf>,
+    /// NARX delays (default: suggested from PACF/XCF).
+    #[arg(long)]
+    narx_lags: Option<usize>,
+    /// Largest network of the MME/NN sizing sweep.
+    #[arg(long, default_value_t = 10)]
+    max_hidden: usize,
+    /// Initialisations per network size (MME/NN).
+    #[arg(long, default_value_t = 10)]
+    inits: usize,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Debug, Subcommand)]
@@ -92,6 +122,10 @@ struct FitArgs {
     /// Update the assumed model by regression on d̂ first: none or regression (thesis §4.3.3).
     #[arg(long, default_value = "none")]
     update_model: mmenn::fit::ModelUpdateChoice,
+    /// How the network is picked from the sweep: d-mse (thesis rule on the test MSE of d)
+    /// or free-run (smallest free-run output error of the hybrid model on the training data).
+    #[arg(long, default_value = "d-mse")]
+    select: mmenn::fit::NetworkSelection,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
     w: mmenn::estimate::WeightChoice,
@@ -279,6 +313,7 @@ fn fit(args: FitArgs) -> Result<()> {
         inits: args.inits,
         max_hidden: args.max_hidden,
         update: args.update_model,
+        selection: args.select,
         seed: args.seed,
         ..Default::default()
     };
@@ -302,6 +337,40 @@ fn predict(args: PredictArgs) -> Result<()> {
     };
     let s = mmenn::fit::run_predict(&args.model, &args.data, &x0, args.x0_window, &args.out)?;
     print_free_run("prediction", &s.free_run);
+    Ok(())
+}
+
+#[allow(clippy::print_stdout)]
+fn compare(a: CompareArgs) -> Result<()> {
+    let opts = mmenn::compare::CompareOptions {
+        fit: mmenn::fit::FitOptions {
+            max_hidden: a.max_hidden,
+            inits: a.inits,
+            seed: a.seed,
+            ..Default::default()
+        },
+        narx_lags: a.narx_lags,
+        ..Default::default()
+    };
+    let s = mmenn::compare::run_compare(&a.data, &a.model, &a.val, &opts, &a.out)?;
+    for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
+        println!("{} — {}:", t.title(), t.horizon());
+        for row in t.rows() {
+            let cells: Vec<String> = row
+                .evaluation
+                .channels
+                .iter()
+                .map(|c| {
+                    format!(
+                        "{} fit {:.1} % R² {:.4}",
+                        c.name, c.metrics.fit_percent, c.metrics.r2
+                    )
+                })
+                .collect();
+            println!("  {:<14} {}", row.label, cells.join("; "));
+        }
+    }
+    println!("wrote {} files into {}", s.files.len(), a.out.display());
     Ok(())
 }
 
@@ -362,6 +431,7 @@ fn main() -> Result<()> {
         Command::Estimate(a) => estimate(a),
         Command::Fit(a) => fit(a),
         Command::Predict(a) => predict(a),
+        Command::Compare(a) => compare(a),
         Command::Monitor(c) => monitor(c),
     }
 }

@@ -1,0 +1,444 @@
+//! Instantiating the catalogue on a model: for every corrected equation, every effect that
+//! may enter it over every state or input of a fitting role, with thresholds and
+//! smoothing widths taken from the data, as candidate terms for selection.
+//!
+//! # Data-derived parameters (documented, fixed rules)
+//!
+//! * Coulomb smoothing width `ε = eps_fraction · RMS(v)` over all samples (default 1 %).
+//! * Stribeck velocity `v_s = stribeck_fraction · RMS(v)` (default 10 %).
+//! * Saturation limits `L` at the `saturation_quantiles` of `|u|` (default 75 % and 90 %:
+//!   the excess is nonzero on a quarter and a tenth of the samples).
+//! * Dead-zone widths `δ` at the `dead_zone_quantiles` of `|u|` (default 10 % and 25 %).
+//!
+//! Saturation and dead zone are tried only in equations where the input acts in the
+//! assumed model (`B[i, j] ≠ 0`): they are the missing part `b·(sat(u) − u)` of an
+//! existing input path, not a new one. Every other effect is tried wherever its roles fit
+//! (see [`crate::catalogue`]).
+//!
+//! All are rounded to 3 significant digits ([`crate::catalogue::number`]) so that the
+//! model file shows the value actually used.
+
+use std::collections::BTreeMap;
+
+use sysid_core::{Expr, LinearModel, term_variables};
+
+use crate::catalogue::{Effect, Slot, coefficient_unit, round_significant};
+use crate::error::{DiscoveryError, Result};
+use crate::roles::{EquationKind, Role, StateRoles};
+use crate::samples::Samples;
+use crate::stats::{quantile, rms};
+
+/// Which effects to try and how their parameters follow from the data.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LibraryConfig {
+    /// Effects to try (smooth variants are ignored here: they are integration forms).
+    /// Default: every regression candidate of the catalogue.
+    pub effects: Vec<Effect>,
+    /// Quantiles of `|u|` giving saturation limits (each in (0, 1)). Default `[0.75, 0.9]`.
+    pub saturation_quantiles: Vec<f64>,
+    /// Quantiles of `|u|` giving dead-zone widths (each in (0, 1)). Default `[0.1, 0.25]`.
+    pub dead_zone_quantiles: Vec<f64>,
+    /// Coulomb smoothing width as a fraction of the velocity's RMS (> 0). Default 0.01.
+    pub eps_fraction: f64,
+    /// Stribeck velocity as a fraction of the velocity's RMS (> 0). Default 0.1.
+    pub stribeck_fraction: f64,
+}
+
+impl Default for LibraryConfig {
+    fn default() -> Self {
+        Self {
+            effects: Effect::ALL
+                .into_iter()
+                .filter(|e| e.is_candidate())
+                .collect(),
+            saturation_quantiles: vec![0.75, 0.9],
+            dead_zone_quantiles: vec![0.1, 0.25],
+            eps_fraction: 0.01,
+            stribeck_fraction: 0.1,
+        }
+    }
+}
+
+impl LibraryConfig {
+    /// Check ranges before any work.
+    pub fn validate(&self) -> Result<()> {
+        for (field, list) in [
+            ("saturation_quantiles", &self.saturation_quantiles),
+            ("dead_zone_quantiles", &self.dead_zone_quantiles),
+        ] {
+            for &q in list {
+                if !(q > 0.0 && q < 1.0) {
+                    return Err(DiscoveryError::InvalidConfig {
+                        field,
+                        value: q,
+                        reason: "quantiles must be in (0, 1)",
+                    });
+                }
+            }
+        }
+        for (field, v) in [
+            ("eps_fraction", self.eps_fraction),
+            ("stribeck_fraction", self.stribeck_fraction),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(DiscoveryError::InvalidConfig {
+                    field,
+                    value: v,
+                    reason: "must be positive and finite",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One candidate term for one corrected equation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidate {
+    /// The effect.
+    pub effect: Effect,
+    /// Index of the state equation it enters.
+    pub state_index: usize,
+    /// Name of that state.
+    pub state: String,
+    /// Names of the variables it reads, in slot order.
+    pub variables: Vec<String>,
+    /// Its parameter values (thresholds, widths), in [`Effect::parameters`] order.
+    pub parameters: Vec<f64>,
+    /// The term, over the model's states then inputs.
+    pub expr: Expr,
+    /// Its canonical text.
+    pub term: String,
+    /// The effect written into a model for integration.
+    pub model_effect: Effect,
+    /// The integrable term (the same as `expr` unless the effect jumps).
+    pub model_expr: Expr,
+    /// Its canonical text.
+    pub model_term: String,
+    /// Unit of the coefficient, when the units of the equation and variables are known.
+    pub coefficient_unit: Option<String>,
+}
+
+/// The candidates of one corrected equation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EquationLibrary {
+    /// Index of the state equation.
+    pub state_index: usize,
+    /// Row of `d̂` holding its correction (column of `E`).
+    pub correction: usize,
+    /// Name of the state.
+    pub state: String,
+    /// What kind of equation it is.
+    pub kind: EquationKind,
+    /// The candidates, in catalogue order.
+    pub candidates: Vec<Candidate>,
+}
+
+/// Unit of state equation `ẋ_i`: `units["d_<state>"]`, else `unit(state)/s` (`a/s`
+/// becomes `a/s^2`).
+fn equation_unit(units: &BTreeMap<String, String>, state: &str) -> Option<String> {
+    if let Some(u) = units.get(&format!("d_{state}")) {
+        return Some(u.clone());
+    }
+    units.get(state).map(|u| {
+        if u == "1" {
+            "1/s".to_string()
+        } else if let Some(base) = u.strip_suffix("/s") {
+            format!("{base}/s^2")
+        } else if u.contains(['*', '/', '^', ' ']) {
+            format!("({u})/s")
+        } else {
+            format!("{u}/s")
+        }
+    })
+}
+
+/// Build the candidate library of every corrected equation of `model`.
+///
+/// Errors: `E` not a selection matrix; a catalogue expression that does not parse over
+/// the model's names (e.g. a state named like a function).
+pub fn build_library(
+    model: &LinearModel,
+    roles: &StateRoles,
+    units: &BTreeMap<String, String>,
+    samples: &[Samples],
+    config: &LibraryConfig,
+) -> Result<Vec<EquationLibrary>> {
+    config.validate()?;
+    let corrected = model
+        .corrected_states()
+        .ok_or(DiscoveryError::NotSelection { matrix: "E" })?;
+    let n = model.n_states();
+    let m = model.n_inputs();
+    let variables = term_variables(model);
+    let states = model.state_names();
+
+    // Data scales: RMS of each state, |u| per input.
+    let series = |v: usize| -> Vec<f64> {
+        samples
+            .iter()
+            .flat_map(|s| {
+                if v < n {
+                    s.states().row(v).iter().copied().collect::<Vec<_>>()
+                } else {
+                    s.inputs().row(v - n).iter().copied().collect()
+                }
+            })
+            .collect()
+    };
+    let state_rms: Vec<f64> = (0..n).map(|i| rms(&series(i))).collect();
+    let abs_inputs: Vec<Vec<f64>> = (0..m)
+        .map(|j| series(n + j).iter().map(|v| v.abs()).collect())
+        .collect();
+
+    let enabled = |e: Effect| config.effects.contains(&e) && e.is_candidate();
+    let mut out = Vec::with_capacity(corrected.len());
+    for (correction, &eq) in corrected.iter().enumerate() {
+        let kind = roles.equation_kind(eq);
+        let eq_unit = equation_unit(units, &states[eq]);
+        let mut list: Vec<Candidate> = Vec::new();
+        let mut push = |effect: Effect, vars: Vec<usize>, params: Vec<f64>| -> Result<()> {
+            let names: Vec<&str> = vars.iter().map(|&v| variables[v]).collect();
+            let make = |e: Effect, params: &[f64]| {
+                e.expression(&names, params, &variables).map_err(|source| {
+                    DiscoveryError::Expression {
+                        effect: e.name(),
+                        equation: states[eq].clone(),
+                        text: e.template(&names, params),
+                        source,
+                    }
+                })
+            };
+            let expr = make(effect, &params)?;
+            let model_effect = effect.integration_form();
+            let model_params: Vec<f64> = match model_effect {
+                Effect::CoulombFrictionSmooth => {
+                    vec![round_significant(
+                        config.eps_fraction * state_rms[vars[0]],
+                        3,
+                    )]
+                }
+                Effect::StribeckFrictionSmooth => vec![
+                    params[0],
+                    round_significant(config.eps_fraction * state_rms[vars[0]], 3),
+                ],
+                _ => params.clone(),
+            };
+            let model_expr = if model_effect == effect {
+                expr.clone()
+            } else {
+                make(model_effect, &model_params)?
+            };
+            let var_units: Vec<Option<&str>> = names
+                .iter()
+                .map(|v| units.get(*v).map(String::as_str))
+                .collect();
+            let coefficient_unit = match (&eq_unit, effect.term_unit(&var_units)) {
+                (Some(e), Some(t)) => Some(coefficient_unit(e, &t)),
+                _ => None,
+            };
+            list.push(Candidate {
+                effect,
+                state_index: eq,
+                state: states[eq].clone(),
+                variables: names.iter().map(|s| s.to_string()).collect(),
+                parameters: params,
+                term: expr.to_string(),
+                expr,
+                model_effect,
+                model_term: model_expr.to_string(),
+                model_expr,
+                coefficient_unit,
+            });
+            Ok(())
+        };
+
+        for effect in Effect::ALL {
+            if !enabled(effect) || !effect.enters().contains(&kind) {
+                continue;
+            }
+            match effect {
+                Effect::ConstantBias => push(effect, vec![], vec![])?,
+                Effect::ViscousDamping | Effect::LinearStiffness | Effect::LinearCoupling => {
+                    for j in 0..n {
+                        if linear_kind(roles, eq, j) == effect {
+                            push(effect, vec![j], vec![])?;
+                        }
+                    }
+                }
+                Effect::InputGain => {
+                    for j in 0..m {
+                        push(effect, vec![n + j], vec![])?;
+                    }
+                }
+                Effect::InputSaturation | Effect::DeadZone => {
+                    let qs = if effect == Effect::InputSaturation {
+                        &config.saturation_quantiles
+                    } else {
+                        &config.dead_zone_quantiles
+                    };
+                    // Only where the input acts: the term is the missing part of B·u.
+                    for j in (0..m).filter(|&j| model.b()[(eq, j)] != 0.0) {
+                        let mut used: Vec<f64> = Vec::new();
+                        for &q in qs {
+                            let level = round_significant(quantile(&abs_inputs[j], q), 3);
+                            if level > 0.0 && !used.iter().any(|u| (u - level).abs() == 0.0) {
+                                used.push(level);
+                                push(effect, vec![n + j], vec![level])?;
+                            }
+                        }
+                    }
+                }
+                Effect::AmplitudeDependentDamping => {
+                    for x in 0..n {
+                        if roles.roles[x] == Role::Position
+                            && let Some(v) = roles.partners[x]
+                            && state_rms[v] > 0.0
+                        {
+                            push(effect, vec![x, v], vec![])?;
+                        }
+                    }
+                }
+                Effect::InputCouplingCos | Effect::InputCouplingSin => {
+                    for j in 0..m {
+                        for a in 0..n {
+                            if roles.roles[a] == Role::Angle {
+                                push(effect, vec![n + j, a], vec![])?;
+                            }
+                        }
+                    }
+                }
+                Effect::StribeckFriction => {
+                    for v in states_with(effect, roles) {
+                        if state_rms[v] > 0.0 {
+                            let vs = round_significant(config.stribeck_fraction * state_rms[v], 3);
+                            push(effect, vec![v], vec![vs])?;
+                        }
+                    }
+                }
+                _ => {
+                    for v in states_with(effect, roles) {
+                        push(effect, vec![v], vec![])?;
+                    }
+                }
+            }
+        }
+        out.push(EquationLibrary {
+            state_index: eq,
+            correction,
+            state: states[eq].clone(),
+            kind,
+            candidates: list,
+        });
+    }
+    Ok(out)
+}
+
+/// States whose role fits the effect's single state slot.
+fn states_with(effect: Effect, roles: &StateRoles) -> Vec<usize> {
+    match effect.slots() {
+        [Slot::State(allowed)] => (0..roles.roles.len())
+            .filter(|&i| allowed.contains(&roles.roles[i]))
+            .collect(),
+        [Slot::AnyState] => (0..roles.roles.len()).collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Which linear effect state `j` is in equation `eq`: its own velocity is viscous
+/// damping, the position whose velocity this is is stiffness, anything else coupling.
+fn linear_kind(roles: &StateRoles, eq: usize, j: usize) -> Effect {
+    let eq_is_velocity = roles.roles[eq] == Role::Velocity;
+    if eq_is_velocity && j == eq {
+        Effect::ViscousDamping
+    } else if eq_is_velocity && roles.partners[eq] == Some(j) {
+        Effect::LinearStiffness
+    } else {
+        Effect::LinearCoupling
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::DMatrix;
+    use sysid_core::ModelNames;
+
+    fn pendulum() -> LinearModel {
+        let names = ModelNames {
+            states: vec!["theta".into(), "omega".into()],
+            inputs: vec!["u".into()],
+            outputs: vec!["theta".into()],
+            corrections: vec!["omega".into()],
+        };
+        LinearModel::with_names(
+            DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -19.62, -0.2]),
+            DMatrix::from_row_slice(2, 1, &[0.0, -2.0]),
+            DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+            DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
+            names,
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn pendulum_library_has_the_physical_candidates() {
+        let model = pendulum();
+        let units = BTreeMap::from([
+            ("theta".to_string(), "rad".to_string()),
+            ("omega".to_string(), "rad/s".to_string()),
+            ("u".to_string(), "m/s^2".to_string()),
+        ]);
+        let roles = StateRoles::infer(&model, &units, &[]).unwrap_or_else(|e| panic!("{e}"));
+        let len = 200;
+        let t = |k: usize| k as f64 * 0.05;
+        let states = DMatrix::from_fn(2, len, |i, k| if i == 0 { t(k).sin() } else { t(k).cos() });
+        let inputs = DMatrix::from_fn(1, len, |_, k| 2.0 * (1.3 * t(k)).sin());
+        let s =
+            Samples::new(states, inputs, DMatrix::zeros(1, len)).unwrap_or_else(|e| panic!("{e}"));
+        let lib = build_library(&model, &roles, &units, &[s], &LibraryConfig::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(lib.len(), 1);
+        let names: Vec<(&str, &str)> = lib[0]
+            .candidates
+            .iter()
+            .map(|c| (c.effect.name(), c.term.as_str()))
+            .collect();
+        for want in [
+            ("constant_bias", "1"),
+            ("viscous_damping", "omega"),
+            ("linear_stiffness", "theta"),
+            ("input_gain", "u"),
+            ("coulomb_friction", "sign(omega)"),
+            ("gravity_nonlinearity", "sin(theta) - theta"),
+            ("input_coupling_cos", "u*cos(theta) - u"),
+            ("input_coupling_sin", "u*sin(theta)"),
+        ] {
+            assert!(names.contains(&want), "{want:?} missing from {names:?}");
+        }
+        // No cubic stiffness on an angle, no orifice on a mechanical equation.
+        assert!(
+            !names
+                .iter()
+                .any(|(n, _)| *n == "cubic_stiffness" || *n == "orifice_outflow")
+        );
+        let coulomb = lib[0]
+            .candidates
+            .iter()
+            .find(|c| c.effect == Effect::CoulombFriction)
+            .unwrap_or_else(|| panic!("no coulomb"));
+        assert_eq!(coulomb.model_effect, Effect::CoulombFrictionSmooth);
+        // RMS of cos over the record ≈ 0.7; ε = 1 % of it.
+        assert!(
+            coulomb.model_term.starts_with("tanh(omega/0.00"),
+            "{}",
+            coulomb.model_term
+        );
+        let gravity = lib[0]
+            .candidates
+            .iter()
+            .find(|c| c.effect == Effect::GravityNonlinearity)
+            .unwrap_or_else(|| panic!("no gravity"));
+        assert_eq!(gravity.coefficient_unit.as_deref(), Some("rad/s^2"));
+    }
+}

@@ -1,0 +1,36 @@
+#![doc = include_str!("../README.md")]
+
+pub mod augment;
+pub mod candidates;
+pub mod catalogue;
+pub mod discover;
+pub mod error;
+pub mod floor;
+mod json;
+pub mod localise;
+pub mod roles;
+pub mod samples;
+pub mod select;
+pub mod stats;
+
+pub use augment::{
+    Calibration, CalibrationConfig, InitialState, OutputWeights, augment, calibrate, free_run_cost,
+    simulate_outputs,
+};
+pub use candidates::{Candidate, EquationLibrary, LibraryConfig, build_library};
+pub use catalogue::{Effect, Slot, coefficient_unit};
+pub use discover::{
+    Alias, Discovery, DiscoveryConfig, EquationReport, FoundEffect, ScreenedCandidate, StepRecord,
+    Verdict, discover, equation_design,
+};
+pub use error::{DiscoveryError, Result};
+pub use floor::NoiseFloor;
+pub use localise::{
+    Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
+    WindowLength, WindowSource, localise,
+};
+pub use roles::{EquationKind, Role, StateRoles};
+pub use samples::{Samples, centred_corrections, samples_from_estimate};
+pub use select::{
+    Design, Screened, SelectedTerm, Selection, SelectionConfig, Step, StepAction, select,
+};

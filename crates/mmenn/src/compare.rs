@@ -1,0 +1,487 @@
+//! `mmenn compare`: the assumed model, a linear output-error model, a NARX network and the
+//! MME/NN hybrid model judged the same way on the same data (thesis ch. 5): free-run
+//! simulation, fit %, R², RMSE and error variance per channel, on estimation and
+//! validation data; compare plots with fit % in the legend, residual correlation plots
+//! with 99 % bands, and `compare.json`.
+
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use sysid_baselines::{
+    EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel, ResidualAnalysis,
+    ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions, residual_analysis,
+    suggest_lags,
+};
+use sysid_core::{Dataset, Horizon, InitialStateFit, Model, fit_initial_state};
+
+use crate::atomic::{ensure_dir, write_atomic};
+use crate::data_file::read_dataset;
+use crate::error::{MmennError, Result};
+use crate::fit::{FitOptions, HybridFile, HybridModel, run_fit};
+use crate::model_file::{ModelSpec, read_model};
+use crate::plot::{Figure, Series};
+
+/// Options of [`run_compare`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompareOptions {
+    /// MME/NN settings.
+    pub fit: FitOptions,
+    /// NARX delays (same for outputs and inputs); `None` = suggested from PACF/XCF,
+    /// capped at `max_narx_lag`.
+    pub narx_lags: Option<usize>,
+    /// Cap of the suggested NARX delays.
+    pub max_narx_lag: usize,
+    /// Free parameters of the output-error model (`"A[i,j]"`, `"B[i,j]"`); `None` = every
+    /// entry of the corrected rows of A and B (the equations MME corrects).
+    pub oe_free: Option<Vec<String>>,
+}
+
+impl Default for CompareOptions {
+    fn default() -> Self {
+        Self {
+            fit: FitOptions::default(),
+            narx_lags: None,
+            max_narx_lag: 10,
+            oe_free: None,
+        }
+    }
+}
+
+/// What `mmenn compare` reports.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CompareSummary {
+    /// Free-run table on the estimation data.
+    pub estimation: EvaluationTable,
+    /// Free-run table on the validation data, when given.
+    pub validation: Option<EvaluationTable>,
+    /// NARX delays used (na = nb) and how they were chosen.
+    pub narx_orders: NarxOrders,
+    /// Output-error parameters with ±1σ.
+    pub oe_parameters: Vec<sysid_baselines::ParameterEstimate>,
+    /// How each model gets its initial condition.
+    pub initialisation: Vec<(String, String)>,
+    /// Residual analysis (free-run) of each model on the validation data (or the
+    /// estimation data without validation).
+    pub residuals: Vec<(String, ResidualAnalysis)>,
+    /// Files written.
+    pub files: Vec<String>,
+}
+
+fn default_free(spec: &ModelSpec) -> Vec<String> {
+    let lin = &spec.linear;
+    let rows = lin.corrected_states().unwrap_or_default();
+    let mut free = Vec::new();
+    for &i in &rows {
+        for j in 0..lin.n_states() {
+            free.push(format!("A[{i},{j}]"));
+        }
+        for j in 0..lin.n_inputs() {
+            free.push(format!("B[{i},{j}]"));
+        }
+    }
+    free
+}
+
+/// The hybrid model with its initial state fitted to the first samples of `data`'s
+/// first experiment (the same rule `mmenn predict` uses).
+fn hybrid_for(file: &HybridFile, data: &Dataset, window: usize) -> Result<HybridModel> {
+    let mut model = file.model()?;
+    let spec = file.spec()?;
+    let fit = InitialStateFit {
+        window,
+        integrator: model.integrator,
+        ..InitialStateFit::default()
+    };
+    model.x0 = fit_initial_state(
+        &model,
+        spec.linear.c(),
+        &data.experiments()[0],
+        &file.x0,
+        &fit,
+    )
+    .map_err(|source| MmennError::Core {
+        context: "fitting the hybrid model's initial state",
+        source,
+    })?;
+    Ok(model)
+}
+
+fn table(
+    title: &str,
+    data: &Dataset,
+    assumed: &OeModel,
+    oe: &OeModel,
+    narx: &NarxModel,
+    hybrid: &HybridModel,
+) -> Result<EvaluationTable> {
+    let mut t = EvaluationTable::new(title, Horizon::FreeRun);
+    t.push("assumed model", evaluate(assumed, data, Horizon::FreeRun)?)?;
+    t.push("linear OE", evaluate(oe, data, Horizon::FreeRun)?)?;
+    t.push("NARX", evaluate(narx, data, Horizon::FreeRun)?)?;
+    t.push("MME/NN", evaluate(hybrid, data, Horizon::FreeRun)?)?;
+    Ok(t)
+}
+
+fn compare_figures(
+    which: &str,
+    data: &Dataset,
+    models: &[(
+        &str,
+        &dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>>,
+    )],
+    tab: &EvaluationTable,
+    out: &Path,
+) -> Result<Vec<String>> {
+    let exp = &data.experiments()[0];
+    let t = exp.times();
+    let preds: Vec<(&str, sysid_core::Prediction)> = models
+        .iter()
+        .map(|(n, f)| f(data).map(|mut p| (*n, p.swap_remove(0))))
+        .collect::<Result<_>>()?;
+    let mut files = Vec::new();
+    for (i, name) in data.output_names().iter().enumerate() {
+        let mut series = vec![Series::points(
+            format!("{name} measured"),
+            t.clone(),
+            exp.outputs().row(i).iter().copied().collect(),
+        )];
+        for (label, p) in &preds {
+            let fit = tab
+                .rows()
+                .iter()
+                .find(|r| r.label == *label)
+                .and_then(|r| r.evaluation.channel(name))
+                .map_or(f64::NAN, |m| m.fit_percent);
+            series.push(Series::line(
+                format!("{label} (fit {fit:.1} %)"),
+                t.clone(),
+                p.outputs.row(i).iter().copied().collect(),
+            ));
+        }
+        let fig = Figure {
+            title: format!("{name}: free-run simulation, {which} data"),
+            x_label: "t (s)".into(),
+            y_label: name.clone(),
+            series,
+            bands: vec![],
+        };
+        let file = format!("compare_{which}_{name}.svg");
+        fig.write(&out.join(&file))?;
+        files.push(file);
+    }
+    Ok(files)
+}
+
+fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<String>> {
+    let mut files = Vec::new();
+    for ch in &r.channels {
+        let c = &ch.autocorrelation;
+        let fig = Figure {
+            title: format!(
+                "{label}: residual autocorrelation of {} ({})",
+                ch.output, r.horizon
+            ),
+            x_label: "lag".into(),
+            y_label: "ACF".into(),
+            series: vec![Series::points(
+                "ACF",
+                c.lags.iter().map(|&l| l as f64).collect(),
+                c.values.clone(),
+            )],
+            bands: vec![("99 % band".into(), c.bound99)],
+        };
+        let file = format!(
+            "residual_acf_{}_{}.svg",
+            label.replace(['/', ' '], "_"),
+            ch.output
+        );
+        fig.write(&out.join(&file))?;
+        files.push(file);
+        for x in &ch.cross {
+            let c = &x.correlogram;
+            let fig = Figure {
+                title: format!(
+                    "{label}: residual {} against input {} ({})",
+                    ch.output, x.input, r.horizon
+                ),
+                x_label: "lag".into(),
+                y_label: "XCF".into(),
+                series: vec![Series::points(
+                    "XCF",
+                    c.lags.iter().map(|&l| l as f64).collect(),
+                    c.values.clone(),
+                )],
+                bands: vec![("99 % band".into(), c.bound99)],
+            };
+            let file = format!(
+                "residual_xcf_{}_{}_{}.svg",
+                label.replace(['/', ' '], "_"),
+                ch.output,
+                x.input
+            );
+            fig.write(&out.join(&file))?;
+            files.push(file);
+        }
+    }
+    Ok(files)
+}
+
+/// Fit every model on the estimation data and compare them free-run on it and on the
+/// validation data; write the table, figures and `compare.json` into `out`.
+pub fn run_compare(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &CompareOptions,
+    out: &Path,
+) -> Result<CompareSummary> {
+    let spec = read_model(model_path)?;
+    let lin = spec.linear.clone();
+    let data = read_dataset(
+        data_paths,
+        lin.input_names(),
+        lin.output_names(),
+        &spec.units,
+    )?;
+    let val = if val_paths.is_empty() {
+        None
+    } else {
+        Some(read_dataset(
+            val_paths,
+            lin.input_names(),
+            lin.output_names(),
+            &spec.units,
+        )?)
+    };
+    ensure_dir(out)?;
+
+    // Both linear models get their initial state the same way as the hybrid model: least
+    // squares over the first `x0_window` samples (which their metrics then skip).
+    let window = opts.fit.x0_window.max(10 * lin.n_states());
+    let mut assumed = OeModel::new(lin.clone());
+    assumed.observer_window = window;
+    let oe_config = OeConfig {
+        free: opts.oe_free.clone().unwrap_or_else(|| default_free(&spec)),
+        ..OeConfig::default()
+    };
+    let mut oe_fit = fit_oe(&lin, &data, &oe_config)?;
+    oe_fit.model.observer_window = window;
+    let orders = match opts.narx_lags {
+        Some(l) => NarxOrders {
+            na: l,
+            nb: l,
+            nk: 1,
+        },
+        None => {
+            let s = suggest_lags(
+                &data,
+                &SuggestionConfig {
+                    max_lag: opts.max_narx_lag,
+                    ..SuggestionConfig::default()
+                },
+            )?;
+            NarxOrders {
+                na: s.orders.na.max(1),
+                nb: s.orders.nb.max(1),
+                nk: s.orders.nk,
+            }
+        }
+    };
+    let narx = fit_narx(
+        &data,
+        &NarxConfig {
+            orders,
+            seed: opts.fit.seed,
+            ..NarxConfig::default()
+        },
+    )?
+    .model;
+    let fit_dir = out.join("mme_nn");
+    run_fit(data_paths, model_path, val_paths, &opts.fit, &fit_dir)?;
+    let text =
+        std::fs::read_to_string(fit_dir.join("model.json")).map_err(|source| MmennError::Io {
+            path: fit_dir.join("model.json"),
+            source,
+        })?;
+    let file: HybridFile = serde_json::from_str(&text)?;
+
+    let mut files = vec!["mme_nn/".to_string()];
+    let hybrid_est = hybrid_for(&file, &data, opts.fit.x0_window)?;
+    let estimation = table(
+        "free-run simulation, estimation data",
+        &data,
+        &assumed,
+        &oe_fit.model,
+        &narx,
+        &hybrid_est,
+    )?;
+    type Sim<'a> = Box<dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>> + 'a>;
+    let sims = |h: &HybridModel| -> Vec<(&'static str, Sim<'_>)> {
+        let h = h.clone();
+        vec![
+            (
+                "assumed model",
+                Box::new(|d: &Dataset| Ok(predictions(&assumed, d, Horizon::FreeRun)?)),
+            ),
+            (
+                "linear OE",
+                Box::new(|d: &Dataset| Ok(predictions(&oe_fit.model, d, Horizon::FreeRun)?)),
+            ),
+            (
+                "NARX",
+                Box::new(|d: &Dataset| Ok(predictions(&narx, d, Horizon::FreeRun)?)),
+            ),
+            (
+                "MME/NN",
+                Box::new(move |d: &Dataset| {
+                    Ok(vec![h.simulate(&d.experiments()[0]).map_err(|source| {
+                        MmennError::Core {
+                            context: "MME/NN free run",
+                            source,
+                        }
+                    })?])
+                }),
+            ),
+        ]
+    };
+    let est_sims = sims(&hybrid_est);
+    let refs: Vec<(
+        &str,
+        &dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>>,
+    )> = est_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
+    files.extend(compare_figures(
+        "estimation",
+        &data,
+        &refs,
+        &estimation,
+        out,
+    )?);
+
+    let (validation, hybrid_res, res_data) = match &val {
+        Some(v) => {
+            let hv = hybrid_for(&file, v, opts.fit.x0_window)?;
+            let tab = table(
+                "free-run simulation, validation data",
+                v,
+                &assumed,
+                &oe_fit.model,
+                &narx,
+                &hv,
+            )?;
+            let val_sims = sims(&hv);
+            let refs: Vec<(
+                &str,
+                &dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>>,
+            )> = val_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
+            files.extend(compare_figures("validation", v, &refs, &tab, out)?);
+            (Some(tab), hv, v)
+        }
+        None => (None, hybrid_est.clone(), &data),
+    };
+    let rc = ResidualConfig::default();
+    let residuals = vec![
+        (
+            "assumed model".to_string(),
+            residual_analysis(&assumed, res_data, 0, Horizon::FreeRun, &rc)?,
+        ),
+        (
+            "linear OE".to_string(),
+            residual_analysis(&oe_fit.model, res_data, 0, Horizon::FreeRun, &rc)?,
+        ),
+        (
+            "NARX".to_string(),
+            residual_analysis(&narx, res_data, 0, Horizon::FreeRun, &rc)?,
+        ),
+        (
+            "MME/NN".to_string(),
+            residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc)?,
+        ),
+    ];
+    for (label, r) in &residuals {
+        files.extend(residual_figure(label, r, out)?);
+    }
+    let initialisation = vec![
+        (
+            "assumed model".to_string(),
+            format!(
+                "initial state estimated by least squares from the first {window} samples, which the metrics skip"
+            ),
+        ),
+        (
+            "linear OE".to_string(),
+            "same as the assumed model".to_string(),
+        ),
+        (
+            "NARX".to_string(),
+            format!(
+                "the first {} measured samples seed the delay line and are skipped (NARX predicts only measured channels)",
+                orders.na.max(orders.nb + orders.nk - 1)
+            ),
+        ),
+        (
+            "MME/NN".to_string(),
+            format!(
+                "initial state fitted to the first {} samples (not skipped); every state is simulated",
+                opts.fit.x0_window
+            ),
+        ),
+    ];
+    files.push("compare.json".into());
+    files.push("report.md".into());
+    let summary = CompareSummary {
+        estimation,
+        validation,
+        narx_orders: orders,
+        oe_parameters: oe_fit.parameters.clone(),
+        initialisation,
+        residuals,
+        files,
+    };
+    write_atomic(
+        &out.join("compare.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    write_atomic(&out.join("report.md"), compare_report(&summary).as_bytes())?;
+    Ok(summary)
+}
+
+fn table_md(t: &EvaluationTable) -> String {
+    let mut s = format!(
+        "### {} ({})\n\n| model | channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|---|\n",
+        t.title(),
+        t.horizon()
+    );
+    for row in t.rows() {
+        for ch in &row.evaluation.channels {
+            let m = &ch.metrics;
+            s.push_str(&format!(
+                "| {} | {} | {:.2} | {:.5} | {:.4e} | {:.4e} |\n",
+                row.label, ch.name, m.fit_percent, m.r2, m.rmse, m.error_variance
+            ));
+        }
+    }
+    s
+}
+
+fn compare_report(s: &CompareSummary) -> String {
+    let mut r = String::from(
+        "# Model comparison\n\nEvery number below is **free-run simulation** (inputs only after the initial condition).\n\n",
+    );
+    r.push_str(&table_md(&s.estimation));
+    if let Some(v) = &s.validation {
+        r.push('\n');
+        r.push_str(&table_md(v));
+    }
+    r.push_str("\n## Initial conditions\n\n");
+    for (m, how) in &s.initialisation {
+        r.push_str(&format!("- **{m}**: {how}\n"));
+    }
+    r.push_str(&format!(
+        "\nNARX delays: na = {}, nb = {}, nk = {}.\n\nOutput-error parameters (±1σ):\n\n",
+        s.narx_orders.na, s.narx_orders.nb, s.narx_orders.nk
+    ));
+    for p in &s.oe_parameters {
+        r.push_str(&format!("- {}: {:.6} ± {:.2e}\n", p.name, p.value, p.std));
+    }
+    r
+}
