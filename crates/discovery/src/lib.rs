@@ -8,6 +8,7 @@ pub mod error;
 pub mod floor;
 mod json;
 pub mod localise;
+pub mod refine;
 pub mod roles;
 pub mod samples;
 pub mod select;
@@ -29,6 +30,7 @@ pub use localise::{
     Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
     WindowLength, WindowSource, localise,
 };
+pub use refine::{RefineCandidate, RefineConfig, RefineStep, Refinement, refine_by_free_run};
 pub use roles::{EquationKind, Role, StateRoles};
 pub use samples::{Samples, centred_corrections, samples_from_estimate};
 pub use select::{

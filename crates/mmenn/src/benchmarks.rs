@@ -84,14 +84,8 @@ impl Benchmark {
         }
     }
 
-    /// Estimation file and test files (name, file, rows kept from the start — `None` for
-    /// all) of the official split.
-    fn files(
-        self,
-    ) -> (
-        &'static str,
-        Vec<(&'static str, &'static str, Option<usize>)>,
-    ) {
+    /// Estimation file and test files of the official split.
+    fn files(self) -> (&'static str, Vec<TestFile>) {
         match self {
             Benchmark::CascadedTanks => ("estimation.csv", vec![("test", "validation.csv", None)]),
             Benchmark::Silverbox => (
@@ -112,6 +106,9 @@ impl Benchmark {
         }
     }
 }
+
+/// A test split: its name, its file, and the rows kept from the start (`None`: all).
+type TestFile = (&'static str, &'static str, Option<usize>);
 
 /// One test record of a benchmark.
 #[derive(Debug, Clone, PartialEq)]
@@ -342,7 +339,7 @@ mod tests {
         let root = temp_dir("load");
         let dir = fake_tanks(&root, 60);
         let b = load(Benchmark::CascadedTanks, &dir).unwrap();
-        assert_eq!(b.dt, 4.0);
+        assert!((b.dt - 4.0).abs() < 1e-12);
         assert_eq!(b.tests.len(), 1);
         assert_eq!(b.tests[0].name, "test");
         let e = &b.estimation.experiments()[0];
@@ -420,6 +417,6 @@ mod tests {
         let b = load(Benchmark::CascadedTanks, &dir).unwrap();
         assert_eq!(b.estimation.experiments()[0].len(), 1024);
         assert_eq!(b.tests[0].data.experiments()[0].len(), 1024);
-        assert_eq!(b.dt, 4.0);
+        assert!((b.dt - 4.0).abs() < 1e-12);
     }
 }

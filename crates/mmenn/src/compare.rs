@@ -21,6 +21,9 @@ use crate::fit::{FitOptions, HybridFile, HybridModel, run_fit};
 use crate::model_file::{ModelSpec, read_model};
 use crate::plot::{Figure, Series};
 
+/// A model's free-run simulation over a dataset, one prediction per experiment.
+type SimFn<'a> = dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>> + 'a;
+
 /// Options of [`run_compare`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct CompareOptions {
@@ -125,10 +128,7 @@ fn table(
 fn compare_figures(
     which: &str,
     data: &Dataset,
-    models: &[(
-        &str,
-        &dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>>,
-    )],
+    models: &[(&str, &SimFn<'_>)],
     tab: &EvaluationTable,
     out: &Path,
 ) -> Result<Vec<String>> {
@@ -345,10 +345,7 @@ pub fn run_compare(
         ]
     };
     let est_sims = sims(&hybrid_est);
-    let refs: Vec<(
-        &str,
-        &dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>>,
-    )> = est_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
+    let refs: Vec<(&str, &SimFn<'_>)> = est_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
     files.extend(compare_figures(
         "estimation",
         &data,
@@ -369,10 +366,8 @@ pub fn run_compare(
                 &hv,
             )?;
             let val_sims = sims(&hv);
-            let refs: Vec<(
-                &str,
-                &dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>>,
-            )> = val_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
+            let refs: Vec<(&str, &SimFn<'_>)> =
+                val_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
             files.extend(compare_figures("validation", v, &refs, &tab, out)?);
             (Some(tab), hv, v)
         }

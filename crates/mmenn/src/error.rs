@@ -228,6 +228,9 @@ pub enum MmennError {
     /// A baseline model failed.
     #[error("baseline model: {0}")]
     Baseline(#[from] sysid_baselines::BaselineError),
+    /// Discovery failed.
+    #[error("discovery: {0}")]
+    Discovery(#[from] discovery::DiscoveryError),
     /// JSON serialisation failed.
     #[error("writing JSON: {0}")]
     Json(#[from] serde_json::Error),

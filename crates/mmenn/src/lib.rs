@@ -4,6 +4,7 @@ pub mod atomic;
 pub mod benchmarks;
 pub mod compare;
 pub mod data_file;
+pub mod discover;
 pub mod error;
 pub mod estimate;
 pub mod fit;

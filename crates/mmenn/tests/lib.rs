@@ -1,6 +1,7 @@
 //! Integration tests of the facade: every workflow end to end through files.
 
 mod compare;
+mod discover;
 mod fit;
 mod monitor;
 mod simulate;

@@ -26,6 +26,8 @@ enum Command {
     Predict(PredictArgs),
     /// Compare the assumed model, linear OE, NARX and MME/NN on the same data (free-run).
     Compare(CompareArgs),
+    /// Find where model and data disagree, name the missing effect, add it, show the gap shrink.
+    Discover(DiscoverArgs),
     /// Condition monitoring from identified models.
     #[command(subcommand)]
     Monitor(MonitorCommand),
@@ -52,6 +54,28 @@ struct CompareArgs {
     #[arg(long, default_value_t = 10)]
     inits: usize,
     /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+struct DiscoverArgs {
+    /// Estimation data file(s) (CSV).
+    #[arg(long, required = true, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    model: PathBuf,
+    /// Validation data file(s): adds validation figures to the gap.
+    #[arg(long, num_args = 1..)]
+    val: Vec<PathBuf>,
+    /// Most discover–augment rounds.
+    #[arg(long, default_value_t = 3)]
+    max_rounds: usize,
+    /// Seed of the noise-floor simulation.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Output directory.
@@ -375,6 +399,40 @@ fn compare(a: CompareArgs) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
+fn discover(a: DiscoverArgs) -> Result<()> {
+    let opts = mmenn::discover::DiscoverOptions {
+        max_rounds: a.max_rounds,
+        seed: a.seed,
+        ..Default::default()
+    };
+    let s = mmenn::discover::run_discover(&a.data, &a.model, &a.val, &opts, &a.out)?;
+    println!("verdict: {:?}", s.verdict);
+    for e in &s.effects {
+        println!(
+            "  {} in d({}): {} × {:.6} (free-run calibrated; {})",
+            e.name, e.state, e.term, e.coefficient, e.named_by
+        );
+    }
+    let show = |label: &str, g: &mmenn::discover::GapPair| {
+        for (k, b) in &g.before.fit_percent {
+            println!(
+                "  {label} free-run fit of {k}: {b:.2} % → {:.2} %",
+                g.after.fit_percent[k]
+            );
+        }
+        for (k, b) in &g.before.d_rms {
+            println!("  {label} d̂ RMS of {k}: {b:.4e} → {:.4e}", g.after.d_rms[k]);
+        }
+    };
+    show("estimation", &s.gap);
+    if let Some(v) = &s.validation_gap {
+        show("validation", v);
+    }
+    println!("wrote {}", a.out.join(&s.model).display());
+    Ok(())
+}
+
+#[allow(clippy::print_stdout)]
 fn monitor(cmd: MonitorCommand) -> Result<()> {
     match cmd {
         MonitorCommand::Train(a) => {
@@ -432,6 +490,7 @@ fn main() -> Result<()> {
         Command::Fit(a) => fit(a),
         Command::Predict(a) => predict(a),
         Command::Compare(a) => compare(a),
+        Command::Discover(a) => discover(a),
         Command::Monitor(c) => monitor(c),
     }
 }

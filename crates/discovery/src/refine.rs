@@ -1,0 +1,371 @@
+//! Term selection by free-run simulation error: the last word on which named effects a
+//! model needs. The regression on `d̂` is fast and names candidates, but MME's smoothing
+//! distorts `d̂`'s shape systematically (peaks are flattened), and a systematic error is
+//! "significant" to any regression test. The free-run error of the calibrated model has no
+//! such bias: with the right terms its residual is the measurement noise.
+//!
+//! Stepwise on the calibrated free-run cost `J(S) = (1/M) Σ_c Σ_k r_ck² / R_c` over the `M`
+//! measured values (≈ 1 for a correct model; coefficients of the terms in `S` and the
+//! initial states re-fitted for every `S`):
+//! - remove the term whose removal raises `J` least, if that rise is not significant;
+//! - otherwise add the candidate that lowers `J` most, if that drop is significant;
+//! - stop when neither applies.
+//!
+//! A change is significant when `M·ΔJ · N_eff/N > χ²₁(1 − α)`: under a correct model
+//! `M·ΔJ` for one spurious term is χ²₁; the free-run residual of a model that is still
+//! wrong is coloured, and `N_eff/N = (1 − ρ₁)/(1 + ρ₁)` (lag-1 autocorrelation of the
+//! residual of the larger of the two models compared) discounts that.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use sysid_core::{Dataset, TermModel, TermSpec};
+
+use crate::augment::{
+    CalibrationConfig, InitialState, OutputWeights, calibrate, free_run_cost, simulate_outputs,
+};
+use crate::error::{DiscoveryError, Result};
+use crate::stats::chi2_quantile;
+
+/// A candidate term for the free-run search.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefineCandidate {
+    /// Effect name.
+    pub effect: String,
+    /// Equation (state name) it enters.
+    pub state: String,
+    /// Integrable expression (model form).
+    pub term: String,
+    /// Starting coefficient (e.g. from the regression on `d̂`; 0 if unknown).
+    pub coefficient: f64,
+}
+
+/// Settings of [`refine_by_free_run`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefineConfig {
+    /// Significance level of each add/remove decision. Default 0.01.
+    pub alpha: f64,
+    /// Most add/remove steps. Default 12.
+    pub max_steps: usize,
+    /// Calibration settings (its `terms` and `weights` are set by the search).
+    pub calibration: CalibrationConfig,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        Self {
+            alpha: 0.01,
+            max_steps: 12,
+            calibration: CalibrationConfig {
+                initial_state: InitialState::Estimate,
+                ..CalibrationConfig::default()
+            },
+        }
+    }
+}
+
+/// One decision of the search.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefineStep {
+    /// `add` or `remove`.
+    pub action: String,
+    /// Effect and term.
+    pub effect: String,
+    /// Term.
+    pub term: String,
+    /// Cost before and after.
+    pub cost: [f64; 2],
+    /// `M·ΔJ·N_eff/N` against the χ² threshold.
+    pub statistic: f64,
+    /// The threshold.
+    pub threshold: f64,
+}
+
+/// Result of the search.
+#[derive(Debug, Clone)]
+pub struct Refinement {
+    /// Indices into the candidate list of the terms kept, in the order of `model`'s new
+    /// terms.
+    pub selected: Vec<usize>,
+    /// The base model plus the kept terms, calibrated.
+    pub model: TermModel,
+    /// Calibrated initial states.
+    pub x0: Vec<Vec<f64>>,
+    /// Free-run cost of the base model alone (its terms calibrated? no: as given) and of
+    /// the result.
+    pub cost: [f64; 2],
+    /// The decisions taken.
+    pub steps: Vec<RefineStep>,
+}
+
+struct Eval {
+    model: TermModel,
+    x0: Vec<Vec<f64>>,
+    cost: f64,
+    neff_ratio: f64,
+}
+
+fn build(base: &TermModel, candidates: &[RefineCandidate], set: &[usize]) -> Result<TermModel> {
+    let mut specs: Vec<(String, String, String, f64)> = base
+        .terms()
+        .iter()
+        .map(|t| {
+            (
+                base.linear().state_names()[t.state].clone(),
+                t.effect.clone(),
+                t.expr.to_string(),
+                t.coefficient,
+            )
+        })
+        .collect();
+    for &i in set {
+        let c = &candidates[i];
+        specs.push((
+            c.state.clone(),
+            c.effect.clone(),
+            c.term.clone(),
+            c.coefficient,
+        ));
+    }
+    Ok(TermModel::from_specs(
+        base.linear().clone(),
+        specs.iter().map(|(s, e, t, k)| TermSpec {
+            state: s,
+            effect: e,
+            term: t,
+            coefficient: *k,
+        }),
+    )?)
+}
+
+fn evaluate(
+    base: &TermModel,
+    candidates: &[RefineCandidate],
+    set: &[usize],
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    noise: &[f64],
+    config: &RefineConfig,
+) -> Result<Option<Eval>> {
+    let model = build(base, candidates, set)?;
+    let first_new = base.terms().len();
+    if set.is_empty() {
+        // Nothing to calibrate: the base model's cost from the given initial states.
+        let weights = OutputWeights::NoiseVariance(noise.to_vec());
+        let Ok(cost) = free_run_cost(
+            &model,
+            model.linear(),
+            data,
+            x0,
+            &weights,
+            &config.calibration.integrator,
+        ) else {
+            return Ok(None);
+        };
+        if !cost.is_finite() {
+            return Ok(None);
+        }
+        let neff_ratio = residual_neff_ratio(&model, data, x0, &config.calibration)?;
+        return Ok(Some(Eval {
+            model,
+            x0: x0.to_vec(),
+            cost,
+            neff_ratio,
+        }));
+    }
+    let cal = CalibrationConfig {
+        terms: Some((first_new..first_new + set.len()).collect()),
+        weights: OutputWeights::NoiseVariance(noise.to_vec()),
+        ..config.calibration.clone()
+    };
+    // A candidate set whose simulation diverges is simply not admissible.
+    let Ok(fit) = calibrate(&model, data, x0, &cal) else {
+        return Ok(None);
+    };
+    if !fit.cost_after.is_finite() {
+        return Ok(None);
+    }
+    let neff_ratio = residual_neff_ratio(&fit.model, data, &fit.x0, &config.calibration)?;
+    // Every coefficient of the set must be distinguishable from zero (its calibration σ
+    // inflated by √(N/N_eff) for a coloured residual): near-cancelling pairs of collinear
+    // terms with huge opposite coefficients fit the record but name nothing.
+    let z = z_two_sided(config.alpha);
+    let inflate = 1.0 / neff_ratio.sqrt();
+    let significant = fit.coefficients_after[first_new..]
+        .iter()
+        .zip(&fit.coefficient_std[first_new..])
+        .all(|(c, sd)| sd.is_finite() && c.abs() > z * sd * inflate);
+    if !significant {
+        return Ok(None);
+    }
+    Ok(Some(Eval {
+        model: fit.model,
+        x0: fit.x0,
+        cost: fit.cost_after,
+        neff_ratio,
+    }))
+}
+
+/// Two-sided standard-normal quantile for level `alpha`: `z² = χ²₁(1 − α)`.
+fn z_two_sided(alpha: f64) -> f64 {
+    chi2_quantile(1.0 - alpha, 1.0).map_or(2.576, f64::sqrt)
+}
+
+/// `(1 − ρ₁)/(1 + ρ₁)` of the pooled free-run residual, clipped to (0, 1].
+fn residual_neff_ratio(
+    model: &TermModel,
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    cal: &CalibrationConfig,
+) -> Result<f64> {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (exp, x0e) in data.experiments().iter().zip(x0) {
+        let y = simulate_outputs(model, model.linear().c(), x0e, exp, &cal.integrator)?;
+        let r: DMatrix<f64> = exp.outputs() - y;
+        for i in 0..r.nrows() {
+            let row: Vec<f64> = r.row(i).iter().copied().filter(|v| v.is_finite()).collect();
+            let mean = row.iter().sum::<f64>() / row.len().max(1) as f64;
+            for k in 0..row.len() {
+                den += (row[k] - mean).powi(2);
+                if k + 1 < row.len() {
+                    num += (row[k] - mean) * (row[k + 1] - mean);
+                }
+            }
+        }
+    }
+    let rho = if den > 0.0 {
+        (num / den).clamp(-0.99, 0.99)
+    } else {
+        0.0
+    };
+    Ok(((1.0 - rho) / (1.0 + rho)).clamp(1e-3, 1.0))
+}
+
+/// Stepwise selection of `candidates` by calibrated free-run cost, starting from
+/// `initial` (indices into `candidates`, e.g. the regression's choice). `noise_variance`
+/// is per model output; `x0` one initial state per experiment (a starting guess; it is
+/// re-fitted).
+pub fn refine_by_free_run(
+    base: &TermModel,
+    candidates: &[RefineCandidate],
+    initial: &[usize],
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    noise_variance: &[f64],
+    config: &RefineConfig,
+) -> Result<Refinement> {
+    if !(config.alpha > 0.0 && config.alpha < 1.0) {
+        return Err(DiscoveryError::InvalidConfig {
+            field: "alpha",
+            value: config.alpha,
+            reason: "must lie in (0, 1)",
+        });
+    }
+    if let Some(&bad) = initial.iter().find(|&&i| i >= candidates.len()) {
+        return Err(DiscoveryError::InvalidConfig {
+            field: "initial",
+            value: bad as f64,
+            reason: "index beyond the candidate list",
+        });
+    }
+    let threshold = chi2_quantile(1.0 - config.alpha, 1.0)?;
+    let measured: usize = data
+        .experiments()
+        .iter()
+        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
+        .sum();
+    let m = measured as f64;
+    let base_eval = evaluate(base, candidates, &[], data, x0, noise_variance, config)?;
+    let mut set: Vec<usize> = initial.to_vec();
+    let mut current = match evaluate(base, candidates, &set, data, x0, noise_variance, config)? {
+        Some(e) => e,
+        None => {
+            set.clear();
+            base_eval
+                .as_ref()
+                .map(|e| Eval {
+                    model: e.model.clone(),
+                    x0: e.x0.clone(),
+                    cost: e.cost,
+                    neff_ratio: e.neff_ratio,
+                })
+                .ok_or(DiscoveryError::InvalidConfig {
+                    field: "base model",
+                    value: f64::NAN,
+                    reason: "its free-run simulation diverges",
+                })?
+        }
+    };
+    let cost_before = base_eval.as_ref().map_or(f64::NAN, |e| e.cost);
+    let mut steps = Vec::new();
+    for _ in 0..config.max_steps {
+        // Removal: the term whose removal costs least.
+        let mut best_remove: Option<(usize, Eval)> = None;
+        for pos in 0..set.len() {
+            let trial: Vec<usize> = set
+                .iter()
+                .enumerate()
+                .filter(|(p, _)| *p != pos)
+                .map(|(_, &i)| i)
+                .collect();
+            if let Some(e) = evaluate(base, candidates, &trial, data, x0, noise_variance, config)?
+                && best_remove.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
+            {
+                best_remove = Some((pos, e));
+            }
+        }
+        if let Some((pos, e)) = best_remove {
+            let stat = m * (e.cost - current.cost) * current.neff_ratio;
+            if stat < threshold {
+                let c = &candidates[set[pos]];
+                steps.push(RefineStep {
+                    action: "remove".into(),
+                    effect: c.effect.clone(),
+                    term: c.term.clone(),
+                    cost: [current.cost, e.cost],
+                    statistic: stat,
+                    threshold,
+                });
+                set.remove(pos);
+                current = e;
+                continue;
+            }
+        }
+        // Addition: the candidate that helps most.
+        let mut best_add: Option<(usize, Eval)> = None;
+        for i in 0..candidates.len() {
+            if set.contains(&i) {
+                continue;
+            }
+            let mut trial = set.clone();
+            trial.push(i);
+            if let Some(e) = evaluate(base, candidates, &trial, data, x0, noise_variance, config)?
+                && best_add.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
+            {
+                best_add = Some((i, e));
+            }
+        }
+        match best_add {
+            Some((i, e)) if m * (current.cost - e.cost) * e.neff_ratio > threshold => {
+                let c = &candidates[i];
+                steps.push(RefineStep {
+                    action: "add".into(),
+                    effect: c.effect.clone(),
+                    term: c.term.clone(),
+                    cost: [current.cost, e.cost],
+                    statistic: m * (current.cost - e.cost) * e.neff_ratio,
+                    threshold,
+                });
+                set.push(i);
+                current = e;
+            }
+            _ => break,
+        }
+    }
+    Ok(Refinement {
+        selected: set,
+        model: current.model,
+        x0: current.x0,
+        cost: [cost_before, current.cost],
+        steps,
+    })
+}

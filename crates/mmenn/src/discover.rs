@@ -1,0 +1,768 @@
+//! `mmenn discover`: find where the assumed model and the data disagree, name the missing
+//! physical effect, add it to the model, calibrate it by free-run error, rerun MME, and
+//! show the gap before and after on estimation and validation data.
+//!
+//! Rounds: MME → noise floor of `d̂` (MME on data simulated from the assumed model itself
+//! with the same noise, `W` and `R`) → selection over the catalogue → augment and
+//! calibrate → repeat while a significant effect is found (at most `max_rounds`).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use discovery::{
+    Discovery, DiscoveryConfig, Localisation, LocaliseConfig, NoiseFloor, RefineCandidate,
+    RefineConfig, Verdict,
+};
+use nalgebra::DMatrix;
+use serde::Serialize;
+use sysid_core::{
+    Channel, Dataset, Experiment, InitialStateFit, TermModel, channel_metrics, fit_initial_state,
+};
+
+use crate::atomic::{ensure_dir, write_atomic};
+use crate::data_file::read_dataset;
+use crate::error::{MmennError, Result};
+use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
+use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
+use crate::plot::{Figure, Series};
+
+/// Options of [`run_discover`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiscoverOptions {
+    /// MME settings.
+    pub estimate: EstimateOptions,
+    /// Most discover–augment rounds.
+    pub max_rounds: usize,
+    /// Seed of the noise-floor simulation.
+    pub seed: u64,
+    /// Samples used to fit free-run initial states.
+    pub x0_window: usize,
+    /// Fraction of samples dropped at each end of every record before selection: a
+    /// smoother's `d̂` is least reliable at the ends (end effects), and on a decaying
+    /// response the ends carry the largest states, hence the most leverage. Default 0.05.
+    pub trim_fraction: f64,
+    /// Smallest relative drop of `d̂`'s mean square (over its floor) that accepts a
+    /// round's terms. Default 0.1.
+    pub min_d_drop: f64,
+}
+
+/// Drop `fraction` of the samples at each end of every record.
+fn trim_ends(samples: &[discovery::Samples], fraction: f64) -> Result<Vec<discovery::Samples>> {
+    samples
+        .iter()
+        .map(|s| {
+            let n = s.len();
+            let cut = ((n as f64) * fraction).floor() as usize;
+            let keep = n.saturating_sub(2 * cut).max(1);
+            let start = cut.min(n - keep);
+            Ok(discovery::Samples::new(
+                s.states().columns(start, keep).into_owned(),
+                s.inputs().columns(start, keep).into_owned(),
+                s.corrections().columns(start, keep).into_owned(),
+            )?)
+        })
+        .collect()
+}
+
+impl Default for DiscoverOptions {
+    fn default() -> Self {
+        Self {
+            estimate: EstimateOptions::default(),
+            max_rounds: 3,
+            seed: 1,
+            x0_window: 200,
+            trim_fraction: 0.05,
+            min_d_drop: 0.1,
+        }
+    }
+}
+
+/// Fit %, RMSE (free-run, per measured channel) and `d̂` RMS (per corrected equation).
+#[derive(Debug, Clone, PartialEq, Serialize, Default)]
+pub struct Gap {
+    /// Free-run fit % per channel.
+    pub fit_percent: BTreeMap<String, f64>,
+    /// Free-run RMSE per channel.
+    pub rmse: BTreeMap<String, f64>,
+    /// RMS of MME's `d̂` per corrected equation.
+    pub d_rms: BTreeMap<String, f64>,
+}
+
+/// Before and after on one data set.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GapPair {
+    /// With the assumed model.
+    pub before: Gap,
+    /// With the discovered model.
+    pub after: Gap,
+}
+
+/// A named effect as `discovery.json` reports it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NamedEffect {
+    /// Catalogue name.
+    pub name: String,
+    /// Equation (state) it enters.
+    pub state: String,
+    /// Expression, as written into the model.
+    pub term: String,
+    /// Coefficient calibrated by free-run simulation error.
+    pub coefficient: f64,
+    /// 95 % interval of the regression on `d̂` (when the regression named it).
+    pub ci95: Option<[f64; 2]>,
+    /// Share of `d̂` it explains in the regression (when the regression named it).
+    pub share_of_d: Option<f64>,
+    /// Which stage named it.
+    pub named_by: String,
+}
+
+/// One round of discovery.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Round {
+    /// The selection's full report (verdict, effects, per-equation steps, roles).
+    pub discovery: Discovery,
+    /// Where `d̂` and the free-run error exceed their floors.
+    pub localisation: Localisation,
+    /// `d̂` RMS floor per corrected equation.
+    pub floor_rms: Vec<f64>,
+    /// Coefficients after free-run calibration (in the order of `discovery.effects`).
+    pub calibrated: Vec<f64>,
+    /// Free-run cost (`Σ r²/R`) of the model before the round and after it.
+    pub calibration_cost: [f64; 2],
+    /// The free-run search's add/remove decisions.
+    pub refinement: Vec<discovery::RefineStep>,
+    /// Why the round's terms were not accepted, when they were not.
+    pub rejected: Option<String>,
+}
+
+/// `discovery.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DiscoverSummary {
+    /// `found` if any round named an effect; else the first round's verdict.
+    pub verdict: Verdict,
+    /// Every named effect, with its calibrated coefficient and the regression's interval.
+    pub effects: Vec<NamedEffect>,
+    /// Gap on the estimation data (`before`, `after`), and on validation data when given.
+    pub gap: GapPair,
+    /// Gap on the validation data.
+    pub validation_gap: Option<GapPair>,
+    /// The augmented model file.
+    pub model: String,
+    /// Every round.
+    pub rounds: Vec<Round>,
+}
+
+fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennError {
+    move |source| MmennError::Core { context, source }
+}
+
+/// Free-run of a model over the first experiment, from an initial state fitted to its first
+/// samples (starting from `guess`); fit % and RMSE per output.
+fn free_run_gap(
+    model: &TermModel,
+    spec: &ModelSpec,
+    data: &Dataset,
+    guess: &[f64],
+    window: usize,
+) -> Result<(Gap, DMatrix<f64>)> {
+    let exp = &data.experiments()[0];
+    let c = spec.linear.c();
+    let fit = InitialStateFit {
+        window,
+        ..InitialStateFit::default()
+    };
+    let x0 = fit_initial_state(model, c, exp, guess, &fit)
+        .map_err(core("fitting the free-run initial state"))?;
+    let xs = sysid_core::simulate(
+        model,
+        &x0,
+        exp.t0(),
+        exp.dt(),
+        exp.inputs(),
+        &fit.integrator,
+        fit.blow_up,
+    )
+    .map_err(core("free-run simulation"))?;
+    let y = c * xs;
+    let mut gap = Gap::default();
+    for (i, name) in spec.linear.output_names().iter().enumerate() {
+        let meas: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
+        let sim: Vec<f64> = y.row(i).iter().copied().collect();
+        let m = channel_metrics(&meas, &sim).map_err(core("free-run metrics"))?;
+        gap.fit_percent.insert(name.clone(), m.fit_percent);
+        gap.rmse.insert(name.clone(), m.rmse);
+    }
+    Ok((gap, y))
+}
+
+fn d_rms(est: &sysid_core::MmeEstimate) -> BTreeMap<String, f64> {
+    let mut out = BTreeMap::new();
+    for (i, name) in est.correction_names.iter().enumerate() {
+        let (mut s, mut n) = (0.0, 0usize);
+        for e in &est.experiments {
+            for v in e.corrections.row(i).iter() {
+                s += v * v;
+                n += 1;
+            }
+        }
+        out.insert(name.clone(), (s / n.max(1) as f64).sqrt());
+    }
+    out
+}
+
+/// Noise floor of `d̂`: simulate the assumed model itself (free-run from MME's `x̂(t0)`),
+/// add measurement noise of the estimated variance, and run MME at the same `W` and `R`.
+fn noise_floor(
+    spec: &ModelSpec,
+    data: &Dataset,
+    est: &sysid_core::MmeEstimate,
+    opts: &DiscoverOptions,
+) -> Result<NoiseFloor> {
+    let model = spec.term_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })?;
+    let c = spec.linear.c();
+    let mut experiments = Vec::new();
+    for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
+        let x0: Vec<f64> = e.states.column(0).iter().copied().collect();
+        let xs = sysid_core::simulate(
+            &model,
+            &x0,
+            exp.t0(),
+            exp.dt(),
+            exp.inputs(),
+            &sysid_core::Integrator::default(),
+            1e12,
+        )
+        .map_err(core("simulating the assumed model for the noise floor"))?;
+        let noise =
+            plants::noise::gaussian_noise(&est.noise_variance, exp.len(), opts.seed, i as u64)?;
+        let y = c * xs + noise;
+        experiments.push(
+            Experiment::new(exp.t0(), exp.dt(), exp.inputs().clone(), y)
+                .map_err(core("noise-floor data"))?,
+        );
+    }
+    let names = |v: Vec<String>| v.into_iter().map(Channel::new).collect::<Vec<_>>();
+    let sim = Dataset::new(
+        names(data.input_names()),
+        names(data.output_names()),
+        experiments,
+    )
+    .map_err(core("noise-floor data"))?;
+    let mut config = mme_config(spec, &opts.estimate);
+    config.w = mme_core::WeightSpec::Matrix(est.w.clone());
+    config.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
+    let out = estimate_spec(spec, &sim, &config)?;
+    Ok(NoiseFloor::from_estimate(&out.estimate)?)
+}
+
+/// Run the discovery workflow and write `discovery.json`, `model.discovered.toml`,
+/// `report.md` and figures into `out`.
+pub fn run_discover(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &DiscoverOptions,
+    out: &Path,
+) -> Result<DiscoverSummary> {
+    let original = read_model(model_path)?;
+    let lin = original.linear.clone();
+    let data = read_dataset(
+        data_paths,
+        lin.input_names(),
+        lin.output_names(),
+        &original.units,
+    )?;
+    let val = if val_paths.is_empty() {
+        None
+    } else {
+        Some(read_dataset(
+            val_paths,
+            lin.input_names(),
+            lin.output_names(),
+            &original.units,
+        )?)
+    };
+    ensure_dir(out)?;
+
+    let first = estimate_spec(&original, &data, &mme_config(&original, &opts.estimate))?;
+    let x0_guess: Vec<f64> = first.estimate.experiments[0]
+        .states
+        .column(0)
+        .iter()
+        .copied()
+        .collect();
+    let base_model = original.term_model().map_err(|problem| MmennError::Model {
+        path: model_path.to_path_buf(),
+        line: None,
+        column: None,
+        problem,
+    })?;
+    let (mut before, y_before) =
+        free_run_gap(&base_model, &original, &data, &x0_guess, opts.x0_window)?;
+    before.d_rms = d_rms(&first.estimate);
+    let val_before = match &val {
+        Some(v) => Some(free_run_gap(&base_model, &original, v, &x0_guess, opts.x0_window)?.0),
+        None => None,
+    };
+
+    let mut spec = original.clone();
+    let mut result = first;
+    let mut rounds = Vec::new();
+    let mut effects: Vec<NamedEffect> = Vec::new();
+    let mut first_verdict = None;
+    let mut any_rejected = false;
+    for _ in 0..opts.max_rounds.max(1) {
+        let est = &result.estimate;
+        let floor = noise_floor(&spec, &data, est, opts)?;
+        let all_samples = discovery::samples_from_estimate(est, &data)?;
+        let samples = trim_ends(&all_samples, opts.trim_fraction)?;
+        let found = discovery::discover(
+            &spec.linear,
+            &spec.units,
+            &samples,
+            &floor,
+            &DiscoveryConfig::default(),
+        )?;
+        first_verdict.get_or_insert(found.verdict);
+        let current = spec.term_model().map_err(|problem| MmennError::Model {
+            path: "<model>".into(),
+            line: None,
+            column: None,
+            problem,
+        })?;
+        let exp = &data.experiments()[0];
+        let x0: Vec<f64> = est.experiments[0]
+            .states
+            .column(0)
+            .iter()
+            .copied()
+            .collect();
+        let xs = sysid_core::simulate(
+            &current,
+            &x0,
+            exp.t0(),
+            exp.dt(),
+            exp.inputs(),
+            &sysid_core::Integrator::default(),
+            1e12,
+        )
+        .map_err(core("free-run simulation"))?;
+        let simulated = spec.linear.c() * xs;
+        let fr = discovery::FreeRun {
+            measured: exp.outputs(),
+            simulated: &simulated,
+            noise_variance: &est.noise_variance,
+        };
+        let localisation = discovery::localise(
+            &spec.linear,
+            &all_samples[0],
+            exp.t0(),
+            exp.dt(),
+            &floor,
+            Some(&fr),
+            &LocaliseConfig::default(),
+        )?;
+        // The regression's terms: those of `found` equations, and also those of
+        // `unexplained` ones (MME's shrinkage can leave a right term explaining too little
+        // of d̂; the free-run search and the proof below decide).
+        let proposed: Vec<discovery::FoundEffect> = found
+            .equations
+            .iter()
+            .flat_map(|e| e.terms.iter().cloned())
+            .collect();
+        if found.verdict == Verdict::None || proposed.is_empty() {
+            rounds.push(Round {
+                discovery: found,
+                localisation,
+                floor_rms: floor.rms.clone(),
+                refinement: vec![],
+                calibrated: vec![],
+                calibration_cost: [f64::NAN; 2],
+                rejected: None,
+            });
+            break;
+        }
+        // The regression names candidates; the free-run search decides (see
+        // `discovery::refine`): every library term of the corrected equations is a
+        // candidate, the regression's choice the starting set, coefficients calibrated by
+        // free-run simulation error for every set tried.
+        let roles = discovery::StateRoles::infer(&spec.linear, &spec.units, &[])?;
+        let libraries = discovery::build_library(
+            &spec.linear,
+            &roles,
+            &spec.units,
+            &samples,
+            &discovery::LibraryConfig::default(),
+        )?;
+        let mut candidates: Vec<RefineCandidate> = Vec::new();
+        for lib in &libraries {
+            for c in &lib.candidates {
+                candidates.push(RefineCandidate {
+                    effect: c.model_effect.name().to_string(),
+                    state: c.state.clone(),
+                    term: c.model_term.clone(),
+                    coefficient: 0.0,
+                });
+            }
+        }
+        let mut initial = Vec::new();
+        for e in &proposed {
+            match candidates
+                .iter()
+                .position(|c| c.state == e.state && c.term == e.model_term)
+            {
+                Some(i) => {
+                    candidates[i].coefficient = e.coefficient;
+                    initial.push(i);
+                }
+                None => {
+                    candidates.push(RefineCandidate {
+                        effect: e.model_effect.clone(),
+                        state: e.state.clone(),
+                        term: e.model_term.clone(),
+                        coefficient: e.coefficient,
+                    });
+                    initial.push(candidates.len() - 1);
+                }
+            }
+        }
+        let current = spec.term_model().map_err(|problem| MmennError::Model {
+            path: "<model>".into(),
+            line: None,
+            column: None,
+            problem,
+        })?;
+        let x0s: Vec<Vec<f64>> = est
+            .experiments
+            .iter()
+            .map(|e| e.states.column(0).iter().copied().collect())
+            .collect();
+        let refined = discovery::refine_by_free_run(
+            &current,
+            &candidates,
+            &initial,
+            &data,
+            &x0s,
+            &est.noise_variance,
+            &RefineConfig::default(),
+        )?;
+        if refined.selected.is_empty() {
+            rounds.push(Round {
+                discovery: found,
+                localisation,
+                floor_rms: floor.rms.clone(),
+                refinement: refined.steps,
+                calibrated: vec![],
+                calibration_cost: refined.cost,
+                rejected: None,
+            });
+            break;
+        }
+        let first_new = spec.terms.len();
+        let effects_before_round = effects.len();
+        let calibrated: Vec<f64> = refined.model.terms()[first_new..]
+            .iter()
+            .map(|t| t.coefficient)
+            .collect();
+        let mut augmented = spec.clone();
+        for (&i, c) in refined.selected.iter().zip(&calibrated) {
+            let cand = &candidates[i];
+            augmented.terms.push(TermEntry {
+                state: cand.state.clone(),
+                effect: cand.effect.clone(),
+                term: cand.term.clone(),
+                coefficient: *c,
+            });
+            // Report the regression's evidence for it when the regression named it.
+            let regression = proposed
+                .iter()
+                .find(|e| e.state == cand.state && e.model_term == cand.term);
+            effects.push(NamedEffect {
+                name: cand.effect.clone(),
+                state: cand.state.clone(),
+                term: cand.term.clone(),
+                coefficient: *c,
+                ci95: regression.map(|e| e.ci95),
+                share_of_d: regression.map(|e| e.share_of_d),
+                named_by: if regression.is_some() {
+                    "regression on d̂, kept by free-run search".into()
+                } else {
+                    "free-run search".into()
+                },
+            });
+        }
+        // Proof before acceptance: the augmented model must leave MME less to correct
+        // (total d̂ mean square, relative to the floor, down by at least `min_d_drop`), and,
+        // when validation data are given, simulate them free-run no worse than before.
+        let new_result = estimate_spec(&augmented, &data, &mme_config(&augmented, &opts.estimate))?;
+        let ms = |e: &sysid_core::MmeEstimate| {
+            d_rms(e)
+                .values()
+                .zip(&floor.rms)
+                .map(|(d, f)| (d / f.max(f64::MIN_POSITIVE)).powi(2))
+                .sum::<f64>()
+        };
+        let (ms_before, ms_after) = (ms(&result.estimate), ms(&new_result.estimate));
+        let mut rejection = None;
+        let shrank = ms_after <= (1.0 - opts.min_d_drop) * ms_before;
+        if !shrank {
+            rejection = Some(format!(
+                "d̂ did not shrink: mean square / floor² {ms_before:.4e} → {ms_after:.4e}"
+            ));
+        } else if let Some(v) = &val {
+            let prev = spec.term_model().map_err(|problem| MmennError::Model {
+                path: "<model>".into(),
+                line: None,
+                column: None,
+                problem,
+            })?;
+            let next = augmented
+                .term_model()
+                .map_err(|problem| MmennError::Model {
+                    path: "<model>".into(),
+                    line: None,
+                    column: None,
+                    problem,
+                })?;
+            let cost = |m: &TermModel| -> Result<f64> {
+                match free_run_gap(m, &spec, v, &x0_guess, opts.x0_window) {
+                    Ok((g, _)) => Ok(g
+                        .rmse
+                        .values()
+                        .zip(&result.estimate.noise_variance)
+                        .map(|(r, n)| r * r / n)
+                        .sum()),
+                    Err(MmennError::Core { .. }) => Ok(f64::INFINITY),
+                    Err(e) => Err(e),
+                }
+            };
+            let (vb, va) = (cost(&prev)?, cost(&next)?);
+            let improved = va < vb;
+            if !improved {
+                rejection = Some(format!(
+                    "validation free-run error did not fall: Σ RMSE²/R {vb:.4e} → {va:.4e}"
+                ));
+            }
+        }
+        let accepted = rejection.is_none();
+        rounds.push(Round {
+            discovery: found,
+            localisation,
+            floor_rms: floor.rms.clone(),
+            refinement: refined.steps,
+            calibrated,
+            calibration_cost: refined.cost,
+            rejected: rejection,
+        });
+        if !accepted {
+            effects.truncate(effects_before_round);
+            any_rejected = true;
+            break;
+        }
+        spec = augmented;
+        result = new_result;
+    }
+
+    let final_model = spec.term_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })?;
+    let (mut after, y_after) = free_run_gap(&final_model, &spec, &data, &x0_guess, opts.x0_window)?;
+    after.d_rms = d_rms(&result.estimate);
+    let validation_gap = match (&val, val_before) {
+        (Some(v), Some(b)) => Some(GapPair {
+            before: b,
+            after: free_run_gap(&final_model, &spec, v, &x0_guess, opts.x0_window)?.0,
+        }),
+        _ => None,
+    };
+    let mut written = spec.clone();
+    if let NoiseVariance::Auto = original.noise_variance {
+        written.noise_variance = NoiseVariance::Auto;
+    }
+    write_model(&out.join("model.discovered.toml"), &written)?;
+    // Found: a round was accepted. Unexplained: the library fitted something but the proof
+    // failed (never name an effect that does not make the model better).
+    let verdict = if !effects.is_empty() {
+        Verdict::Found
+    } else if any_rejected {
+        Verdict::Unexplained
+    } else {
+        first_verdict.unwrap_or(Verdict::None)
+    };
+    let summary = DiscoverSummary {
+        verdict,
+        effects,
+        gap: GapPair { before, after },
+        validation_gap,
+        model: "model.discovered.toml".into(),
+        rounds,
+    };
+    figures(&summary, &data, &spec, &y_before, &y_after, out)?;
+    write_atomic(
+        &out.join("discovery.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    write_atomic(&out.join("report.md"), report(&summary).as_bytes())?;
+    Ok(summary)
+}
+
+fn figures(
+    s: &DiscoverSummary,
+    data: &Dataset,
+    spec: &ModelSpec,
+    y_before: &DMatrix<f64>,
+    y_after: &DMatrix<f64>,
+    out: &Path,
+) -> Result<()> {
+    let exp = &data.experiments()[0];
+    let t = exp.times();
+    for (i, name) in spec.linear.output_names().iter().enumerate() {
+        let fit_b = s
+            .gap
+            .before
+            .fit_percent
+            .get(name)
+            .copied()
+            .unwrap_or(f64::NAN);
+        let fit_a = s
+            .gap
+            .after
+            .fit_percent
+            .get(name)
+            .copied()
+            .unwrap_or(f64::NAN);
+        Figure {
+            title: format!("{name}: free-run simulation before and after discovery"),
+            x_label: "t (s)".into(),
+            y_label: name.clone(),
+            series: vec![
+                Series::points(
+                    "measured",
+                    t.clone(),
+                    exp.outputs().row(i).iter().copied().collect(),
+                ),
+                Series::line(
+                    format!("assumed model (fit {fit_b:.1} %)"),
+                    t.clone(),
+                    y_before.row(i).iter().copied().collect(),
+                ),
+                Series::line(
+                    format!("discovered model (fit {fit_a:.1} %)"),
+                    t.clone(),
+                    y_after.row(i).iter().copied().collect(),
+                ),
+            ],
+            bands: vec![],
+        }
+        .write(&out.join(format!("gap_{name}.svg")))?;
+    }
+    if let Some(round) = s.rounds.first() {
+        for p in &round.localisation.profiles {
+            Figure {
+                title: format!("d̂ of {} against {} (round 1)", p.equation, p.variable),
+                x_label: p.variable.clone(),
+                y_label: format!("d_{}", p.equation),
+                series: vec![Series::points(
+                    "MME d̂",
+                    p.points.iter().map(|q| q[0]).collect(),
+                    p.points.iter().map(|q| q[1]).collect(),
+                )],
+                bands: round
+                    .floor_rms
+                    .iter()
+                    .take(1)
+                    .map(|f| ("d̂ noise floor (RMS)".to_string(), *f))
+                    .collect(),
+            }
+            .write(&out.join(format!("d_{}_vs_{}.svg", p.equation, p.variable)))?;
+        }
+    }
+    Ok(())
+}
+
+fn gap_table(g: &GapPair) -> String {
+    let mut s = String::from("| quantity | channel | before | after |\n|---|---|---|---|\n");
+    for (k, v) in &g.before.fit_percent {
+        s.push_str(&format!(
+            "| free-run fit % | {k} | {v:.2} | {:.2} |\n",
+            g.after.fit_percent.get(k).copied().unwrap_or(f64::NAN)
+        ));
+    }
+    for (k, v) in &g.before.rmse {
+        s.push_str(&format!(
+            "| free-run RMSE | {k} | {v:.4e} | {:.4e} |\n",
+            g.after.rmse.get(k).copied().unwrap_or(f64::NAN)
+        ));
+    }
+    for (k, v) in &g.before.d_rms {
+        s.push_str(&format!(
+            "| d̂ RMS | {k} | {v:.4e} | {:.4e} |\n",
+            g.after.d_rms.get(k).copied().unwrap_or(f64::NAN)
+        ));
+    }
+    s
+}
+
+fn report(s: &DiscoverSummary) -> String {
+    let mut r = format!("# Discovery\n\nVerdict: **{:?}**.\n\n", s.verdict);
+    if !s.effects.is_empty() {
+        r.push_str("| effect | equation | term | coefficient (free-run calibrated) | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|\n");
+        for e in &s.effects {
+            let ci = e
+                .ci95
+                .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
+            let share = e.share_of_d.map_or("—".to_string(), |v| format!("{v:.2}"));
+            r.push_str(&format!(
+                "| {} | {} | `{}` | {:.6} | {ci} | {share} | {} |\n",
+                e.name, e.state, e.term, e.coefficient, e.named_by
+            ));
+        }
+        r.push_str("\nThe regression on d̂ is shrunk by W, so coefficients are recalibrated by free-run simulation error; the interval is the regression's.\n");
+    }
+    r.push_str("\n## Gap on the estimation data (free-run simulation; d̂ from MME)\n\n");
+    r.push_str(&gap_table(&s.gap));
+    if let Some(v) = &s.validation_gap {
+        r.push_str("\n## Gap on the validation data (free-run simulation)\n\n");
+        r.push_str(&gap_table(v));
+    }
+    for (i, round) in s.rounds.iter().enumerate() {
+        r.push_str(&format!(
+            "\n## Round {}: verdict {:?}\n\n",
+            i + 1,
+            round.discovery.verdict
+        ));
+        if let Some(why) = &round.rejected {
+            r.push_str(&format!(
+                "The terms this round proposed were **not accepted**: {why}.\n\n"
+            ));
+        }
+        for st in &round.refinement {
+            r.push_str(&format!(
+                "- free-run search: {} {} (`{}`), cost {:.4} → {:.4}, statistic {:.2} vs {:.2}\n",
+                st.action, st.effect, st.term, st.cost[0], st.cost[1], st.statistic, st.threshold
+            ));
+        }
+        for w in &round.localisation.windows {
+            r.push_str(&format!(
+                "- disagreement in {} ({:?}) from {:.2} s to {:.2} s\n",
+                w.channel, w.source, w.start, w.end
+            ));
+        }
+        for reg in round.localisation.regions.iter().take(10) {
+            r.push_str(&format!(
+                "- d_{} is significant for {} in [{:.3}, {:.3}] (mean {:.3e})\n",
+                reg.equation, reg.variable, reg.lo, reg.hi, reg.mean_d
+            ));
+        }
+    }
+    r.push_str(&format!("\nThe augmented model is `{}`.\n", s.model));
+    r
+}
