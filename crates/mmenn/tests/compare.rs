@@ -28,9 +28,9 @@ fn four_models_on_one_free_run_table() {
         ..CompareOptions::default()
     };
     let s = run_compare(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &train.model,
-        &[test.data.clone()],
+        std::slice::from_ref(&test.data),
         &opts,
         &dir.join("cmp"),
     )

@@ -36,9 +36,9 @@ fn cubic_spring_and_damping_hidden_from_the_msd_model() {
     let train = run_simulate(&req(Recipe::Train), &dir.join("train")).unwrap();
     let test = run_simulate(&req(Recipe::Test), &dir.join("test")).unwrap();
     let s = run_discover(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &train.model,
-        &[test.data.clone()],
+        std::slice::from_ref(&test.data),
         &DiscoverOptions::default(),
         &dir.join("out"),
     )
@@ -68,7 +68,7 @@ fn cubic_spring_and_damping_hidden_from_the_msd_model() {
 
     // The augmented model explains the data: a second run finds no significant missing effect.
     let again = run_discover(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &dir.join("out/model.discovered.toml"),
         &[],
         &DiscoverOptions::default(),
@@ -96,7 +96,7 @@ fn gravity_nonlinearity_hidden_from_the_linearised_pendulum() {
     };
     let train = run_simulate(&req, &dir.join("train")).unwrap();
     let s = run_discover(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &train.model,
         &[],
         &DiscoverOptions::default(),

@@ -78,9 +78,9 @@ fn clean_single_pendulum_predicts_the_test_input() {
     );
     let test = sim(&dir.join("test"), "pendulum", Recipe::Test, Some(0.0), None);
     run_fit(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &train.model,
-        &[test.data.clone()],
+        std::slice::from_ref(&test.data),
         &quick(ModelUpdateChoice::None),
         &dir.join("fit"),
     )
@@ -114,9 +114,9 @@ fn noisy_single_pendulum_predicts_the_truth_better_than_the_noise() {
         None,
     );
     run_fit(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &train.model,
-        &[test.data.clone()],
+        std::slice::from_ref(&test.data),
         &quick(ModelUpdateChoice::None),
         &dir.join("fit"),
     )
@@ -157,9 +157,9 @@ fn two_tank_at_every_thesis_sample_rate() {
         );
         let test = sim(&dir.join("test"), "two_tank", Recipe::Test, None, Some(fs));
         run_fit(
-            &[train.data.clone()],
+            std::slice::from_ref(&train.data),
             &train.model,
-            &[test.data.clone()],
+            std::slice::from_ref(&test.data),
             &quick(ModelUpdateChoice::None),
             &dir.join("fit"),
         )
@@ -198,9 +198,9 @@ fn double_pendulum_with_regression_updated_model() {
         ..FitOptions::default()
     };
     let s = run_fit(
-        &[train.data.clone()],
+        std::slice::from_ref(&train.data),
         &train.model,
-        &[test.data.clone()],
+        std::slice::from_ref(&test.data),
         &opts,
         &dir.join("fit"),
     )
