@@ -40,6 +40,9 @@ pub enum NoiseMethod {
     /// Maximum restricted (diffuse-initial-state) marginal likelihood of the equivalent
     /// state-space model, computed exactly from the sweep (see [`crate::noise`]).
     MarginalLikelihood,
+    /// The difference-based estimate, used when the likelihood is degenerate (its
+    /// maximum runs to `R → 0`; see [`crate::noise`]).
+    DifferenceBased,
 }
 
 /// The noise variances used and how they were found.

@@ -40,7 +40,20 @@ pub(crate) fn tune<S: Solve>(
     let eval = |z: f64, solver: &mut S, curve: &mut Vec<WCurvePoint>| -> Result<f64> {
         let alpha = z.exp();
         let w = shape * alpha;
-        let s = solver.solve(&w, inv_r, LogDet::Skip)?;
+        // So small a W that the corrections absorb everything leaves the free initial
+        // state undetermined; that is the W → 0 limit, where the residuals vanish
+        // (ratio 0), not a failure of the search.
+        let s = match solver.solve(&w, inv_r, LogDet::Skip) {
+            Err(crate::MmeError::NotObservable { .. }) => {
+                curve.push(WCurvePoint {
+                    alpha,
+                    residual_variance: vec![0.0; inv_r.len()],
+                    ratio: 0.0,
+                });
+                return Ok(-1.0);
+            }
+            other => other?,
+        };
         let ratio = s.ratio(inv_r);
         curve.push(WCurvePoint {
             alpha,

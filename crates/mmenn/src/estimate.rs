@@ -101,6 +101,8 @@ pub struct EstimateSummary {
     pub noise_variance: BTreeMap<String, f64>,
     /// How the noise variance was obtained (`given` or `marginal_likelihood`).
     pub noise_method: mme_core::NoiseMethod,
+    /// The noise estimator's full report (difference-based cross-check, likelihood).
+    pub noise: mme_core::NoiseReport,
     /// Sample variance of measurement minus estimate, per measured channel.
     pub residual_variance: BTreeMap<String, f64>,
     /// Residual variance divided by noise variance, per measured channel (≈ 1 when the
@@ -338,6 +340,7 @@ pub fn run_estimate(
         w_by_correction: by_name(&est.correction_names, &w_diag),
         noise_variance: by_name(&est.output_names, &est.noise_variance),
         noise_method: result.noise.method,
+        noise: result.noise.clone(),
         residual_variance: by_name(&est.output_names, &est.residual_variance),
         residual_to_noise: by_name(&est.output_names, &ratio),
         w_search: result.w_search.clone(),

@@ -4,4 +4,5 @@ mod compare;
 mod discover;
 mod fit;
 mod monitor;
+mod real_data;
 mod simulate;
