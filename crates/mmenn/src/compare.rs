@@ -61,6 +61,9 @@ pub struct CompareSummary {
     pub narx_orders: NarxOrders,
     /// Output-error parameters with ±1σ.
     pub oe_parameters: Vec<sysid_baselines::ParameterEstimate>,
+    /// Why the output-error fit failed, when it did (its rows then show the starting
+    /// physics model).
+    pub oe_error: Option<String>,
     /// How each model gets its initial condition.
     pub initialisation: Vec<(String, String)>,
     /// Residual analysis (free-run) of each model on the validation data (or the
@@ -264,8 +267,14 @@ pub fn run_compare(
         free: opts.oe_free.clone().unwrap_or_else(|| default_free(&spec)),
         ..OeConfig::default()
     };
-    let mut oe_fit = fit_oe(&lin, &data, &oe_config)?;
-    oe_fit.model.observer_window = window;
+    // An output-error fit that fails (e.g. a free parameter the data cannot identify) does
+    // not stop the comparison: its row is then the starting physics model, and the summary
+    // says why.
+    let (mut oe_model, oe_parameters, oe_error) = match fit_oe(&lin, &data, &oe_config) {
+        Ok(f) => (f.model, f.parameters, None),
+        Err(e) => (assumed.clone(), Vec::new(), Some(e.to_string())),
+    };
+    oe_model.observer_window = window;
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
             na: l,
@@ -311,7 +320,7 @@ pub fn run_compare(
         "free-run simulation, estimation data",
         &data,
         &assumed,
-        &oe_fit.model,
+        &oe_model,
         &narx,
         &hybrid_est,
     )?;
@@ -325,7 +334,7 @@ pub fn run_compare(
             ),
             (
                 "linear OE",
-                Box::new(|d: &Dataset| Ok(predictions(&oe_fit.model, d, Horizon::FreeRun)?)),
+                Box::new(|d: &Dataset| Ok(predictions(&oe_model, d, Horizon::FreeRun)?)),
             ),
             (
                 "NARX",
@@ -361,7 +370,7 @@ pub fn run_compare(
                 "free-run simulation, validation data",
                 v,
                 &assumed,
-                &oe_fit.model,
+                &oe_model,
                 &narx,
                 &hv,
             )?;
@@ -381,7 +390,7 @@ pub fn run_compare(
         ),
         (
             "linear OE".to_string(),
-            residual_analysis(&oe_fit.model, res_data, 0, Horizon::FreeRun, &rc)?,
+            residual_analysis(&oe_model, res_data, 0, Horizon::FreeRun, &rc)?,
         ),
         (
             "NARX".to_string(),
@@ -427,7 +436,8 @@ pub fn run_compare(
         estimation,
         validation,
         narx_orders: orders,
-        oe_parameters: oe_fit.parameters.clone(),
+        oe_parameters,
+        oe_error,
         initialisation,
         residuals,
         files,
