@@ -15,7 +15,6 @@ use sysid_baselines::{
 use sysid_core::{Dataset, Horizon, InitialStateFit, Model, fit_initial_state};
 
 use crate::atomic::{ensure_dir, write_atomic};
-use crate::data_file::read_dataset;
 use crate::error::{MmennError, Result};
 use crate::fit::{FitOptions, HybridFile, HybridModel, run_fit};
 use crate::model_file::{ModelSpec, read_model};
@@ -240,22 +239,7 @@ pub fn run_compare(
 ) -> Result<CompareSummary> {
     let spec = read_model(model_path)?;
     let lin = spec.linear.clone();
-    let data = read_dataset(
-        data_paths,
-        lin.input_names(),
-        lin.output_names(),
-        &spec.units,
-    )?;
-    let val = if val_paths.is_empty() {
-        None
-    } else {
-        Some(read_dataset(
-            val_paths,
-            lin.input_names(),
-            lin.output_names(),
-            &spec.units,
-        )?)
-    };
+    let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     ensure_dir(out)?;
 
     // Both linear models get their initial state the same way as the hybrid model: least

@@ -245,6 +245,33 @@ pub fn read_dataset(
     })
 }
 
+/// Read the data files of a workflow with a model's channels: the estimation files and,
+/// when any are given, the validation files (`None` otherwise).
+pub fn read_with_validation(
+    data_paths: &[PathBuf],
+    val_paths: &[PathBuf],
+    spec: &crate::model_file::ModelSpec,
+) -> Result<(Dataset, Option<Dataset>)> {
+    let lin = &spec.linear;
+    let data = read_dataset(
+        data_paths,
+        lin.input_names(),
+        lin.output_names(),
+        &spec.units,
+    )?;
+    let val = if val_paths.is_empty() {
+        None
+    } else {
+        Some(read_dataset(
+            val_paths,
+            lin.input_names(),
+            lin.output_names(),
+            &spec.units,
+        )?)
+    };
+    Ok((data, val))
+}
+
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
 /// Numbers use Rust's shortest round-trip formatting, so reading back gives the same bits.
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {

@@ -20,7 +20,6 @@ use sysid_core::{
 };
 
 use crate::atomic::{ensure_dir, write_atomic};
-use crate::data_file::read_dataset;
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
@@ -270,23 +269,7 @@ pub fn run_discover(
     out: &Path,
 ) -> Result<DiscoverSummary> {
     let original = read_model(model_path)?;
-    let lin = original.linear.clone();
-    let data = read_dataset(
-        data_paths,
-        lin.input_names(),
-        lin.output_names(),
-        &original.units,
-    )?;
-    let val = if val_paths.is_empty() {
-        None
-    } else {
-        Some(read_dataset(
-            val_paths,
-            lin.input_names(),
-            lin.output_names(),
-            &original.units,
-        )?)
-    };
+    let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &original)?;
     ensure_dir(out)?;
 
     let first = estimate_spec(&original, &data, &mme_config(&original, &opts.estimate))?;
