@@ -9,6 +9,8 @@
 //! initial states re-fitted for every `S`):
 //! - remove the term whose removal raises `J` least, if that rise is not significant;
 //! - otherwise add the candidate that lowers `J` most, if that drop is significant;
+//! - otherwise add the pair of candidates of one equation that lowers `J` most, if that
+//!   drop is significant against χ²₂ (terms that only work together);
 //! - stop when neither applies.
 //!
 //! A change is significant when `M·ΔJ · N_eff/N > χ²₁(1 − α)`: under a correct model
@@ -97,6 +99,9 @@ pub struct Refinement {
     pub steps: Vec<RefineStep>,
 }
 
+/// Most candidate pairs tried in one pair step.
+const MAX_PAIRS: usize = 300;
+
 /// What every evaluation shares.
 #[derive(Clone, Copy)]
 struct Ctx<'a> {
@@ -149,9 +154,8 @@ fn build(base: &TermModel, candidates: &[RefineCandidate], set: &[usize]) -> Res
 }
 
 /// Calibrate the base model plus the terms `set`; `None` when the simulation diverges or
-/// when `check_last` is set and the last term's coefficient is not distinguishable from
-/// zero.
-fn evaluate(ctx: &Ctx<'_>, set: &[usize], check_last: bool) -> Result<Option<Eval>> {
+/// when one of the last `check_new` terms' coefficients is not distinguishable from zero.
+fn evaluate(ctx: &Ctx<'_>, set: &[usize], check_new: usize) -> Result<Option<Eval>> {
     let Ctx {
         base,
         candidates,
@@ -206,9 +210,11 @@ fn evaluate(ctx: &Ctx<'_>, set: &[usize], check_last: bool) -> Result<Option<Eva
     // shrink, validation must improve — guards the end result.)
     let z = z_two_sided(config.alpha);
     let inflate = 1.0;
-    let last = first_new + set.len() - 1;
-    let (c, sd) = (fit.coefficients_after[last], fit.coefficient_std[last]);
-    let significant = !check_last || (sd.is_finite() && c.abs() > z * sd * inflate);
+    let end = first_new + set.len();
+    let significant = (end - check_new.min(set.len())..end).all(|k| {
+        let (c, sd) = (fit.coefficients_after[k], fit.coefficient_std[k]);
+        sd.is_finite() && c.abs() > z * sd * inflate
+    });
     if !significant {
         return Ok(None);
     }
@@ -297,9 +303,9 @@ pub fn refine_by_free_run(
         .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
         .sum();
     let m = measured as f64;
-    let base_eval = evaluate(&ctx, &[], false)?;
+    let base_eval = evaluate(&ctx, &[], 0)?;
     let mut set: Vec<usize> = initial.to_vec();
-    let mut current = match evaluate(&ctx, &set, false)? {
+    let mut current = match evaluate(&ctx, &set, 0)? {
         Some(e) => e,
         None => {
             set.clear();
@@ -330,7 +336,7 @@ pub fn refine_by_free_run(
                 .filter(|(p, _)| *p != pos)
                 .map(|(_, &i)| i)
                 .collect();
-            if let Some(e) = evaluate(&ctx, &trial, false)?
+            if let Some(e) = evaluate(&ctx, &trial, 0)?
                 && best_remove.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
             {
                 best_remove = Some((pos, e));
@@ -361,7 +367,7 @@ pub fn refine_by_free_run(
             }
             let mut trial = set.clone();
             trial.push(i);
-            if let Some(e) = evaluate(&ctx, &trial, true)?
+            if let Some(e) = evaluate(&ctx, &trial, 1)?
                 && best_add.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
             {
                 best_add = Some((i, e));
@@ -381,7 +387,55 @@ pub fn refine_by_free_run(
                 set.push(i);
                 current = e;
             }
-            _ => break,
+            _ => {
+                // No single term helps significantly: try pairs within one equation (terms
+                // that only work together, e.g. `v` and `x²v` of amplitude-dependent
+                // damping), judged jointly against χ²₂.
+                let pair_threshold = chi2_quantile(1.0 - config.alpha, 2.0)?;
+                let mut best_pair: Option<((usize, usize), Eval)> = None;
+                let mut tried = 0;
+                'pairs: for i in 0..candidates.len() {
+                    for j in i + 1..candidates.len() {
+                        if set.contains(&i)
+                            || set.contains(&j)
+                            || candidates[i].state != candidates[j].state
+                        {
+                            continue;
+                        }
+                        if tried >= MAX_PAIRS {
+                            break 'pairs;
+                        }
+                        tried += 1;
+                        let mut trial = set.clone();
+                        trial.extend([i, j]);
+                        if let Some(e) = evaluate(&ctx, &trial, 2)?
+                            && best_pair.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
+                        {
+                            best_pair = Some(((i, j), e));
+                        }
+                    }
+                }
+                match best_pair {
+                    Some(((i, j), e))
+                        if m * (current.cost - e.cost) * e.neff_ratio > pair_threshold =>
+                    {
+                        for k in [i, j] {
+                            let c = &candidates[k];
+                            steps.push(RefineStep {
+                                action: "add (pair)".into(),
+                                effect: c.effect.clone(),
+                                term: c.term.clone(),
+                                cost: [current.cost, e.cost],
+                                statistic: m * (current.cost - e.cost) * e.neff_ratio,
+                                threshold: pair_threshold,
+                            });
+                        }
+                        set.extend([i, j]);
+                        current = e;
+                    }
+                    _ => break,
+                }
+            }
         }
     }
     Ok(Refinement {
