@@ -528,4 +528,80 @@ mod tests {
             r.cost[1]
         );
     }
+
+    /// Van der Pol: the correction `μ(1 − x²)v` needs `v` and `x²v` together — either
+    /// alone destabilises or kills the limit cycle, so no single term helps and only the
+    /// pair step can name them (truth coefficients +1 and −1 for μ = 1).
+    #[test]
+    fn pair_step_names_terms_that_only_work_together() {
+        let sim = simulate_system(&SimulationRequest {
+            system: "van_der_pol".into(),
+            recipe: Recipe::Train,
+            seed: 3,
+            ..Default::default()
+        })
+        .unwrap();
+        let base = TermModel::new(sim.assumed.model.clone(), vec![]).unwrap();
+        let state = sim.assumed.model.correction_names()[0].clone();
+        let (x, v) = (
+            sim.assumed.model.state_names()[0].clone(),
+            sim.assumed.model.state_names()[1].clone(),
+        );
+        let cand = |effect: &str, term: String| RefineCandidate {
+            effect: effect.into(),
+            state: state.clone(),
+            term,
+            coefficient: 0.0,
+        };
+        let candidates = vec![
+            cand("cubic_stiffness", format!("{x}^3")),
+            cand("viscous_damping", v.clone()),
+            cand("amplitude_dependent_damping", format!("{x}^2*{v}")),
+            cand("quadratic_drag", format!("{v}*abs({v})")),
+        ];
+        let x0 = vec![
+            sim.truth
+                .states
+                .column(0)
+                .iter()
+                .copied()
+                .collect::<Vec<f64>>(),
+        ];
+        let r = refine_by_free_run(
+            &base,
+            &candidates,
+            &[],
+            &sim.data,
+            &x0,
+            &sim.assumed.noise_variance,
+            &RefineConfig::default(),
+        )
+        .unwrap();
+        let mut names: Vec<&str> = r
+            .selected
+            .iter()
+            .map(|&i| candidates[i].effect.as_str())
+            .collect();
+        names.sort_unstable();
+        assert_eq!(
+            names,
+            ["amplitude_dependent_damping", "viscous_damping"],
+            "steps: {:?}",
+            r.steps
+        );
+        assert!(r.steps.iter().any(|s| s.action == "add (pair)"));
+        for t in r.model.terms() {
+            let want = if t.expr.to_string().contains('^') {
+                -1.0
+            } else {
+                1.0
+            };
+            assert!(
+                (t.coefficient - want).abs() < 0.05,
+                "{}: {}",
+                t.expr,
+                t.coefficient
+            );
+        }
+    }
 }
