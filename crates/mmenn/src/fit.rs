@@ -14,7 +14,7 @@ use sysid_core::{
 };
 
 use crate::atomic::{ensure_dir, write_atomic};
-use crate::data_file::{read_dataset, read_table, table_to_experiment, write_csv};
+use crate::data_file::{read_table, table_to_experiment, write_csv};
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
@@ -361,12 +361,8 @@ pub fn run_fit(
     out: &Path,
 ) -> Result<FitSummary> {
     let mut spec = read_model(model_path)?;
-    let data = read_dataset(
-        data_paths,
-        spec.linear.input_names(),
-        spec.linear.output_names(),
-        &spec.units,
-    )?;
+    // The regression update changes A and B only, so channel names stay valid for both.
+    let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     let config = mme_config(&spec, &opts.estimate);
     let mut result = estimate_spec(&spec, &data, &config)?;
     let mut update_report = None;
@@ -387,16 +383,6 @@ pub fn run_fit(
 
     // The sweep's test set: MME on the validation data at the training W and noise, or the
     // last 20 % of the training pairs when there is no validation data.
-    let val = if val_paths.is_empty() {
-        None
-    } else {
-        Some(read_dataset(
-            val_paths,
-            lin.input_names(),
-            lin.output_names(),
-            &spec.units,
-        )?)
-    };
     let (x_fit, d_fit, x_test, d_test, test_source, val_est) = match &val {
         Some(v) => {
             let mut vconf = config.clone();

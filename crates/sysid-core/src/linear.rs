@@ -4,7 +4,7 @@
 // Index loops over small state vectors read like the equations they implement.
 #![allow(clippy::needless_range_loop)]
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::check_unique;
@@ -346,11 +346,6 @@ impl Dynamics for LinearModel {
         a.copy_from(&self.a);
         b.copy_from(&self.b);
     }
-}
-
-/// Output `y = C x` of a state vector.
-pub fn output_of(c: &DMatrix<f64>, x: &[f64]) -> DVector<f64> {
-    c * DVector::from_column_slice(x)
 }
 
 #[cfg(test)]
