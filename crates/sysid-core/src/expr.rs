@@ -23,7 +23,7 @@
 //!
 //! # Values outside a function's domain
 //!
-//! Evaluation follows IEEE arithmetic (`a^b` is `a·a` when `b` is exactly 2, `powf`
+//! Evaluation follows IEEE arithmetic (`a^b` is `a·a` when `b` is exactly 2, `powi` for another constant integer exponent up to 16 in magnitude, `powf`
 //! otherwise): `sqrt(-1)` and `log(-1)` are NaN, `1/0` is `+inf`.
 //! Callers that need finite values (integrators, estimators) check the results.
 //!
@@ -353,6 +353,7 @@ impl Expr {
                 }
                 Op::Neg => stack[sp - 1] = -stack[sp - 1],
                 Op::Square => stack[sp - 1] *= stack[sp - 1],
+                Op::PowI(n) => stack[sp - 1] = stack[sp - 1].powi(n),
                 Op::Call(f) => stack[sp - 1] = f.apply(stack[sp - 1]),
                 Op::Bin(op) => {
                     sp -= 1;

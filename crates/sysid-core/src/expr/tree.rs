@@ -57,6 +57,8 @@ pub(super) enum Op {
     Var(usize),
     Neg,
     Square,
+    /// Integer power by repeated multiplication (`powi`): much cheaper than `powf`.
+    PowI(i32),
     Call(Func),
     /// Pops `b` then `a`, pushes `a op b`.
     Bin(BinOp),
@@ -254,6 +256,15 @@ pub(super) fn remap(t: &Tree, map: &[Option<usize>]) -> Tree {
     }
 }
 
+/// A constant exponent that is a small integer (|n| ≤ 16), evaluated by `powi`.
+fn integer_exponent(t: &Tree) -> Option<i32> {
+    match t {
+        #[allow(clippy::float_cmp)]
+        Tree::Const(c) if c.fract() == 0.0 && c.abs() <= 16.0 => Some(*c as i32),
+        _ => None,
+    }
+}
+
 /// Postfix program and the stack slots it needs. Binary operands are emitted
 /// deeper-subtree-first (Sethi–Ullman), which is exact: the operation is the same, only
 /// the evaluation order of independent operands changes.
@@ -272,6 +283,11 @@ pub(super) fn compile(t: &Tree) -> (Vec<Op>, usize) {
         Tree::Bin(BinOp::Pow, a, b) if is(b, 2.0) => {
             let (mut p, need) = compile(a);
             p.push(Op::Square);
+            (p, need)
+        }
+        Tree::Bin(BinOp::Pow, a, b) if integer_exponent(b).is_some() => {
+            let (mut p, need) = compile(a);
+            p.push(Op::PowI(integer_exponent(b).unwrap_or(1)));
             (p, need)
         }
         Tree::Bin(op, a, b) => {

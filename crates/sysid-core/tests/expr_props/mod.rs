@@ -35,22 +35,34 @@ fn text(t: &T) -> String {
     }
 }
 
+/// Whether a subtree uses no variable (the parser folds it to a constant).
+fn constant(t: &T) -> bool {
+    match t {
+        T::C(..) => true,
+        T::V(_) => false,
+        T::Neg(a) | T::F(_, a) => constant(a),
+        T::Bin(_, a, b) => constant(a) && constant(b),
+    }
+}
+
 /// Direct evaluation with the documented semantics: `^` is `a·a` for an exponent of
-/// exactly 2 and `powf` otherwise, `log` is natural, `sign(0) = 0`.
+/// exactly 2, `powi` for a constant integer exponent up to 16 in magnitude and `powf`
+/// otherwise, `log` is natural, `sign(0) = 0`.
 #[allow(clippy::float_cmp)]
 fn value(t: &T, v: &[f64]) -> f64 {
     match t {
         T::C(c, _) => *c,
         T::V(i) => v[*i],
         T::Neg(a) => -value(a, v),
-        T::Bin(op, a, b) => {
-            let (a, b) = (value(a, v), value(b, v));
+        T::Bin(op, ta, tb) => {
+            let (a, b) = (value(ta, v), value(tb, v));
             match op {
                 '+' => a + b,
                 '-' => a - b,
                 '*' => a * b,
                 '/' => a / b,
                 _ if b == 2.0 => a * a,
+                _ if constant(tb) && b.fract() == 0.0 && b.abs() <= 16.0 => a.powi(b as i32),
                 _ => a.powf(b),
             }
         }
