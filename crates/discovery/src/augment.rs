@@ -527,7 +527,7 @@ pub fn calibrate(
     let m = r.len() as f64;
     let mut coefficient_std = vec![f64::NAN; base.len()];
     if p > 0 && m > p as f64 {
-        let jac_end = jacobian(&mut problem, &theta)?;
+        let jac_end = jacobian(&mut problem, &theta, None)?;
         let sigma2 = cost * m / (m - p as f64);
         if let Some(inv) = (jac_end.transpose() * &jac_end * m).try_inverse() {
             for (i, &k) in problem.free.iter().enumerate() {
@@ -574,7 +574,7 @@ fn lm_stage(
         .residuals(&theta)
         .map_err(|(experiment, source)| DiscoveryError::Simulation { experiment, source })?;
     let mut cost = r.norm_squared();
-    let mut jac = jacobian(problem, &theta)?;
+    let mut jac = jacobian(problem, &theta, Some(&r))?;
     let mut mu = {
         let jtj = jac.transpose() * &jac;
         (1e-3 * (0..p).map(|i| jtj[(i, i)]).fold(0.0, f64::max)).max(1e-12)
@@ -618,7 +618,7 @@ fn lm_stage(
                     termination = Termination::Converged;
                     break;
                 }
-                jac = jacobian(problem, &theta)?;
+                jac = jacobian(problem, &theta, Some(&r))?;
             }
             _ => {
                 mu *= 4.0;
@@ -633,9 +633,15 @@ fn lm_stage(
     Ok((theta, termination))
 }
 
-/// Central-difference Jacobian of the residuals; a diverging perturbed simulation is an
+/// Finite-difference Jacobian of the residuals: forward differences from the residual
+/// `at` (inside the solver, where a step direction needs no more), central differences
+/// when `at` is `None` (for the standard errors). A diverging perturbed simulation is an
 /// error naming the experiment.
-fn jacobian(problem: &mut Problem<'_>, theta: &[f64]) -> Result<DMatrix<f64>> {
+fn jacobian(
+    problem: &mut Problem<'_>,
+    theta: &[f64],
+    at: Option<&DVector<f64>>,
+) -> Result<DMatrix<f64>> {
     let p = theta.len();
     let mut cols: Vec<DVector<f64>> = Vec::with_capacity(p);
     let mut t = theta.to_vec();
@@ -643,6 +649,16 @@ fn jacobian(problem: &mut Problem<'_>, theta: &[f64]) -> Result<DMatrix<f64>> {
         let h = 1e-5 * theta[j].abs().max(0.01);
         t[j] = theta[j] + h;
         let plus = problem.residuals(&t);
+        if let Some(r0) = at {
+            t[j] = theta[j];
+            match plus {
+                Ok(a) => cols.push((a - r0) / h),
+                Err((experiment, source)) => {
+                    return Err(DiscoveryError::Simulation { experiment, source });
+                }
+            }
+            continue;
+        }
         t[j] = theta[j] - h;
         let minus = problem.residuals(&t);
         t[j] = theta[j];

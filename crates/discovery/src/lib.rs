@@ -11,6 +11,7 @@ pub mod localise;
 pub mod refine;
 pub mod roles;
 pub mod samples;
+mod screen;
 pub mod select;
 pub mod stats;
 
@@ -30,7 +31,10 @@ pub use localise::{
     Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
     WindowLength, WindowSource, localise,
 };
-pub use refine::{RefineCandidate, RefineConfig, RefineStep, Refinement, refine_by_free_run};
+pub use refine::{
+    Holdout, RefineCandidate, RefineConfig, RefineStep, Refinement, refine_by_free_run,
+    refine_with_holdout,
+};
 pub use roles::{EquationKind, Role, StateRoles};
 pub use samples::{Samples, centred_corrections, samples_from_estimate};
 pub use select::{

@@ -26,6 +26,9 @@ use crate::augment::{
     CalibrationConfig, InitialState, OutputWeights, calibrate, free_run_cost, simulate_outputs,
 };
 use crate::error::{DiscoveryError, Result};
+use rayon::prelude::*;
+
+use crate::screen::Screen;
 use crate::stats::chi2_quantile;
 
 /// A candidate term for the free-run search.
@@ -50,6 +53,10 @@ pub struct RefineConfig {
     pub max_steps: usize,
     /// Calibration settings (its `terms` and `weights` are set by the search).
     pub calibration: CalibrationConfig,
+    /// How many of the best-ranked single candidates, and separately of the best-ranked
+    /// pairs, are calibrated fully at each step (ranked by their score statistic, see
+    /// the `screen` module); `usize::MAX` calibrates every one. Default 4.
+    pub screen: usize,
 }
 
 impl Default for RefineConfig {
@@ -57,8 +64,14 @@ impl Default for RefineConfig {
         Self {
             alpha: 0.01,
             max_steps: 12,
+            screen: 4,
             calibration: CalibrationConfig {
                 initial_state: InitialState::Estimate,
+                // Decisions need `J` to ~1/M; a relative 1e-8 is far below that.
+                tolerance: 1e-8,
+                // Candidates start near their fit (calibrated set, Gauss–Newton start for
+                // the new term): one short stage guards against drift, then the record.
+                horizons: vec![0.25, 1.0],
                 ..CalibrationConfig::default()
             },
         }
@@ -92,32 +105,32 @@ pub struct Refinement {
     pub model: TermModel,
     /// Calibrated initial states.
     pub x0: Vec<Vec<f64>>,
-    /// Free-run cost of the base model alone (its terms calibrated? no: as given) and of
-    /// the result.
+    /// Free-run cost of the base model alone (as given) and of the result — on the
+    /// held-out records when there are any.
     pub cost: [f64; 2],
     /// The decisions taken.
     pub steps: Vec<RefineStep>,
 }
 
-/// Most candidate pairs tried in one pair step.
-const MAX_PAIRS: usize = 300;
-
 /// What every evaluation shares.
 #[derive(Clone, Copy)]
 struct Ctx<'a> {
     base: &'a TermModel,
-    candidates: &'a [RefineCandidate],
+    holdout: Option<Holdout<'a>>,
     data: &'a Dataset,
     x0: &'a [Vec<f64>],
     noise: &'a [f64],
     config: &'a RefineConfig,
 }
 
+#[derive(Clone)]
 struct Eval {
     model: TermModel,
     x0: Vec<Vec<f64>>,
     cost: f64,
     neff_ratio: f64,
+    /// `(c/σ_c)²` of every term of the set, in set order (ranks removals).
+    wald: Vec<f64>,
 }
 
 fn build(base: &TermModel, candidates: &[RefineCandidate], set: &[usize]) -> Result<TermModel> {
@@ -155,14 +168,56 @@ fn build(base: &TermModel, candidates: &[RefineCandidate], set: &[usize]) -> Res
 
 /// Calibrate the base model plus the terms `set`; `None` when the simulation diverges or
 /// when one of the last `check_new` terms' coefficients is not distinguishable from zero.
-fn evaluate(ctx: &Ctx<'_>, set: &[usize], check_new: usize) -> Result<Option<Eval>> {
+fn evaluate(
+    ctx: &Ctx<'_>,
+    candidates: &[RefineCandidate],
+    set: &[usize],
+    check_new: usize,
+) -> Result<Option<Eval>> {
+    let Some(eval) = evaluate_on_data(ctx, candidates, set, check_new)? else {
+        return Ok(None);
+    };
+    match ctx.holdout {
+        None => Ok(Some(eval)),
+        Some(h) => holdout_score(ctx, h, eval),
+    }
+}
+
+/// Replace an evaluation's cost and residual colour by those on the held-out records:
+/// coefficients as calibrated, initial states re-fitted there. `None` when the held-out
+/// simulation diverges.
+fn holdout_score(ctx: &Ctx<'_>, h: Holdout<'_>, mut eval: Eval) -> Result<Option<Eval>> {
+    let cal = CalibrationConfig {
+        terms: Some(vec![]),
+        initial_state: InitialState::Estimate,
+        weights: OutputWeights::NoiseVariance(ctx.noise.to_vec()),
+        ..ctx.config.calibration.clone()
+    };
+    let Ok(fit) = calibrate(&eval.model, h.data, h.x0, &cal) else {
+        return Ok(None);
+    };
+    if !fit.cost_after.is_finite() {
+        return Ok(None);
+    }
+    eval.neff_ratio = residual_neff_ratio(&fit.model, h.data, &fit.x0, &ctx.config.calibration)?;
+    eval.cost = fit.cost_after;
+    Ok(Some(eval))
+}
+
+/// [`evaluate`] on the estimation records only.
+fn evaluate_on_data(
+    ctx: &Ctx<'_>,
+    candidates: &[RefineCandidate],
+    set: &[usize],
+    check_new: usize,
+) -> Result<Option<Eval>> {
     let Ctx {
         base,
-        candidates,
         data,
         x0,
         noise,
         config,
+        ..
     } = *ctx;
     let model = build(base, candidates, set)?;
     let first_new = base.terms().len();
@@ -188,6 +243,7 @@ fn evaluate(ctx: &Ctx<'_>, set: &[usize], check_new: usize) -> Result<Option<Eva
             x0: x0.to_vec(),
             cost,
             neff_ratio,
+            wald: vec![],
         }));
     }
     let cal = CalibrationConfig {
@@ -218,12 +274,73 @@ fn evaluate(ctx: &Ctx<'_>, set: &[usize], check_new: usize) -> Result<Option<Eva
     if !significant {
         return Ok(None);
     }
+    let wald = (first_new..end)
+        .map(|k| {
+            let (c, sd) = (fit.coefficients_after[k], fit.coefficient_std[k]);
+            if sd.is_finite() && sd > 0.0 {
+                (c / sd).powi(2)
+            } else {
+                0.0
+            }
+        })
+        .collect();
     Ok(Some(Eval {
         model: fit.model,
         x0: fit.x0,
         cost: fit.cost_after,
         neff_ratio,
+        wald,
     }))
+}
+
+/// One candidate set to calibrate: its key, the candidate list with starting
+/// coefficients, the set, and how many of its last terms must be significant.
+struct TrialSet<K> {
+    key: K,
+    cands: Vec<RefineCandidate>,
+    set: Vec<usize>,
+    check_new: usize,
+}
+
+/// Calibrate every trial (in parallel) and return the admissible one of least cost (the
+/// first in order on ties, so the result does not depend on the thread count).
+fn best_trial<K: Copy + Send + Sync>(
+    ctx: &Ctx<'_>,
+    trials: Vec<TrialSet<K>>,
+) -> Result<Option<(K, Eval)>> {
+    let results: Vec<Result<Option<Eval>>> = trials
+        .par_iter()
+        .map(|t| evaluate(ctx, &t.cands, &t.set, t.check_new))
+        .collect();
+    let mut best: Option<(K, Eval)> = None;
+    for (t, r) in trials.iter().zip(results) {
+        if let Some(e) = r?
+            && best.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
+        {
+            best = Some((t.key, e));
+        }
+    }
+    Ok(best)
+}
+
+/// Smallest `M·ΔJ·N_eff/N` by which an exchange must improve the fit (same size: no χ²
+/// test applies; the margin keeps near-ties from churning).
+const SWAP_MARGIN: f64 = 1.0;
+
+/// The set's indices in ascending order (identity of a term set).
+fn sorted(set: &[usize]) -> Vec<usize> {
+    let mut v = set.to_vec();
+    v.sort_unstable();
+    v
+}
+
+/// `set` without its entry at `pos`.
+fn without(set: &[usize], pos: usize) -> Vec<usize> {
+    set.iter()
+        .enumerate()
+        .filter(|(p, _)| *p != pos)
+        .map(|(_, &i)| i)
+        .collect()
 }
 
 /// Two-sided standard-normal quantile for level `alpha`: `z² = χ²₁(1 − α)`.
@@ -261,10 +378,18 @@ fn residual_neff_ratio(
     Ok(((1.0 - rho) / (1.0 + rho)).clamp(1e-3, 1.0))
 }
 
-/// Stepwise selection of `candidates` by calibrated free-run cost, starting from
-/// `initial` (indices into `candidates`, e.g. the regression's choice). `noise_variance`
-/// is per model output; `x0` one initial state per experiment (a starting guess; it is
-/// re-fitted).
+/// Held-out records for [`refine_with_holdout`]: data not used to calibrate, on which
+/// every candidate set is judged (coefficients as calibrated, initial states re-fitted).
+#[derive(Debug, Clone, Copy)]
+pub struct Holdout<'a> {
+    /// The records.
+    pub data: &'a Dataset,
+    /// A starting guess of each record's initial state.
+    pub x0: &'a [Vec<f64>],
+}
+
+/// [`refine_with_holdout`] without held-out data: every decision on the estimation
+/// records.
 pub fn refine_by_free_run(
     base: &TermModel,
     candidates: &[RefineCandidate],
@@ -272,6 +397,37 @@ pub fn refine_by_free_run(
     data: &Dataset,
     x0: &[Vec<f64>],
     noise_variance: &[f64],
+    config: &RefineConfig,
+) -> Result<Refinement> {
+    refine_with_holdout(
+        base,
+        candidates,
+        initial,
+        data,
+        x0,
+        noise_variance,
+        None,
+        config,
+    )
+}
+
+/// Stepwise selection of `candidates` by calibrated free-run cost, starting from
+/// `initial` (indices into `candidates`, e.g. the regression's choice). `noise_variance`
+/// is per model output; `x0` one initial state per experiment (a starting guess; it is
+/// re-fitted).
+///
+/// With `holdout`, coefficients are calibrated on `data` but every decision (and the
+/// reported costs) uses the free-run cost on the held-out records: a combination of
+/// wrong terms that mimics the missing effect on one input rarely does so on another.
+#[allow(clippy::too_many_arguments)]
+pub fn refine_with_holdout(
+    base: &TermModel,
+    candidates: &[RefineCandidate],
+    initial: &[usize],
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    noise_variance: &[f64],
+    holdout: Option<Holdout<'_>>,
     config: &RefineConfig,
 ) -> Result<Refinement> {
     if !(config.alpha > 0.0 && config.alpha < 1.0) {
@@ -289,63 +445,91 @@ pub fn refine_by_free_run(
         });
     }
     let threshold = chi2_quantile(1.0 - config.alpha, 1.0)?;
+    if config.screen == 0 {
+        return Err(DiscoveryError::InvalidConfig {
+            field: "screen",
+            value: 0.0,
+            reason: "at least 1 candidate per step",
+        });
+    }
     let ctx = Ctx {
         base,
-        candidates,
+        holdout,
         data,
         x0,
         noise: noise_variance,
         config,
     };
-    let measured: usize = data
+    let measured: usize = holdout
+        .map_or(data, |h| h.data)
         .experiments()
         .iter()
         .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
         .sum();
     let m = measured as f64;
-    let base_eval = evaluate(&ctx, &[], 0)?;
+    // Working copy: starting coefficients follow the latest calibration.
+    let mut cands: Vec<RefineCandidate> = candidates.to_vec();
+    let base_eval = evaluate(&ctx, &cands, &[], 0)?;
+    // The starting set; when it is not admissible (diverges, or calibration fails), drop
+    // its terms one at a time, keeping the best admissible subset at each size.
     let mut set: Vec<usize> = initial.to_vec();
-    let mut current = match evaluate(&ctx, &set, 0)? {
-        Some(e) => e,
-        None => {
-            set.clear();
-            base_eval
-                .as_ref()
-                .map(|e| Eval {
-                    model: e.model.clone(),
-                    x0: e.x0.clone(),
-                    cost: e.cost,
-                    neff_ratio: e.neff_ratio,
-                })
-                .ok_or(DiscoveryError::InvalidConfig {
-                    field: "base model",
-                    value: f64::NAN,
-                    reason: "its free-run simulation diverges",
-                })?
+    let mut current = loop {
+        if let Some(e) = evaluate(&ctx, &cands, &set, 0)? {
+            break e;
+        }
+        if set.is_empty() {
+            return Err(DiscoveryError::InvalidConfig {
+                field: "base model",
+                value: f64::NAN,
+                reason: "its free-run simulation diverges",
+            });
+        }
+        let mut best: Option<(usize, Eval)> = None;
+        for pos in 0..set.len() {
+            let trial = without(&set, pos);
+            if let Some(e) = evaluate(&ctx, &cands, &trial, 0)?
+                && best.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
+            {
+                best = Some((pos, e));
+            }
+        }
+        match best {
+            Some((pos, _)) => {
+                set.remove(pos);
+            }
+            None => set.clear(),
         }
     };
     let cost_before = base_eval.as_ref().map_or(f64::NAN, |e| e.cost);
     let mut steps = Vec::new();
-    for _ in 0..config.max_steps {
-        // Removal: the term whose removal costs least.
-        let mut best_remove: Option<(usize, Eval)> = None;
-        for pos in 0..set.len() {
-            let trial: Vec<usize> = set
-                .iter()
-                .enumerate()
-                .filter(|(p, _)| *p != pos)
-                .map(|(_, &i)| i)
-                .collect();
-            if let Some(e) = evaluate(&ctx, &trial, 0)?
-                && best_remove.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
-            {
-                best_remove = Some((pos, e));
-            }
-        }
+    let remove_step = |set: &mut Vec<usize>,
+                       current: &mut Eval,
+                       steps: &mut Vec<RefineStep>,
+                       cands: &[RefineCandidate]|
+     -> Result<bool> {
+        // Removal: rank the set's terms by their Wald statistic, calibrate the weakest
+        // fully without each, take the removal that costs least if it is not significant.
+        let mut order: Vec<usize> = (0..set.len()).collect();
+        order.sort_by(|&a, &b| {
+            let wa = current.wald.get(a).copied().unwrap_or(0.0);
+            let wb = current.wald.get(b).copied().unwrap_or(0.0);
+            wa.total_cmp(&wb)
+        });
+        let trials = order
+            .iter()
+            .take(config.screen)
+            .map(|&pos| TrialSet {
+                key: pos,
+                cands: cands.to_vec(),
+                set: without(set, pos),
+                check_new: 0,
+            })
+            .collect();
+        let best_remove = best_trial(&ctx, trials)?;
         if let Some((pos, e)) = best_remove {
             let stat = m * (e.cost - current.cost) * current.neff_ratio;
             if stat < threshold {
-                let c = &candidates[set[pos]];
+                let c = &cands[set[pos]];
                 steps.push(RefineStep {
                     action: "remove".into(),
                     effect: c.effect.clone(),
@@ -355,27 +539,114 @@ pub fn refine_by_free_run(
                     threshold,
                 });
                 set.remove(pos);
-                current = e;
-                continue;
+                *current = e;
+                return Ok(true);
             }
         }
-        // Addition: the candidate that helps most.
-        let mut best_add: Option<(usize, Eval)> = None;
-        for i in 0..candidates.len() {
-            if set.contains(&i) {
-                continue;
+        Ok(false)
+    };
+    let mut visited: std::collections::BTreeSet<Vec<usize>> = std::collections::BTreeSet::new();
+    visited.insert(sorted(&set));
+    for _ in 0..config.max_steps {
+        if remove_step(&mut set, &mut current, &mut steps, &cands)? {
+            continue;
+        }
+        // Exchange, then addition: rank every candidate by its score statistic at the
+        // current model, calibrate the best-ranked fully and take the one that helps most.
+        let first_new = base.terms().len();
+        let screen = Screen::new(
+            &current.model,
+            &(first_new..first_new + set.len()).collect::<Vec<_>>(),
+            &current.x0,
+            &cands,
+            &set,
+            data,
+            noise_variance,
+            &config.calibration.integrator,
+        )?;
+        // Exchange: a term of the set for a candidate of the same equation, when the
+        // exchanged set fits better at the same size (a combination of wrong terms can
+        // mimic a right one — Coulomb friction looks like viscous plus v|v| — and no
+        // single removal or addition leaves such a local optimum).
+        let mut swaps: Vec<(usize, usize, f64, f64)> = Vec::new();
+        for pos in 0..set.len() {
+            for i in 0..cands.len() {
+                if set.contains(&i) || cands[i].state != cands[set[pos]].state {
+                    continue;
+                }
+                if let Some((cost, c)) = screen.swap(pos, i) {
+                    swaps.push((pos, i, cost, c));
+                }
             }
-            let mut trial = set.clone();
+        }
+        swaps.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let mut trials = Vec::new();
+        for &(pos, i, predicted, coefficient) in swaps.iter().take(config.screen) {
+            // Without held-out data an exchange must at least promise a better fit here.
+            if holdout.is_none() && predicted >= screen.cost() {
+                break;
+            }
+            let mut trial = without(&set, pos);
             trial.push(i);
-            if let Some(e) = evaluate(&ctx, &trial, 1)?
-                && best_add.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
-            {
-                best_add = Some((i, e));
+            if visited.contains(&sorted(&trial)) {
+                continue;
             }
+            let mut trial_cands = cands.clone();
+            trial_cands[i].coefficient = coefficient;
+            trials.push(TrialSet {
+                key: (pos, i),
+                cands: trial_cands,
+                set: trial,
+                check_new: 1,
+            });
         }
-        match best_add {
+        if let Some(((pos, i), e)) = best_trial(&ctx, trials)?
+            && m * (current.cost - e.cost) * e.neff_ratio > SWAP_MARGIN
+        {
+            let (out, c) = (&cands[set[pos]], &cands[i]);
+            steps.push(RefineStep {
+                action: "exchange".into(),
+                effect: format!("{} → {}", out.effect, c.effect),
+                term: format!("{} → {}", out.term, c.term),
+                cost: [current.cost, e.cost],
+                statistic: m * (current.cost - e.cost) * e.neff_ratio,
+                threshold: SWAP_MARGIN,
+            });
+            set.remove(pos);
+            set.push(i);
+            visited.insert(sorted(&set));
+            current = e;
+            for (pos, &i) in set.iter().enumerate() {
+                if let Some(t) = current.model.terms().get(first_new + pos) {
+                    cands[i].coefficient = t.coefficient;
+                }
+            }
+            continue;
+        }
+        let mut ranked: Vec<(usize, f64, f64)> = (0..cands.len())
+            .filter(|i| !set.contains(i))
+            .filter_map(|i| screen.single(i).map(|(drop, c)| (i, drop, c)))
+            .collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let trials = ranked
+            .iter()
+            .take(config.screen)
+            .map(|&(i, _, coefficient)| {
+                let mut trial = set.clone();
+                trial.push(i);
+                let mut trial_cands = cands.clone();
+                trial_cands[i].coefficient = coefficient;
+                TrialSet {
+                    key: i,
+                    cands: trial_cands,
+                    set: trial,
+                    check_new: 1,
+                }
+            })
+            .collect();
+        match best_trial(&ctx, trials)? {
             Some((i, e)) if m * (current.cost - e.cost) * e.neff_ratio > threshold => {
-                let c = &candidates[i];
+                let c = &cands[i];
                 steps.push(RefineStep {
                     action: "add".into(),
                     effect: c.effect.clone(),
@@ -388,39 +659,46 @@ pub fn refine_by_free_run(
                 current = e;
             }
             _ => {
-                // No single term helps significantly: try pairs within one equation (terms
+                // No single term helps significantly: pairs within one equation (terms
                 // that only work together, e.g. `v` and `x²v` of amplitude-dependent
-                // damping), judged jointly against χ²₂.
+                // damping), ranked by their joint score, judged against χ²₂.
                 let pair_threshold = chi2_quantile(1.0 - config.alpha, 2.0)?;
-                let mut best_pair: Option<((usize, usize), Eval)> = None;
-                let mut tried = 0;
-                'pairs: for i in 0..candidates.len() {
-                    for j in i + 1..candidates.len() {
-                        if set.contains(&i)
-                            || set.contains(&j)
-                            || candidates[i].state != candidates[j].state
+                let mut pairs: Vec<((usize, usize), f64, [f64; 2])> = Vec::new();
+                for i in 0..cands.len() {
+                    for j in i + 1..cands.len() {
+                        if set.contains(&i) || set.contains(&j) || cands[i].state != cands[j].state
                         {
                             continue;
                         }
-                        if tried >= MAX_PAIRS {
-                            break 'pairs;
-                        }
-                        tried += 1;
-                        let mut trial = set.clone();
-                        trial.extend([i, j]);
-                        if let Some(e) = evaluate(&ctx, &trial, 2)?
-                            && best_pair.as_ref().is_none_or(|(_, b)| e.cost < b.cost)
-                        {
-                            best_pair = Some(((i, j), e));
+                        if let Some((drop, c)) = screen.pair(i, j) {
+                            pairs.push(((i, j), drop, c));
                         }
                     }
                 }
-                match best_pair {
+                pairs.sort_by(|a, b| b.1.total_cmp(&a.1));
+                let trials = pairs
+                    .iter()
+                    .take(config.screen)
+                    .map(|&((i, j), _, [ci, cj])| {
+                        let mut trial = set.clone();
+                        trial.extend([i, j]);
+                        let mut trial_cands = cands.clone();
+                        trial_cands[i].coefficient = ci;
+                        trial_cands[j].coefficient = cj;
+                        TrialSet {
+                            key: (i, j),
+                            cands: trial_cands,
+                            set: trial,
+                            check_new: 2,
+                        }
+                    })
+                    .collect();
+                match best_trial(&ctx, trials)? {
                     Some(((i, j), e))
                         if m * (current.cost - e.cost) * e.neff_ratio > pair_threshold =>
                     {
                         for k in [i, j] {
-                            let c = &candidates[k];
+                            let c = &cands[k];
                             steps.push(RefineStep {
                                 action: "add (pair)".into(),
                                 effect: c.effect.clone(),
@@ -437,7 +715,15 @@ pub fn refine_by_free_run(
                 }
             }
         }
+        // Later steps start from the calibrated coefficients.
+        for (pos, &i) in set.iter().enumerate() {
+            if let Some(t) = current.model.terms().get(first_new + pos) {
+                cands[i].coefficient = t.coefficient;
+            }
+        }
     }
+    // Whatever stopped the search, end with no term whose removal is insignificant.
+    while !set.is_empty() && remove_step(&mut set, &mut current, &mut steps, &cands)? {}
     Ok(Refinement {
         selected: set,
         model: current.model,

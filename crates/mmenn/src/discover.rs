@@ -194,6 +194,27 @@ fn free_run_gap(
     Ok((gap, y))
 }
 
+/// Initial states of every record, fitted to its first `window` samples with `model`.
+fn holdout_initial_states(
+    model: &TermModel,
+    spec: &ModelSpec,
+    data: &Dataset,
+    guess: &[f64],
+    window: usize,
+) -> Result<Vec<Vec<f64>>> {
+    let fit = InitialStateFit {
+        window,
+        ..InitialStateFit::default()
+    };
+    data.experiments()
+        .iter()
+        .map(|exp| {
+            fit_initial_state(model, spec.linear.c(), exp, guess, &fit)
+                .map_err(core("fitting a validation record's initial state"))
+        })
+        .collect()
+}
+
 fn d_rms(est: &sysid_core::MmeEstimate) -> BTreeMap<String, f64> {
     let mut out = BTreeMap::new();
     for (i, name) in est.correction_names.iter().enumerate() {
@@ -425,13 +446,30 @@ pub fn run_discover(
             .iter()
             .map(|e| e.states.column(0).iter().copied().collect())
             .collect();
-        let refined = discovery::refine_by_free_run(
+        // Validation records, when given, judge every candidate set (coefficients are
+        // calibrated on the estimation data only).
+        let val_x0: Option<Vec<Vec<f64>>> = match &val {
+            Some(v) => Some(holdout_initial_states(
+                &current,
+                &spec,
+                v,
+                &x0_guess,
+                opts.x0_window,
+            )?),
+            None => None,
+        };
+        let holdout = match (&val, &val_x0) {
+            (Some(v), Some(x)) => Some(discovery::Holdout { data: v, x0: x }),
+            _ => None,
+        };
+        let refined = discovery::refine_with_holdout(
             &current,
             &candidates,
             &initial,
             &data,
             &x0s,
             &est.noise_variance,
+            holdout,
             &RefineConfig::default(),
         )?;
         if refined.selected.is_empty() {
