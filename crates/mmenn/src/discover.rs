@@ -25,6 +25,11 @@ use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
 use crate::plot::{Figure, Series};
 
+/// Largest free-run cost `J = (1/M) Σ r²/R` (1 for a right model and right noise
+/// variance) at which named effects are claimed: twice the noise power leaves room for an
+/// estimated `R` and a coloured residual, but not for a missing effect.
+pub const CONFIRM_COST: f64 = 2.0;
+
 /// Options of [`run_discover`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct DiscoverOptions {
@@ -137,10 +142,15 @@ pub struct Round {
 /// `discovery.json`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DiscoverSummary {
-    /// `found` if any round named an effect; else the first round's verdict.
+    /// `found` if a round was accepted; `unexplained` if a round was rejected or the
+    /// free-run search left a cost above the noise level; else `none`.
     pub verdict: Verdict,
     /// Every named effect, with its calibrated coefficient and the regression's interval.
     pub effects: Vec<NamedEffect>,
+    /// Terms that improved the model (and are in `model.discovered.toml`) but did not
+    /// bring its free-run cost down to the noise level, so they are not claimed as the
+    /// missing physics (verdict `unexplained`).
+    pub unconfirmed: Vec<NamedEffect>,
     /// Gap on the estimation data (`before`, `after`), and on validation data when given.
     pub gap: GapPair,
     /// Gap on the validation data.
@@ -320,9 +330,17 @@ pub fn run_discover(
     let mut effects: Vec<NamedEffect> = Vec::new();
     let mut first_verdict = None;
     let mut any_rejected = false;
+    // Free-run cost (held-out when given) of the last accepted model.
+    let mut accepted_cost = f64::NAN;
     for _ in 0..opts.max_rounds.max(1) {
         let est = &result.estimate;
-        let floor = noise_floor(&spec, &data, est, opts)?;
+        // After an accepted round, a model MME cannot handle ends the search (the first
+        // round's failure is the user's problem and is reported as an error).
+        let floor = match noise_floor(&spec, &data, est, opts) {
+            Ok(f) => f,
+            Err(_) if !rounds.is_empty() => break,
+            Err(e) => return Err(e),
+        };
         let all_samples = discovery::samples_from_estimate(est, &data)?;
         let samples = trim_ends(&all_samples, opts.trim_fraction)?;
         let found = discovery::discover(
@@ -520,7 +538,24 @@ pub fn run_discover(
         // Proof before acceptance: the augmented model must leave MME less to correct
         // (total d̂ mean square, relative to the floor, down by at least `min_d_drop`), and,
         // when validation data are given, simulate them free-run no worse than before.
-        let new_result = estimate_spec(&augmented, &data, &mme_config(&augmented, &opts.estimate))?;
+        let new_result =
+            match estimate_spec(&augmented, &data, &mme_config(&augmented, &opts.estimate)) {
+                Ok(r) => r,
+                Err(e) => {
+                    rounds.push(Round {
+                        discovery: found,
+                        localisation,
+                        floor_rms: floor.rms.clone(),
+                        refinement: refined.steps,
+                        calibrated,
+                        calibration_cost: refined.cost,
+                        rejected: Some(format!("MME failed on the augmented model: {e}")),
+                    });
+                    effects.truncate(effects_before_round);
+                    any_rejected = true;
+                    break;
+                }
+            };
         let ms = |e: &sysid_core::MmeEstimate| {
             d_rms(e)
                 .values()
@@ -585,6 +620,7 @@ pub fn run_discover(
             any_rejected = true;
             break;
         }
+        accepted_cost = refined.cost[1];
         spec = augmented;
         result = new_result;
     }
@@ -611,16 +647,42 @@ pub fn run_discover(
     write_model(&out.join("model.discovered.toml"), &written)?;
     // Found: a round was accepted. Unexplained: the library fitted something but the proof
     // failed (never name an effect that does not make the model better).
+    // With nothing named, the free-run search's last cost decides between `none` (the
+    // model already simulates the (held-out) data to the noise level: J within 3σ of 1,
+    // σ = √(2/M) for M measured values) and `unexplained`.
+    let judged = val.as_ref().unwrap_or(&data);
+    let measured: usize = judged
+        .experiments()
+        .iter()
+        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
+        .sum();
+    let last_cost = rounds
+        .last()
+        .map(|r| r.calibration_cost[1])
+        .filter(|c| c.is_finite());
+    let at_noise_level = |j: f64| j <= 1.0 + 3.0 * (2.0 / measured.max(1) as f64).sqrt();
+    // Named effects are claimed only when they bring the free-run cost down to the noise
+    // level (within `CONFIRM_COST`); otherwise a combination of catalogue terms may be
+    // standing in for something outside the catalogue.
+    let mut unconfirmed = Vec::new();
+    if !effects.is_empty() && (accepted_cost.is_nan() || accepted_cost > CONFIRM_COST) {
+        unconfirmed = std::mem::take(&mut effects);
+    }
     let verdict = if !effects.is_empty() {
         Verdict::Found
-    } else if any_rejected {
+    } else if any_rejected || !unconfirmed.is_empty() {
         Verdict::Unexplained
     } else {
-        first_verdict.unwrap_or(Verdict::None)
+        match last_cost {
+            Some(j) if at_noise_level(j) => Verdict::None,
+            Some(_) => Verdict::Unexplained,
+            None => first_verdict.unwrap_or(Verdict::None),
+        }
     };
     let summary = DiscoverSummary {
         verdict,
         effects,
+        unconfirmed,
         gap: GapPair { before, after },
         validation_gap,
         model: "model.discovered.toml".into(),
@@ -747,6 +809,17 @@ fn report(s: &DiscoverSummary) -> String {
             ));
         }
         r.push_str("\nThe regression on d̂ is shrunk by W, so coefficients are recalibrated by free-run simulation error; the interval is the regression's.\n");
+    }
+    if !s.unconfirmed.is_empty() {
+        r.push_str(&format!(
+            "These terms improved the model (they are in `model.discovered.toml`) but left its free-run cost above {CONFIRM_COST} × the noise level, so they are **not claimed** as the missing physics — something outside the catalogue may be at work:\n\n"
+        ));
+        for e in &s.unconfirmed {
+            r.push_str(&format!(
+                "- {} in d({}): `{}` × {:.6}\n",
+                e.name, e.state, e.term, e.coefficient
+            ));
+        }
     }
     r.push_str("\n## Gap on the estimation data (free-run simulation; d̂ from MME)\n\n");
     r.push_str(&gap_table(&s.gap));

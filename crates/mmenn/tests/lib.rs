@@ -3,6 +3,7 @@
 mod compare;
 mod discover;
 mod fit;
+mod hidden_effects;
 mod monitor;
 mod real_data;
 mod simulate;

@@ -5,6 +5,7 @@ pub mod double_pendulum;
 pub mod error;
 pub mod msd;
 pub mod noise;
+pub mod oscillator;
 pub mod params;
 pub mod pendulum;
 pub mod recipe;
@@ -24,6 +25,7 @@ pub use double_pendulum::{
 pub use error::{PlantError, Result};
 pub use msd::{MSD_DAMPING_CLASSES, MsdCubic, MsdCubicParams};
 pub use noise::{add_noise, gaussian_noise};
+pub use oscillator::{Oscillator, OscillatorParams};
 pub use params::{ParamInfo, Parameters};
 pub use pendulum::{Pendulum, PendulumParams};
 pub use recipe::{

@@ -16,6 +16,7 @@ use crate::double_pendulum::{self, DoublePendulum, DoublePendulumParams};
 use crate::error::{PlantError, Result};
 use crate::msd::{self, MsdCubic, MsdCubicParams};
 use crate::noise::add_noise;
+use crate::oscillator::{self, Oscillator, OscillatorParams};
 use crate::params::{ParamInfo, Parameters};
 use crate::pendulum::{self, Pendulum, PendulumParams};
 use crate::signals::SampleGrid;
@@ -73,13 +74,14 @@ pub struct SystemInfo {
 }
 
 /// Registered systems, in listing order.
-const NAMES: [&str; 6] = [
+const NAMES: [&str; 7] = [
     msd::NAME,
     pendulum::NAME,
     compound_pendulum::NAME,
     double_pendulum::NAME,
     two_tank::NAME,
     van_der_pol::NAME,
+    oscillator::NAME,
 ];
 
 /// Every registered system with its defaults.
@@ -126,6 +128,7 @@ pub fn build_system(name: &str, overrides: &[(String, f64)]) -> Result<Box<dyn T
         }
         two_tank::NAME => with_overrides::<TwoTankParams, _>(overrides, TwoTank::new),
         van_der_pol::NAME => with_overrides::<VanDerPolParams, _>(overrides, VanDerPol::new),
+        oscillator::NAME => with_overrides::<OscillatorParams, _>(overrides, Oscillator::new),
         other => Err(PlantError::UnknownSystem {
             name: other.to_string(),
         }),

@@ -413,6 +413,12 @@ fn discover(a: DiscoverArgs) -> Result<()> {
             e.name, e.state, e.term, e.coefficient, e.named_by
         );
     }
+    for e in &s.unconfirmed {
+        println!(
+            "  not claimed (cost stays above the noise level): {} in d({}): {} × {:.6}",
+            e.name, e.state, e.term, e.coefficient
+        );
+    }
     let show = |label: &str, g: &mmenn::discover::GapPair| {
         for (k, b) in &g.before.fit_percent {
             println!(
