@@ -1,20 +1,33 @@
 //! The simulated data sets of the reproduction: which systems, recipes, noise levels,
 //! sample rates and seeds; their generation into `fixtures/data/<name>/<recipe>/`
-//! (`data.csv`, `truth.csv`, `model.toml`); and, under `--check`, their comparison with the
-//! committed files.
+//! (`data.csv`, `truth.csv`, `model.toml`); and, under `--check`, the comparison of their
+//! summary statistics with the committed `fixtures/data_summary.json` (see
+//! [`crate::summary`]).
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
-use mmenn::data_file::{Table as CsvTable, read_table};
+use anyhow::{Context, Result};
+use mmenn::data_file::read_table;
 use mmenn::plants::{Recipe, SimulatedData, SimulationRequest, simulate_system};
 use mmenn::simulate::{SimulateOutput, write_simulation};
+
+use crate::summary::{DataSummary, FileSummary};
 
 /// Seed of the measurement noise of every data set (the recipes' inputs are fixed).
 pub const NOISE_SEED: u64 = 1;
 
 /// Damping classes of the condition-monitoring study (thesis ch. 6), N·s/m.
 pub const MSD_CLASSES: [f64; 3] = [0.1, 0.15, 0.2];
+
+/// The simulated double-pendulum rig (stand-in for the thesis's §5.6 experiment): the
+/// nominal rods with joint Coulomb friction 0.01 N·m (≈ 3 % of the lower rod's largest
+/// gravity torque) and 20 % / 50 % more viscous damping at the joint / pivot than the
+/// nominal physics model (c2 = 0.03, c1 = 0.01) knows.
+pub const RIG_PARAMS: [(&str, f64); 3] = [("tau_c2", 0.01), ("c2", 0.036), ("c1", 0.015)];
+
+/// Angle noise of the rig, rad² (σ ≈ 3.2 mrad ≈ 0.18°, an encoder-class sensor; the
+/// simulation study uses 1e-6).
+pub const RIG_NOISE: f64 = 1e-5;
 
 /// One data set to generate.
 #[derive(Debug, Clone, PartialEq)]
@@ -81,6 +94,14 @@ pub fn specs(class_seeds: u64) -> Vec<DataSpec> {
         },
         DataSpec::new("compound_pendulum", "compound_pendulum"),
         DataSpec::new("double_pendulum", "double_pendulum"),
+        DataSpec {
+            noise: Some(RIG_NOISE),
+            params: RIG_PARAMS
+                .iter()
+                .map(|(n, v)| (n.to_string(), *v))
+                .collect(),
+            ..DataSpec::new("double_pendulum_rig", "double_pendulum")
+        },
     ];
     for (name, fs) in [
         ("two_tank_10hz", 10.0),
@@ -142,79 +163,51 @@ impl DataSet {
     }
 }
 
-/// Largest difference between a regenerated and a committed CSV, relative to each
-/// column's largest magnitude (so it reads the same for metres and radians).
-fn relative_difference(new: &CsvTable, old: &CsvTable) -> Result<f64> {
-    if new.header != old.header {
-        bail!(
-            "header {:?} differs from the committed {:?}",
-            new.header,
-            old.header
-        );
-    }
-    let mut worst = 0.0_f64;
-    for (a, b) in new.columns.iter().zip(&old.columns) {
-        if a.len() != b.len() {
-            bail!("{} rows, the committed file has {}", a.len(), b.len());
-        }
-        let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs())).max(1e-300);
-        for (x, y) in a.iter().zip(b) {
-            worst = worst.max((x - y).abs() / scale);
-        }
-    }
-    Ok(worst)
-}
+/// One generated data set, its problems under `--check` and its files' summaries.
+type Generated = (DataSet, Vec<String>, Vec<(String, FileSummary)>);
 
-/// Data files whose regenerated numbers differ from the committed ones by more than this
-/// (relative to the column's range) fail `--check`. The truth is integrated to rtol 1e-10,
-/// so round-off differences between machines (libm, instruction choice) stay orders of
-/// magnitude below it except on a chaotic record.
+/// Data files whose regenerated summary statistics differ from the committed ones by more
+/// than this (relative to the column's largest magnitude) fail `--check`. The truth is
+/// integrated to rtol 1e-10, so round-off differences between machines (libm, instruction
+/// choice) stay orders of magnitude below it except on a chaotic record.
 pub const DATA_TOLERANCE: f64 = 1e-6;
 
-/// Generate every data set into `dir`. With `committed`, compare each regenerated file with
-/// the committed one of the same name first (read before anything is overwritten) and
-/// return one line per difference beyond [`DATA_TOLERANCE`].
+/// Generate every data set into `dir` and summarise every written CSV (keys
+/// `<name>/<recipe>/<file>`). With `committed`, compare each summary with the committed
+/// one and return one line per difference beyond [`DATA_TOLERANCE`].
 pub fn generate(
     specs: &[DataSpec],
     dir: &Path,
-    committed: Option<&Path>,
-) -> Result<(Vec<DataSet>, Vec<String>)> {
+    committed: Option<&DataSummary>,
+) -> Result<(Vec<DataSet>, Vec<String>, DataSummary)> {
     use rayon::prelude::*;
-    let results: Vec<Result<(DataSet, Vec<String>)>> = specs
+    let results: Vec<Result<Generated>> = specs
         .par_iter()
         .map(|spec| {
             let mut problems = Vec::new();
+            let mut summaries = Vec::new();
             let mut make = |recipe: Recipe| -> Result<Record> {
                 let sim = simulate_system(&spec.request(recipe))
                     .with_context(|| format!("simulating {} ({recipe})", spec.name))?;
                 let sub: PathBuf = dir.join(&spec.name).join(recipe.to_string());
-                let old: Vec<(String, Option<CsvTable>)> = match committed {
-                    Some(c) => ["data.csv", "truth.csv"]
-                        .iter()
-                        .map(|f| {
-                            let p = c.join(&spec.name).join(recipe.to_string()).join(f);
-                            (f.to_string(), read_table(&p).ok())
-                        })
-                        .collect(),
-                    None => Vec::new(),
-                };
                 let files = write_simulation(&sim, &sub)
                     .with_context(|| format!("writing {}", sub.display()))?;
-                for (f, old) in old {
+                for f in ["data.csv", "truth.csv"] {
                     let label = format!("{}/{recipe}/{f}", spec.name);
-                    match old {
-                        None => problems.push(format!("{label}: no committed file to compare")),
-                        Some(old) => {
-                            let new = read_table(&sub.join(&f))?;
-                            match relative_difference(&new, &old) {
-                                Ok(d) if d <= DATA_TOLERANCE => {}
-                                Ok(d) => problems.push(format!(
-                                    "{label}: differs from the committed file by {d:.3e} of the column range (> {DATA_TOLERANCE:e})"
+                    let new = FileSummary::of(&read_table(&sub.join(f))?);
+                    if let Some(c) = committed {
+                        match c.files.get(&label) {
+                            None => problems.push(format!("{label}: no committed summary to compare")),
+                            Some(old) => match new.difference(old) {
+                                Ok((d, _)) if d <= DATA_TOLERANCE => {}
+                                Ok((d, what)) => problems.push(format!(
+                                    "{label}: {what} differs from the committed summary by {d:.3e} of the column's largest magnitude (> {DATA_TOLERANCE:e})"
                                 )),
                                 Err(e) => problems.push(format!("{label}: {e}")),
-                            }
+                            },
                         }
                     }
+                    summaries.push((label, new));
                 }
                 Ok(Record { files, sim })
             };
@@ -231,17 +224,20 @@ pub fn generate(
                     test,
                 },
                 problems,
+                summaries,
             ))
         })
         .collect();
     let mut sets = Vec::new();
     let mut problems = Vec::new();
+    let mut summary = DataSummary::default();
     for r in results {
-        let (s, p) = r?;
+        let (s, p, f) = r?;
         sets.push(s);
         problems.extend(p);
+        summary.files.extend(f);
     }
-    Ok((sets, problems))
+    Ok((sets, problems, summary))
 }
 
 /// The data set named `name`.

@@ -10,6 +10,7 @@ mod experiments;
 mod progress;
 mod report;
 mod stamp;
+mod summary;
 mod table;
 
 use std::collections::BTreeMap;
@@ -24,6 +25,7 @@ use crate::check::{TABLE_FORMAT, TableFile};
 use crate::experiments::{Ctx, FIT_SEED, Mode, Outcome};
 use crate::progress::Progress;
 use crate::stamp::Stamp;
+use crate::summary::DataSummary;
 use crate::table::Table;
 
 /// Development tasks of the mmenn workspace.
@@ -46,11 +48,13 @@ struct ReproduceArgs {
     /// docs/results/quick.
     #[arg(long)]
     quick: bool,
-    /// Compare the tables with fixtures/tables/<mode>/ and the data with fixtures/data;
-    /// fail with a diff when anything drifts beyond the stated tolerances.
+    /// Compare the tables with fixtures/tables/<mode>/ and the data files' summary
+    /// statistics with fixtures/data_summary.json; fail with a diff when anything drifts
+    /// beyond the stated tolerances.
     #[arg(long, conflicts_with = "bless")]
     check: bool,
-    /// Write this run's tables as the new fixtures (fixtures/tables/<mode>/).
+    /// Write this run's tables as the new fixtures (fixtures/tables/<mode>/) and its data
+    /// summaries into fixtures/data_summary.json.
     #[arg(long)]
     bless: bool,
     /// Folder holding the real benchmarks (cascaded_tanks/, silverbox/, emps/); default
@@ -60,10 +64,11 @@ struct ReproduceArgs {
     /// Root for fixtures/data and docs/results (default: the workspace).
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Fixture folder holding tables/<mode>/ and data/ (default: the workspace's fixtures/).
+    /// Fixture folder holding tables/<mode>/ and data_summary.json (default: the
+    /// workspace's fixtures/).
     #[arg(long)]
     fixtures: Option<PathBuf>,
-    /// Only these experiment groups (ch2, ch4, ch6, real), comma-separated.
+    /// Only these experiment groups (ch2, ch4, ch6, real, discovery), comma-separated.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Worker threads (default: all cores).
@@ -140,11 +145,16 @@ fn reproduce(args: ReproduceArgs) -> Result<()> {
     );
 
     let clock = Instant::now();
-    let committed = fixture_root.join("data");
-    let (sets, data_problems) = data::generate(
+    let summary_path = fixture_root.join("data_summary.json");
+    let committed = if args.check {
+        Some(DataSummary::read(&summary_path)?)
+    } else {
+        None
+    };
+    let (sets, data_problems, data_summary) = data::generate(
         &data::specs(mode.class_seeds()),
         &data_dir,
-        args.check.then_some(committed.as_path()),
+        committed.as_ref(),
     )?;
     let data_seconds = clock.elapsed().as_secs_f64();
     progress.line(
@@ -274,12 +284,19 @@ fn reproduce(args: ReproduceArgs) -> Result<()> {
                 serde_json::to_string_pretty(&file)?.as_bytes(),
             )?;
         }
+        // The quick and full runs generate different sets (ch6 noise seeds): keep the
+        // other mode's entries, replace this run's.
+        let mut summary = DataSummary::read(&summary_path)?;
+        let n_files = data_summary.files.len();
+        summary.files.extend(data_summary.files);
+        summary.write(&summary_path)?;
         ctx.progress.line(
             "bless",
             &format!(
-                "{} fixture tables written to {}",
+                "{} fixture tables written to {}; summaries of {n_files} data files to {}",
                 tables.len(),
-                fixture_tables.display()
+                fixture_tables.display(),
+                summary_path.display()
             ),
         );
     }

@@ -1,7 +1,8 @@
 //! The CI regression guard: `cargo xtask reproduce --quick --check` into a temporary folder
 //! must agree with the committed fixtures (tables within their stated tolerances, data
-//! files within `DATA_TOLERANCE`), and a fixture moved beyond its tolerance must be caught
-//! with a diff naming the table, row and column.
+//! files' summary statistics within `DATA_TOLERANCE`), and a fixture moved beyond its
+//! tolerance must be caught with a diff naming the table, row and column (or the data
+//! file and statistic).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -85,6 +86,45 @@ fn drift_beyond_tolerance_is_reported() {
         msg.contains("ch2_msd_mme [d_v (model correction, m/s²), whole record] r2"),
         "{msg}"
     );
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&fixtures);
+}
+
+/// A data summary moved by 1e-3 of its column's scale (1000 times the tolerance) fails
+/// the check, and the message names the file.
+#[test]
+fn data_drift_is_reported() {
+    let fixtures = temp("data-fixtures");
+    copy_dir(
+        &workspace().join("fixtures").join("tables"),
+        &fixtures.join("tables"),
+    );
+    let src = workspace().join("fixtures/data_summary.json");
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&src).expect("data summary")).expect("json");
+    let col = &mut v["files"]["msd_cubic/train/data.csv"]["columns"][1];
+    let scale = col["scale"].as_f64().expect("scale");
+    let mean = col["mean"].as_f64().expect("mean");
+    col["mean"] = serde_json::json!(mean + 1e-3 * scale);
+    std::fs::write(
+        fixtures.join("data_summary.json"),
+        serde_json::to_string(&v).expect("json"),
+    )
+    .expect("write");
+    let out = temp("data-drift");
+    let o = reproduce(
+        &out,
+        &[
+            "--only",
+            "ch2",
+            "--fixtures",
+            fixtures.to_str().expect("utf-8 path"),
+        ],
+    );
+    let msg = text(&o);
+    assert!(!o.status.success(), "a drifted data summary passed:\n{msg}");
+    assert!(msg.contains("msd_cubic/train/data.csv"), "{msg}");
+    assert!(msg.contains("mean differs"), "{msg}");
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_dir_all(&fixtures);
 }

@@ -2,7 +2,10 @@
 //! mass–spring–damper at damping c ∈ {0.1, 0.15, 0.2} N·s/m. Per class and noise seed:
 //! MME gives `d̂`, a network learns `(x̂, v̂, u) → d̂`; its weights (raw, as in the thesis, or
 //! canonicalised) or named physical coefficients are the features; cross-validated error %
-//! of LDA, QDA, k-NN and naive Bayes, with and without PCA.
+//! of LDA, QDA, k-NN and naive Bayes, with and without PCA. The double-pendulum study
+//! (Tables 6-4, 6-5) is in [`double`]; both share the table layout defined here.
+
+mod double;
 
 use anyhow::{Context, Result};
 use condmon::{
@@ -26,8 +29,13 @@ pub const TABLE: &str = "ch6_msd_condition";
 /// Hidden units of the feature networks (the thesis used 1-node and 3- or 6-node nets).
 const HIDDEN: [usize; 2] = [1, 3];
 
-/// The job.
-pub fn job() -> Job {
+/// The jobs: the mass–spring–damper study and the double-pendulum study.
+pub fn jobs() -> Vec<Job> {
+    vec![job(), double::job()]
+}
+
+/// The mass–spring–damper job.
+fn job() -> Job {
     Job {
         name: "ch6 condition monitoring (MSD damping classes)".into(),
         group: "ch6",
@@ -100,69 +108,34 @@ fn run(ctx: &Ctx) -> Result<Outcome> {
         .collect::<Result<Vec<_>>>()?;
     let labels: Vec<usize> = samples.iter().map(|s| s.label).collect();
     let n = samples.len();
-    // One sample is 100/n % of the error; allow three samples to flip between machines.
-    let flips = 3.0 * 100.0 / n as f64;
-    let mut table = Table::new(
+    let mut table = new_table(
         TABLE,
-        "Ch. 6 (Tables 6-2…6-5 analogue): damping classification error, cubic MSD, leave-one-out",
-        &["features", "classifier", "preprocessing"],
-        vec![
-            Column::checked(
-                "error_percent",
-                "%",
-                Tolerance::abs(flips),
-                "one sample is 100/N %; networks trained on another machine may land on other \
-                 equivalent weights, so three samples may change class",
-                3,
-            ),
-            Column::info("n_features", "-", "feature count before PCA", 3),
-        ],
+        "Ch. 6 (Tables 6-2, 6-3 analogue): damping classification error, cubic MSD, leave-one-out",
+        n,
     );
-    let mut sets: Vec<(String, Vec<NamedFeatures>)> = Vec::new();
+    let mut sets: Vec<FeatureSet> = Vec::new();
     for (i, h) in HIDDEN.iter().enumerate() {
-        sets.push((
-            format!("raw weights, {h}-node net"),
-            samples.iter().map(|s| raw_weights(&s.nets[i])).collect(),
-        ));
-        sets.push((
-            format!("canonical weights, {h}-node net"),
-            samples
+        sets.push(FeatureSet {
+            name: format!("raw weights, {h}-node net"),
+            labels: labels.clone(),
+            features: samples.iter().map(|s| raw_weights(&s.nets[i])).collect(),
+        });
+        sets.push(FeatureSet {
+            name: format!("canonical weights, {h}-node net"),
+            labels: labels.clone(),
+            features: samples
                 .iter()
                 .map(|s| canonical_weights(&s.nets[i]))
                 .collect::<condmon::Result<Vec<_>>>()?,
-        ));
+        });
     }
-    sets.push((
-        "physical (a_v, b_x3 from d̂)".into(),
-        samples.iter().map(|s| s.physical.clone()).collect(),
-    ));
-    let columns = [Preprocessing::default(), Preprocessing::pca_fraction(0.95)];
-    let config = CvConfig {
-        scheme: CvScheme::LeaveOneOut,
-        ..CvConfig::default()
-    };
-    let classifiers = ClassifierSpec::thesis_set();
-    for (name, feats) in sets {
-        let x = stack(&feats)?;
-        let p = x.values().ncols() as f64;
-        match error_table(x.values(), &labels, &classifiers, &columns, &config) {
-            Ok(t) => {
-                for (r, row) in t.rows.iter().enumerate() {
-                    for (c, col) in t.columns.iter().enumerate() {
-                        let e = t.cell(r, c).map(|cell| cell.error_percent());
-                        table.push(&[&name, row, col], &[e, Some(p)]);
-                    }
-                }
-            }
-            Err(e) => {
-                table.note(format!("{name}: no error table: {e}"));
-                for spec in &classifiers {
-                    for col in &columns {
-                        table.push(&[&name, &spec.label(), &col.label()], &[None, Some(p)]);
-                    }
-                }
-            }
-        }
+    sets.push(FeatureSet {
+        name: "physical (a_v, b_x3 from d̂)".into(),
+        labels,
+        features: samples.iter().map(|s| s.physical.clone()).collect(),
+    });
+    for set in &sets {
+        error_rows(&mut table, set)?;
     }
     table.note(format!(
         "{n} records: {seeds} noise seeds × 3 damping classes (c = 0.1, 0.15, 0.2 N·s/m), \
@@ -174,4 +147,80 @@ fn run(ctx: &Ctx) -> Result<Outcome> {
         tables: vec![table],
         ..Outcome::default()
     })
+}
+
+/// One feature variant: a name, the class of each sample and its features.
+pub struct FeatureSet {
+    /// Row label (`raw weights, 3-node net`…).
+    pub name: String,
+    /// Class index per sample.
+    pub labels: Vec<usize>,
+    /// Features per sample (same names in every sample).
+    pub features: Vec<NamedFeatures>,
+}
+
+/// An empty condition-monitoring table; `n` is the smallest sample count of its rows
+/// (sets the tolerance: three samples may flip class).
+pub fn new_table(id: &str, title: &str, n: usize) -> Table {
+    let flips = 3.0 * 100.0 / n.max(1) as f64;
+    Table::new(
+        id,
+        title,
+        &["features", "classifier", "preprocessing"],
+        vec![
+            Column::checked(
+                "error_percent",
+                "%",
+                Tolerance::abs(flips),
+                "one sample is 100/N %; networks trained on another machine may land on other \
+                 equivalent weights, so three samples (of the smallest set) may change class",
+                3,
+            ),
+            Column::info("n_features", "-", "feature count before PCA", 3),
+            Column::info(
+                "n_samples",
+                "-",
+                "samples (networks or records) classified",
+                3,
+            ),
+        ],
+    )
+}
+
+/// Leave-one-out error % of LDA, QDA, k-NN and naive Bayes, without and with PCA (95 %
+/// of the variance), on one feature set; a set whose error table cannot be made gets
+/// empty cells and a note.
+pub fn error_rows(table: &mut Table, set: &FeatureSet) -> Result<()> {
+    let x = stack(&set.features)?;
+    let p = x.values().ncols() as f64;
+    let n = set.labels.len() as f64;
+    let columns = [Preprocessing::default(), Preprocessing::pca_fraction(0.95)];
+    let config = CvConfig {
+        scheme: CvScheme::LeaveOneOut,
+        ..CvConfig::default()
+    };
+    let classifiers = ClassifierSpec::thesis_set();
+    let name = &set.name;
+    match error_table(x.values(), &set.labels, &classifiers, &columns, &config) {
+        Ok(t) => {
+            for (r, row) in t.rows.iter().enumerate() {
+                for (c, col) in t.columns.iter().enumerate() {
+                    let e = t.cell(r, c).map(|cell| cell.error_percent());
+                    table.push(&[name, row, col], &[e, Some(p), Some(n)]);
+                }
+            }
+        }
+        Err(e) => {
+            table.note(format!("{name}: no error table: {e}"));
+            for spec in &classifiers {
+                for col in &columns {
+                    table.push(
+                        &[name, &spec.label(), &col.label()],
+                        &[None, Some(p), Some(n)],
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
 }

@@ -3,6 +3,7 @@
 
 pub mod ch2;
 pub mod ch6;
+pub mod discovery;
 pub mod real;
 pub mod systems;
 
@@ -106,7 +107,7 @@ pub type RunFn = Box<dyn Fn(&Ctx) -> Result<Outcome> + Send + Sync>;
 pub struct Job {
     /// Name on the progress lines.
     pub name: String,
-    /// Group selectable with `--only` (`ch2`, `ch4`, `ch6`, `real`).
+    /// Group selectable with `--only` (`ch2`, `ch4`, `ch6`, `real`, `discovery`).
     pub group: &'static str,
     /// Table ids it produces (to tell why a fixture table is missing when it is not run).
     pub tables: Vec<&'static str>,
@@ -121,8 +122,11 @@ pub struct Job {
 pub fn jobs(mode: Mode) -> Vec<Job> {
     let mut v = vec![ch2::job()];
     v.extend(systems::jobs(mode));
-    v.push(ch6::job());
+    v.extend(ch6::jobs());
     v.extend(real::jobs());
+    if mode == Mode::Full {
+        v.push(discovery::job());
+    }
     v
 }
 
