@@ -110,6 +110,10 @@ pub struct Refinement {
     pub cost: [f64; 2],
     /// The decisions taken.
     pub steps: Vec<RefineStep>,
+    /// Standard error of each kept term's calibrated coefficient (order of `selected`):
+    /// the Gauss–Newton covariance of the estimation-record fit, inflated by
+    /// `√(N/N_eff)` of its residual's lag-1 autocorrelation.
+    pub coefficient_std: Vec<f64>,
 }
 
 /// What every evaluation shares.
@@ -131,6 +135,8 @@ struct Eval {
     neff_ratio: f64,
     /// `(c/σ_c)²` of every term of the set, in set order (ranks removals).
     wald: Vec<f64>,
+    /// Standard error of every term of the set, in set order (colour-inflated).
+    std: Vec<f64>,
 }
 
 fn build(base: &TermModel, candidates: &[RefineCandidate], set: &[usize]) -> Result<TermModel> {
@@ -244,6 +250,7 @@ fn evaluate_on_data(
             cost,
             neff_ratio,
             wald: vec![],
+            std: vec![],
         }));
     }
     let cal = CalibrationConfig {
@@ -284,12 +291,16 @@ fn evaluate_on_data(
             }
         })
         .collect();
+    let std = (first_new..end)
+        .map(|k| fit.coefficient_std[k] / neff_ratio.sqrt())
+        .collect();
     Ok(Some(Eval {
         model: fit.model,
         x0: fit.x0,
         cost: fit.cost_after,
         neff_ratio,
         wald,
+        std,
     }))
 }
 
@@ -730,6 +741,7 @@ pub fn refine_with_holdout(
         x0: current.x0,
         cost: [cost_before, current.cost],
         steps,
+        coefficient_std: current.std,
     })
 }
 

@@ -118,6 +118,9 @@ pub struct NamedEffect {
     pub share_of_d: Option<f64>,
     /// Which stage named it.
     pub named_by: String,
+    /// 95 % interval of the calibrated coefficient (free-run fit's Gauss–Newton standard
+    /// error, inflated for residual colour; ±1.96 σ).
+    pub ci95_calibrated: Option<[f64; 2]>,
 }
 
 /// One round of discovery.
@@ -509,7 +512,12 @@ pub fn run_discover(
             .map(|t| t.coefficient)
             .collect();
         let mut augmented = spec.clone();
-        for (&i, c) in refined.selected.iter().zip(&calibrated) {
+        for (pos, (&i, c)) in refined.selected.iter().zip(&calibrated).enumerate() {
+            let ci95_calibrated = refined
+                .coefficient_std
+                .get(pos)
+                .filter(|sd| sd.is_finite())
+                .map(|sd| [c - 1.96 * sd, c + 1.96 * sd]);
             let cand = &candidates[i];
             augmented.terms.push(TermEntry {
                 state: cand.state.clone(),
@@ -528,6 +536,7 @@ pub fn run_discover(
                 coefficient: *c,
                 ci95: regression.map(|e| e.ci95),
                 share_of_d: regression.map(|e| e.share_of_d),
+                ci95_calibrated,
                 named_by: if regression.is_some() {
                     "regression on d̂, kept by free-run search".into()
                 } else {
@@ -797,14 +806,17 @@ fn gap_table(g: &GapPair) -> String {
 fn report(s: &DiscoverSummary) -> String {
     let mut r = format!("# Discovery\n\nVerdict: **{:?}**.\n\n", s.verdict);
     if !s.effects.is_empty() {
-        r.push_str("| effect | equation | term | coefficient (free-run calibrated) | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|\n");
+        r.push_str("| effect | equation | term | coefficient (free-run calibrated) | its 95 % CI | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|---|\n");
         for e in &s.effects {
             let ci = e
                 .ci95
                 .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
             let share = e.share_of_d.map_or("—".to_string(), |v| format!("{v:.2}"));
+            let cal = e
+                .ci95_calibrated
+                .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
             r.push_str(&format!(
-                "| {} | {} | `{}` | {:.6} | {ci} | {share} | {} |\n",
+                "| {} | {} | `{}` | {:.6} | {cal} | {ci} | {share} | {} |\n",
                 e.name, e.state, e.term, e.coefficient, e.named_by
             ));
         }

@@ -41,7 +41,8 @@ fn run(label: &str, params: &[(&str, f64)], noise: f64) -> DiscoverSummary {
 
 /// The verdict is `found`, exactly the expected effects are named (catalogue name and
 /// truth coefficient of the correction `d` on `v̇`, i.e. force / m with m = 1), each
-/// calibrated coefficient within 3 % of the truth (measured errors are below 1 %), and
+/// calibrated coefficient within 3 % of the truth (measured errors are below 1 %) with
+/// its 95 % interval covering the truth, and
 /// the validation free-run RMSE falls at least threefold.
 fn expect_found(s: &DiscoverSummary, expected: &[(&str, f64)]) {
     assert_eq!(format!("{:?}", s.verdict), "Found", "{:?}", s.unconfirmed);
@@ -57,6 +58,11 @@ fn expect_found(s: &DiscoverSummary, expected: &[(&str, f64)]) {
             (e.coefficient - truth).abs() < 0.03 * truth.abs(),
             "{name}: {} vs truth {truth}",
             e.coefficient
+        );
+        let [lo, hi] = e.ci95_calibrated.expect("calibrated interval");
+        assert!(
+            lo <= *truth && *truth <= hi,
+            "{name}: 95 % interval [{lo}, {hi}] misses the truth {truth}"
         );
     }
     let v = s.validation_gap.as_ref().unwrap();
