@@ -335,6 +335,8 @@ pub fn run_discover(
     let mut any_rejected = false;
     // Free-run cost (held-out when given) of the last accepted model.
     let mut accepted_cost = f64::NAN;
+    // Whether `result` is MME's estimate with the final model.
+    let mut d_after_known = true;
     for _ in 0..opts.max_rounds.max(1) {
         let est = &result.estimate;
         // After an accepted round, a model MME cannot handle ends the search (the first
@@ -544,6 +546,28 @@ pub fn run_discover(
                 },
             });
         }
+        // Terms that leave the free-run cost far above the noise level will not be claimed:
+        // keep the better model (its free-run error fell on the judged records) but skip
+        // MME's proof and stop — more rounds would only pile up stand-ins.
+        if refined.cost[1] > CONFIRM_COST && refined.cost[1] < refined.cost[0] {
+            rounds.push(Round {
+                discovery: found,
+                localisation,
+                floor_rms: floor.rms.clone(),
+                refinement: refined.steps,
+                calibrated,
+                calibration_cost: refined.cost,
+                rejected: Some(format!(
+                    "free-run cost {:.4e} stays above {CONFIRM_COST} × the noise level: the \
+                     terms improve the model but are not claimed (MME not rerun)",
+                    refined.cost[1]
+                )),
+            });
+            accepted_cost = refined.cost[1];
+            spec = augmented;
+            d_after_known = false;
+            break;
+        }
         // Proof before acceptance: the augmented model must leave MME less to correct
         // (total d̂ mean square, relative to the floor, down by at least `min_d_drop`), and,
         // when validation data are given, simulate them free-run no worse than before.
@@ -641,7 +665,9 @@ pub fn run_discover(
         problem,
     })?;
     let (mut after, y_after) = free_run_gap(&final_model, &spec, &data, &x0_guess, opts.x0_window)?;
-    after.d_rms = d_rms(&result.estimate);
+    if d_after_known {
+        after.d_rms = d_rms(&result.estimate);
+    }
     let validation_gap = match (&val, val_before) {
         (Some(v), Some(b)) => Some(GapPair {
             before: b,
