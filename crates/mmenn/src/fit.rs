@@ -1,5 +1,6 @@
 //! `mmenn fit` and `mmenn predict`: the MME/NN hybrid model (thesis ch. 4). MME gives
-//! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; the plant model
+//! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; by default its weights are then refined
+//! on the training trajectories (thesis §7.1; [`crate::refine`]); the plant model
 //! `ẋ = f(x, u) + E·NN(x, u)` then predicts free-run from an initial state.
 
 use std::collections::BTreeMap;
@@ -19,6 +20,8 @@ use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
 use crate::plot::{Figure, Series};
+pub use crate::refine::{RefineChoice, RefineSummary};
+use crate::refine::{refine_network, validation_run};
 
 /// Format tag of `model.json`.
 pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
@@ -141,6 +144,10 @@ pub struct FitOptions {
     pub update: ModelUpdateChoice,
     /// How the network is picked from the sweep.
     pub selection: NetworkSelection,
+    /// Whether the network is then refined on trajectories (thesis §7.1).
+    pub refine: RefineChoice,
+    /// Settings of that refinement (its `substeps` is replaced by [`FitOptions::substeps`]).
+    pub trajectory: nn::TrajectoryConfig,
 }
 
 impl std::str::FromStr for NetworkSelection {
@@ -243,6 +250,8 @@ impl Default for FitOptions {
             max_hidden: 10,
             update: ModelUpdateChoice::None,
             selection: NetworkSelection::CorrectionMse,
+            refine: RefineChoice::default(),
+            trajectory: nn::TrajectoryConfig::default(),
         }
     }
 }
@@ -327,11 +336,13 @@ pub struct FitSummary {
     pub train: FreeRunReport,
     /// Free-run on the validation record, when given.
     pub validation: Option<FreeRunReport>,
+    /// Trajectory refinement of the network, when asked for.
+    pub refinement: Option<RefineSummary>,
     /// Files written.
     pub files: Vec<String>,
 }
 
-fn metrics_for(
+pub(crate) fn metrics_for(
     names: &[String],
     c: &DMatrix<f64>,
     xs: &DMatrix<f64>,
@@ -435,7 +446,22 @@ pub fn run_fit(
             (i, Some(sse))
         }
     };
-    let network = sweep.networks[chosen].clone();
+    let mut network = sweep.networks[chosen].clone();
+    let val_guess = |ve: &MmeEstimate| -> Vec<f64> {
+        ve.experiments[0].states.column(0).iter().copied().collect()
+    };
+    let val_pair = val_est.as_ref().zip(val.as_ref());
+    let mut refinement = match opts.refine {
+        RefineChoice::None => None,
+        RefineChoice::Trajectory => Some(refine_network(
+            &spec,
+            &mut network,
+            (est, &data),
+            val_pair,
+            &x0,
+            opts,
+        )?),
+    };
     let hybrid = hybrid_model(&spec, network.clone(), &x0, opts.substeps)?;
 
     ensure_dir(out)?;
@@ -453,20 +479,8 @@ pub fn run_fit(
     let validation = match (&val, &val_est) {
         (Some(v), Some(ve)) => {
             let vexp = &v.experiments()[0];
-            let guess: Vec<f64> = ve.experiments[0].states.column(0).iter().copied().collect();
-            let fit = InitialStateFit {
-                window: opts.x0_window,
-                integrator: hybrid.integrator,
-                ..InitialStateFit::default()
-            };
-            let vx0 =
-                fit_initial_state(&hybrid, lin.c(), vexp, &guess, &fit).map_err(|source| {
-                    MmennError::Core {
-                        context: "fitting the validation initial state",
-                        source,
-                    }
-                })?;
-            let vxs = free_run(&hybrid, vexp, &vx0)?;
+            let (vx0, vxs) =
+                validation_run(&hybrid, lin.c(), vexp, &val_guess(ve), opts.x0_window)?;
             let report = FreeRunReport {
                 horizon: Horizon::FreeRun,
                 x0: vx0,
@@ -476,6 +490,15 @@ pub fn run_fit(
                 ),
                 channels: metrics_for(lin.output_names(), lin.c(), &vxs, vexp)?,
             };
+            if let Some(r) = refinement.as_mut() {
+                r.validation_fit_after = Some(
+                    report
+                        .channels
+                        .iter()
+                        .map(|(k, m)| (k.clone(), m.fit_percent))
+                        .collect(),
+                );
+            }
             compare_figure(&spec, vexp, &vxs, &report, "validation")?
                 .write(&out.join("compare_validation.svg"))?;
             files.push("compare_validation.svg".to_string());
@@ -538,6 +561,7 @@ pub fn run_fit(
         model_update: update_report,
         train,
         validation,
+        refinement,
         files,
     };
     write_atomic(
@@ -653,6 +677,9 @@ fn fit_report(s: &FitSummary) -> String {
             v.horizon, v.x0_source
         ));
         r.push_str(&metrics_table(v));
+    }
+    if let Some(refine) = &s.refinement {
+        r.push_str(&refine.markdown());
     }
     r.push_str(
         "\nFigures: `compare_*.svg`, `nn_d_*.svg`, `sweep.svg`; the sweep table is `sweep.csv`.\n",

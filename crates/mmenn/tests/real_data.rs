@@ -1,10 +1,13 @@
-//! `mmenn estimate` and `mmenn compare` on measured data (Cascaded Tanks benchmark, read in
-//! place from `../shared/data` or `MMENN_DATA_DIR`), with the noise variance estimated.
+//! `mmenn estimate`, `mmenn fit` and `mmenn predict` on measured data (Cascaded Tanks
+//! benchmark, read in place from `../shared/data` or `MMENN_DATA_DIR`).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use mmenn::benchmarks::{Benchmark, DataDirSearch};
+use mmenn::benchmarks::{Benchmark, DataDirSearch, load, test_rmse};
+use mmenn::data_file::{read_table, write_experiment};
 use mmenn::estimate::{EstimateOptions, run_estimate};
+use mmenn::fit::{FitOptions, InitialChoice, run_fit, run_predict};
+use mmenn::sysid_core::{Dataset, Experiment, InitialStateFit, fit_initial_state};
 
 const MODEL: &str = r#"
 states = ["x1", "y"]
@@ -18,14 +21,8 @@ units = { y = "V", u = "V" }
 "#;
 
 #[test]
-#[allow(clippy::print_stderr)]
 fn cascaded_tanks_with_estimated_noise() {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let Ok(folder) = DataDirSearch::from_env(None, Some(root)).locate(Benchmark::CascadedTanks)
-    else {
-        eprintln!(
-            "SKIPPED: the Cascaded Tanks data folder is absent (set MMENN_DATA_DIR or provide ../shared/data)"
-        );
+    let Some(folder) = tanks_folder() else {
         return;
     };
     let dir = std::env::temp_dir().join(format!("mmenn-real-{}", std::process::id()));
@@ -47,5 +44,162 @@ fn cascaded_tanks_with_estimated_noise() {
         "ratio {}",
         s.residual_to_noise["y"]
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The benchmark folder, or `None` (with a note) when it is absent — except under CI
+/// (`CI` set), where the data are provisioned and a missing folder is a failure.
+#[allow(clippy::print_stderr)]
+fn tanks_folder() -> Option<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+    match DataDirSearch::from_env(None, Some(root)).locate(Benchmark::CascadedTanks) {
+        Ok(folder) => Some(folder),
+        Err(e) if std::env::var_os("CI").is_some() => panic!("CI must provide the data: {e}"),
+        Err(_) => {
+            eprintln!(
+                "SKIPPED: the Cascaded Tanks data folder is absent (set MMENN_DATA_DIR or provide ../shared/data)"
+            );
+            None
+        }
+    }
+}
+
+/// Physics-structured linear model of the two tanks in deviations from the estimation
+/// record's means: `h1' = a1 h1 + b u`, `h2' = 0.02 h1 + a2 h2 + d`, `y = h2` (upper level
+/// unmeasured, the correction on the measured lower tank). Coefficients: the linear
+/// output-error fit of this structure on the estimation record (`cargo xtask reproduce`,
+/// table `real_cascaded_tanks`), rounded.
+const TANKS_MODEL: &str = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+A = [[-0.02044, 0.0], [0.02, -0.005863]]
+B = [[0.027596], [0.0]]
+measured = ["h2"]
+corrected = ["h2"]
+noise_variance = [NOISE]
+units = { h1 = "V", h2 = "V", u = "V" }
+"#;
+
+/// A benchmark record as deviations `(u − u0, y − y0)` with the output named `h2`.
+fn shifted(d: &Dataset, u0: f64, y0: f64) -> Dataset {
+    let e = &d.experiments()[0];
+    let exp = Experiment::new(
+        e.t0(),
+        e.dt(),
+        e.inputs().map(|v| v - u0),
+        e.outputs().map(|v| v - y0),
+    )
+    .unwrap();
+    Dataset::new(
+        d.input_channels().to_vec(),
+        vec![mmenn::sysid_core::Channel::new("h2")],
+        vec![exp],
+    )
+    .unwrap()
+}
+
+fn column(path: &Path, name: &str) -> Vec<f64> {
+    let t = read_table(path).unwrap();
+    t.columns[t.column_index(name).unwrap()].clone()
+}
+
+#[test]
+fn cascaded_tanks_fit_then_predict_beats_the_physics_model() {
+    // `mmenn fit` on the official estimation record, then `mmenn predict` on the official
+    // test record (never seen by the fit: no validation data are given), with the state
+    // initialised on the first 50 test outputs and the RMSE scored after them (the official
+    // loader's protocol).
+    let Some(folder) = tanks_folder() else {
+        return;
+    };
+    let data = load(Benchmark::CascadedTanks, &folder).unwrap();
+    let e = &data.estimation.experiments()[0];
+    let (u0, y0) = (e.inputs().mean(), e.outputs().mean());
+    let est = shifted(&data.estimation, u0, y0);
+    let test = shifted(&data.tests[0].data, u0, y0);
+    let dir = std::env::temp_dir().join(format!("mmenn-real-fit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (est_csv, test_csv) = (dir.join("estimation.csv"), dir.join("test.csv"));
+    write_experiment(&est_csv, &est, 0).unwrap();
+    write_experiment(&test_csv, &test, 0).unwrap();
+    // The benchmark states an output SNR close to 40 dB: noise variance = var(y)/10⁴.
+    let y = est.experiments()[0].outputs();
+    let noise = y.iter().map(|v| v * v).sum::<f64>() / (y.len() as f64 - 1.0) / 1e4;
+    let model = dir.join("model.toml");
+    std::fs::write(&model, TANKS_MODEL.replace("NOISE", &format!("{noise:e}"))).unwrap();
+
+    // The assumed model alone, judged with the same protocol.
+    let spec = mmenn::read_model(&model).unwrap();
+    let lin = &spec.linear;
+    let texp = &test.experiments()[0];
+    let window = Benchmark::CascadedTanks.init_window();
+    let fit = InitialStateFit {
+        window,
+        ..InitialStateFit::default()
+    };
+    let x0 = fit_initial_state(lin, lin.c(), texp, &[0.0; 2], &fit).unwrap();
+    let xs = mmenn::sysid_core::simulate(
+        lin,
+        &x0,
+        texp.t0(),
+        texp.dt(),
+        texp.inputs(),
+        &fit.integrator,
+        1e12,
+    )
+    .unwrap();
+    let measured: Vec<f64> = texp.outputs().row(0).iter().copied().collect();
+    let linear: Vec<f64> = xs.row(1).iter().copied().collect();
+    let rmse_linear = test_rmse(Benchmark::CascadedTanks, &measured, &linear).unwrap();
+
+    // A reduced sweep (1–6 units × 3 initialisations; the full 1–10 × 10 sweep picks the same
+    // network here) keeps the test near a second.
+    let opts = FitOptions {
+        max_hidden: 6,
+        inits: 3,
+        seed: 1,
+        ..FitOptions::default()
+    };
+    let summary = run_fit(
+        std::slice::from_ref(&est_csv),
+        &model,
+        &[],
+        &opts,
+        &dir.join("fit"),
+    )
+    .unwrap();
+    // Trajectory refinement (the default) is a descent method on the training windows.
+    let refine = summary.refinement.as_ref().unwrap();
+    assert!(refine.report.final_train_objective() <= refine.report.initial_train_objective());
+    let p = run_predict(
+        &dir.join("fit/model.json"),
+        &test_csv,
+        &InitialChoice::Fit,
+        window,
+        &dir.join("pred"),
+    )
+    .unwrap();
+    assert_eq!(p.free_run.x0.len(), 2);
+    let hybrid = column(&dir.join("pred/prediction.csv"), "h2");
+    let rmse = test_rmse(Benchmark::CascadedTanks, &measured, &hybrid).unwrap();
+    // Published free-run test RMSEs (../shared/data/README.md): linear state-space 0.588 V,
+    // BLA 0.75 V, best 0.18–0.19 V (grey-box with a physical overflow term). The assumed
+    // linear model alone lands between the linear anchors (measured 0.603 V). The hybrid
+    // model (measured 0.476 V; 0.48–0.51 V over seeds 1, 2, 7) must remove at least 10 % of
+    // the assumed model's error, beat the published linear state-space model, and stay
+    // within 3× the best published result (it has no overflow physics).
+    assert!(
+        (0.5..0.75).contains(&rmse_linear),
+        "assumed model alone: RMSE {rmse_linear} V"
+    );
+    assert!(
+        rmse < 0.9 * rmse_linear,
+        "MME/NN RMSE {rmse} V vs assumed model {rmse_linear} V"
+    );
+    assert!(
+        rmse < 0.588,
+        "MME/NN RMSE {rmse} V vs linear state-space 0.588 V"
+    );
+    assert!(rmse < 3.0 * 0.19, "MME/NN RMSE {rmse} V");
     std::fs::remove_dir_all(&dir).unwrap();
 }

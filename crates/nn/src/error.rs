@@ -95,6 +95,17 @@ pub enum NnError {
         /// Network inputs.
         n_inputs: usize,
     },
+    /// The hybrid model with the initial network diverges on a shooting window, so
+    /// trajectory refinement has no finite objective to descend from.
+    #[error(
+        "the hybrid model diverges on the shooting window of record {record} starting at sample {sample}"
+    )]
+    TrajectoryDiverged {
+        /// Record index, 0-based.
+        record: usize,
+        /// First sample of the window, 0-based.
+        sample: usize,
+    },
 }
 
 /// Result alias for `nn`.

@@ -8,6 +8,7 @@ pub mod lm;
 pub mod mlp;
 pub mod scaling;
 pub mod sweep;
+pub mod trajectory;
 
 pub use config::{ErrorSpace, LmConfig, ValidationSplit};
 pub use correction::NetCorrection;
@@ -17,4 +18,8 @@ pub use mlp::{Architecture, Mlp, Workspace};
 pub use scaling::{CONSTANT_CHANNEL_RTOL, Scaler};
 pub use sweep::{
     Selection, SweepConfig, SweepProgress, SweepResult, SweepRow, derive_seed, select, sizing_sweep,
+};
+pub use trajectory::{
+    HybridParts, RefineProgress, RefineReport, RefineStop, ShootingRecord, TrajectoryConfig,
+    refine_on_trajectories,
 };

@@ -418,7 +418,7 @@ impl Mlp {
                         .zip(a_in)
                         .map(|(w, a)| w * a)
                         .sum::<f64>();
-                *o = if layer + 1 < n_layers { s.tanh() } else { s };
+                *o = if layer + 1 < n_layers { tanh(s) } else { s };
             }
             in_start += fan_in;
         }
@@ -453,6 +453,19 @@ impl Mlp {
         }
         Ok(())
     }
+}
+
+/// `tanh` through one `exp`: `tanh(s) = sign(s)·(1 − 2/(e^{2|s|} + 1))`.
+///
+/// About three times faster than `f64::tanh` (which goes through `expm1`), and training
+/// spends most of its time here. Odd by construction, exactly ±1 once `e^{2|s|}` overflows,
+/// NaN in → NaN out. The absolute error is a few ulps of 1 (≤ 1e-15); the relative error
+/// grows as `|s|` → 0 (about ε/|s|), which no network output or derivative notices because
+/// every activation enters a sum with O(1) terms.
+#[inline]
+pub(crate) fn tanh(s: f64) -> f64 {
+    let e = (2.0 * s.abs()).exp();
+    (1.0 - 2.0 / (e + 1.0)).copysign(s)
 }
 
 /// Validate a weight vector against an architecture.
@@ -498,6 +511,22 @@ pub(crate) fn check_training_data(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fast_tanh_matches_std_to_a_few_ulps_of_one() {
+        // Absolute error bound 1e-15 (a few ulps of 1) over a fine grid, both tails and 0.
+        let mut worst = 0.0f64;
+        for k in -200_000..=200_000 {
+            let s = k as f64 * 1e-4;
+            worst = worst.max((tanh(s) - s.tanh()).abs());
+        }
+        assert!(worst < 1e-15, "worst {worst}");
+        assert_eq!(tanh(0.0).to_bits(), 0.0f64.to_bits());
+        // Saturation is exact: the bits of ±1.
+        assert_eq!(tanh(800.0).to_bits(), 1.0f64.to_bits());
+        assert_eq!(tanh(-800.0).to_bits(), (-1.0f64).to_bits());
+        assert!(tanh(f64::NAN).is_nan());
+    }
 
     #[test]
     fn layout_matches_hand_count() {

@@ -15,3 +15,5 @@ mod jacobian;
 mod roundtrip;
 #[path = "cases/training.rs"]
 mod training;
+#[path = "cases/trajectory.rs"]
+mod trajectory;

@@ -522,6 +522,9 @@ fn run_benchmark(
         max_hidden,
         inits,
         seed: FIT_SEED,
+        // The thesis's method: the network as trained on d̂ (the trajectory refinement
+        // of `mmenn fit` is the thesis's future work, §7.1, and costs minutes here).
+        refine: mmenn::fit::RefineChoice::None,
         ..FitOptions::default()
     };
     let fit_dir = work.join("fit");

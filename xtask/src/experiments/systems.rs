@@ -349,6 +349,9 @@ fn run_case(ctx: &Ctx, case: &Case) -> Result<Outcome> {
         max_hidden,
         seed: FIT_SEED,
         update: case.update,
+        // The thesis's method: the network as trained on d̂ (the trajectory refinement
+        // of `mmenn fit` is the thesis's future work, §7.1, and costs minutes here).
+        refine: mmenn::fit::RefineChoice::None,
         ..FitOptions::default()
     };
     let summary = run_fit(

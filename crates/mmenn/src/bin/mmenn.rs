@@ -150,6 +150,13 @@ struct FitArgs {
     /// or free-run (smallest free-run output error of the hybrid model on the training data).
     #[arg(long, default_value = "d-mse")]
     select: mmenn::fit::NetworkSelection,
+    /// Refine the network on trajectories after training on d̂: none or trajectory
+    /// (multiple-shooting LM on the free-run output error; thesis §7.1).
+    #[arg(long, default_value = "trajectory")]
+    refine: mmenn::fit::RefineChoice,
+    /// Samples per shooting window of the trajectory refinement.
+    #[arg(long, default_value_t = 100)]
+    refine_window: usize,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
     w: mmenn::estimate::WeightChoice,
@@ -339,6 +346,11 @@ fn fit(args: FitArgs) -> Result<()> {
         update: args.update_model,
         selection: args.select,
         seed: args.seed,
+        refine: args.refine,
+        trajectory: mmenn::nn::TrajectoryConfig {
+            window: args.refine_window,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let s = mmenn::fit::run_fit(&args.data, &args.model, &args.val, &opts, &args.out)?;
@@ -349,6 +361,22 @@ fn fit(args: FitArgs) -> Result<()> {
     print_free_run("training data", &s.train);
     if let Some(v) = &s.validation {
         print_free_run("validation data", v);
+    }
+    if let Some(r) = &s.refinement {
+        println!(
+            "trajectory refinement: {} steps, objective {:.4e} -> {:.4e}",
+            r.report.iterations,
+            r.report.initial_train_objective(),
+            r.report.final_train_objective()
+        );
+        if let (Some(b), Some(a)) = (&r.validation_fit_before, &r.validation_fit_after) {
+            for (name, before) in b {
+                println!(
+                    "  validation free-run fit of {name}: {before:.2} % -> {:.2} %",
+                    a.get(name).copied().unwrap_or(f64::NAN)
+                );
+            }
+        }
     }
     println!("wrote {} files into {}", s.files.len(), args.out.display());
     Ok(())
@@ -427,7 +455,10 @@ fn discover(a: DiscoverArgs) -> Result<()> {
             );
         }
         for (k, b) in &g.before.d_rms {
-            println!("  {label} d̂ RMS of {k}: {b:.4e} → {:.4e}", g.after.d_rms[k]);
+            match g.after.d_rms.get(k) {
+                Some(a) => println!("  {label} d̂ RMS of {k}: {b:.4e} → {a:.4e}"),
+                None => println!("  {label} d̂ RMS of {k}: {b:.4e} (MME not rerun)"),
+            }
         }
     };
     show("estimation", &s.gap);

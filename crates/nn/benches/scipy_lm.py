@@ -1,0 +1,132 @@
+#!/usr/bin/env python3
+"""MINPACK's Levenberg-Marquardt (scipy.optimize.least_squares(method='lm')) on the same
+network, data and initial weights as `cargo run --release -p nn --example lm_vs_scipy`,
+and the time each optimiser needs to reach the same training MSE.
+
+Usage: python3 crates/nn/benches/scipy_lm.py OUT_DIR   (OUT_DIR written by the example)
+
+The network is nn's 3-H-1 tanh MLP acting on the scaled data written by the example, with
+nn's flat weight layout: per hidden unit [w1 w2 w3 b], then [v1 .. vH c]. Residuals are
+rho*(t_scaled - y_scaled), i.e. errors in the target's original units, as nn's
+ErrorSpace::Original. The Jacobian is analytic (MINPACK lmder).
+
+Protocol, per case: both optimisers run from the same weights within their budgets
+(Rust: the example's epoch budget; scipy: max_nfev = 2 x that budget, tolerances 1e-15),
+recording the training MSE and the elapsed time at every point they evaluate (Rust: after
+every epoch; scipy: every residual evaluation). The common target is 1 % above the larger
+of the two best MSEs (so both reach it), and each optimiser's time is the first elapsed
+time at which its MSE is at or below the target. Times are the thread's CPU time on both sides
+(time.thread_time here, CLOCK_THREAD_CPUTIME_ID in the example), so other processes on a
+shared machine do not inflate them. Also reported: the cost of one iteration
+(Rust: time per epoch; scipy: time per Jacobian evaluation), which does not depend on the
+paths the two take. scipy's times are the minimum over REPEATS runs,
+like the example's. BLAS threads are pinned to 1 (MINPACK and nn's LM are single-threaded).
+"""
+
+import json
+import os
+import sys
+import time
+
+for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(var, "1")
+
+import numpy as np  # noqa: E402
+from scipy.optimize import least_squares  # noqa: E402
+
+REPEATS = 3
+# The common target is this factor above the worse of the two best MSEs, so that a slow
+# final creep towards an optimiser's own minimum does not dominate its time.
+TARGET_SLACK = 1.01
+
+
+def unpack(w, h):
+    """Hidden weights W (h x 3), biases b (h), output weights v (h), output bias c."""
+    hid = w[: 4 * h].reshape(h, 4)
+    out = w[4 * h:]
+    return hid[:, :3], hid[:, 3], out[:h], out[h]
+
+
+class Problem:
+    def __init__(self, s, t, rho, h):
+        self.s, self.t, self.rho, self.h = s, t, rho, h
+        self.log = []  # (elapsed, mse) at every residual evaluation
+        self.start = 0.0
+        self.njev = 0
+
+    def residual(self, w):
+        wh, b, v, c = unpack(w, self.h)
+        a = np.tanh(self.s @ wh.T + b)
+        r = self.rho * (self.t - (a @ v + c))
+        self.log.append((time.thread_time() - self.start, float(r @ r) / r.size))
+        return r
+
+    def jacobian(self, w):
+        self.njev += 1
+        wh, b, v, c = unpack(w, self.h)
+        a = np.tanh(self.s @ wh.T + b)
+        n = self.s.shape[0]
+        jac = np.empty((n, 5 * self.h + 1))
+        g = (1.0 - a * a) * v  # d y / d (hidden pre-activation), n x h
+        hid = jac[:, : 4 * self.h].reshape(n, self.h, 4)
+        hid[:, :, :3] = g[:, :, None] * self.s[:, None, :]
+        hid[:, :, 3] = g
+        jac[:, 4 * self.h: 5 * self.h] = a
+        jac[:, 5 * self.h] = 1.0
+        return -self.rho * jac
+
+
+def run_scipy(s, t, rho, h, w0, max_nfev):
+    p = Problem(s, t, rho, h)
+    p.start = time.thread_time()
+    least_squares(p.residual, np.array(w0), jac=p.jacobian, method="lm",
+                  ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=max_nfev)
+    return p.log, p.njev
+
+
+def first_time(times, mses, target):
+    for t, m in zip(times, mses):
+        if m <= target:
+            return t
+    return float("nan")
+
+
+def main():
+    out = sys.argv[1]
+    rust = json.load(open(os.path.join(out, "rust.json")))
+    budget = 2 * rust["max_epochs"]
+    data = {}
+    rows = []
+    for case in rust["cases"]:
+        n, h = case["n"], case["h"]
+        if n not in data:
+            d = np.loadtxt(os.path.join(out, f"data_N{n}.csv"), delimiter=",", skiprows=1)
+            data[n] = (np.ascontiguousarray(d[:, :3]), np.ascontiguousarray(d[:, 3]))
+        s, t = data[n]
+        runs = [run_scipy(s, t, case["rho"], h, case["w0"], budget) for _ in range(REPEATS)]
+        logs = [log for log, _ in runs]
+        njev = runs[0][1]
+        # Same evaluation sequence every run (deterministic); elapsed = best over runs.
+        sp_mse = [m for _, m in logs[0]]
+        sp_time = [min(log[i][0] for log in logs) for i in range(len(logs[0]))]
+        r_mse, r_time = case["rust_mse"], case["rust_time"]
+        # MSE at w0 must agree: same network, data and weights.
+        assert abs(sp_mse[0] - r_mse[0]) <= 1e-9 * r_mse[0], (sp_mse[0], r_mse[0])
+        target = TARGET_SLACK * max(min(sp_mse), min(r_mse))
+        tr, ts = first_time(r_time, r_mse, target), first_time(sp_time, sp_mse, target)
+        it_r = 1e3 * r_time[-1] / (len(r_time) - 1)
+        it_s = 1e3 * sp_time[-1] / max(njev, 1)
+        rows.append((n, h, tr, ts, ts / tr, min(r_mse), min(sp_mse), target, it_r, it_s))
+        print(f"N {n:>5} H {h:>2}: rust {tr:.4f} s, scipy {ts:.4f} s, ratio {ts / tr:.1f}, "
+              f"MSE rust {min(r_mse):.3e} scipy {min(sp_mse):.3e} target {target:.3e}, "
+              f"per iteration {it_r:.2f} / {it_s:.2f} ms", file=sys.stderr)
+    print("| N | H | Rust to target (s) | scipy to target (s) | scipy / Rust | best MSE Rust "
+          "| best MSE scipy | target MSE | Rust ms/epoch | scipy ms/iteration | ratio |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n, h, tr, ts, ratio, mr, ms, tg, ir, isp in rows:
+        print(f"| {n} | {h} | {tr:.4f} | {ts:.4f} | {ratio:.1f} | {mr:.3e} | {ms:.3e} "
+              f"| {tg:.3e} | {ir:.2f} | {isp:.2f} | {isp / ir:.1f} |")
+
+
+if __name__ == "__main__":
+    main()

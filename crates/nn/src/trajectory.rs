@@ -1,0 +1,642 @@
+//! Refinement of a correction network on trajectories (thesis §7.1, future work): after
+//! training on MME's `d̂`, the weights are adjusted by Levenberg–Marquardt so that the
+//! hybrid model `ẋ = f(x, u) + E·NN(x, u)`, `y = C x`, simulated free-run over short
+//! windows (multiple shooting), reproduces the measured outputs.
+//!
+//! Each window starts from a given state estimate (MME's smoothed `x̂` at the window's
+//! first sample), so the shooting nodes are not extra unknowns and a window cannot carry
+//! an error in from earlier windows. Residuals are measured minus simulated outputs at
+//! every later sample of the window, divided by the channel's standard deviation. The
+//! Jacobian with respect to the flat weight vector is taken by forward differences, one
+//! simulation of all windows per weight (the networks have tens of weights), in parallel
+//! over weights and bit-identical for any thread count.
+
+use nalgebra::{Cholesky, DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+use sysid_core::{Dynamics, Experiment};
+
+use crate::error::{NnError, Result};
+use crate::mlp::Mlp;
+
+mod shooting;
+use shooting::{Buffers, Linearisation, Shooter, Window};
+
+/// Settings of [`refine_on_trajectories`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TrajectoryConfig {
+    /// Sample intervals simulated per window (residuals at the `window` samples after the
+    /// start). Windows tile each record without overlap; a shorter last window is kept.
+    /// Default 100.
+    pub window: usize,
+    /// Without validation records, every `holdout_every`-th training window (the last of
+    /// each group) is held out and used only for early stopping; 0 holds out nothing.
+    /// Ignored when validation records are given. Default 5.
+    pub holdout_every: usize,
+    /// Maximum number of accepted LM steps. Default 30.
+    pub max_iterations: usize,
+    /// Stop after this many consecutive accepted steps whose held-out objective is above
+    /// the best so far. Default 5.
+    pub max_fail: usize,
+    /// Initial damping relative to the largest diagonal entry of `JᵀJ` (Madsen, Nielsen &
+    /// Tingleff, *Methods for non-linear least squares problems*, 2004, §3.2). Default 1e-3.
+    pub mu_initial: f64,
+    /// Factor on μ after a rejected step, > 1. Default 10.
+    pub mu_increase: f64,
+    /// Factor on μ after an accepted step, in (0, 1). Default 0.1.
+    pub mu_decrease: f64,
+    /// Give up when μ exceeds this multiple of the largest diagonal entry of `JᵀJ`.
+    /// Default 1e10.
+    pub mu_max_ratio: f64,
+    /// Stop when an accepted step lowers the training objective by less than this
+    /// fraction. Default 1e-6.
+    pub min_relative_decrease: f64,
+    /// RK4 steps per sample interval (inputs held between samples). Default 4.
+    pub substeps: usize,
+    /// States beyond this magnitude count as a diverged window. Default 1e12.
+    pub blow_up: f64,
+}
+
+impl Default for TrajectoryConfig {
+    fn default() -> Self {
+        Self {
+            window: 100,
+            holdout_every: 5,
+            max_iterations: 30,
+            max_fail: 5,
+            mu_initial: 1e-3,
+            mu_increase: 10.0,
+            mu_decrease: 0.1,
+            mu_max_ratio: 1e10,
+            min_relative_decrease: 1e-6,
+            substeps: 4,
+            blow_up: sysid_core::integrate::DEFAULT_BLOW_UP,
+        }
+    }
+}
+
+impl TrajectoryConfig {
+    /// Check every field is in range.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field, value, reason| {
+            Err(NnError::InvalidConfig {
+                field,
+                value,
+                reason,
+            })
+        };
+        if self.window == 0 {
+            return bad("window", 0.0, "must be ≥ 1");
+        }
+        if self.max_fail == 0 {
+            return bad("max_fail", 0.0, "must be ≥ 1");
+        }
+        if self.substeps == 0 {
+            return bad("substeps", 0.0, "must be ≥ 1");
+        }
+        if !(self.mu_initial.is_finite() && self.mu_initial > 0.0) {
+            return bad("mu_initial", self.mu_initial, "must be finite and > 0");
+        }
+        if !(self.mu_increase.is_finite() && self.mu_increase > 1.0) {
+            return bad("mu_increase", self.mu_increase, "must be finite and > 1");
+        }
+        if !(self.mu_decrease > 0.0 && self.mu_decrease < 1.0) {
+            return bad("mu_decrease", self.mu_decrease, "must be in (0, 1)");
+        }
+        if !(self.mu_max_ratio.is_finite() && self.mu_max_ratio > self.mu_initial) {
+            return bad(
+                "mu_max_ratio",
+                self.mu_max_ratio,
+                "must be finite and > mu_initial",
+            );
+        }
+        if !(self.min_relative_decrease.is_finite() && self.min_relative_decrease >= 0.0) {
+            return bad(
+                "min_relative_decrease",
+                self.min_relative_decrease,
+                "must be finite and ≥ 0",
+            );
+        }
+        if !(self.blow_up.is_finite() && self.blow_up > 0.0) {
+            return bad("blow_up", self.blow_up, "must be finite and > 0");
+        }
+        Ok(())
+    }
+}
+
+/// The fixed parts of the hybrid model `ẋ = f(x, u) + E·NN([x; u])`, `y = C x`.
+#[derive(Debug, Clone, Copy)]
+pub struct HybridParts<'a, F> {
+    /// The assumed dynamics `f` (`n` states, `m` inputs).
+    pub base: &'a F,
+    /// `E`, `n × q` (`q` = network outputs).
+    pub e: &'a DMatrix<f64>,
+    /// `C`, `p × n` (`p` = measured output channels of the records).
+    pub c: &'a DMatrix<f64>,
+}
+
+/// One record to shoot over: its inputs and measured outputs (NaN = not observed), and
+/// the state estimate at every sample, from which each window starts.
+#[derive(Debug, Clone, Copy)]
+pub struct ShootingRecord<'a> {
+    /// Inputs (`m × N`) and measured outputs (`p × N`).
+    pub experiment: &'a Experiment,
+    /// State estimates `n × N` (MME's smoothed `x̂`); only window starts are read.
+    pub states: &'a DMatrix<f64>,
+}
+
+/// Why refinement stopped. Not improving is a reason, not an error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[non_exhaustive]
+pub enum RefineStop {
+    /// [`TrajectoryConfig::max_iterations`] steps were accepted.
+    MaxIterations,
+    /// No step lowered the training objective before μ reached its limit.
+    MuMax,
+    /// An accepted step lowered the objective by less than
+    /// [`TrajectoryConfig::min_relative_decrease`].
+    SmallDecrease,
+    /// The held-out objective failed to improve [`TrajectoryConfig::max_fail`] times.
+    ValidationStop,
+}
+
+/// State after one accepted step, passed to the progress callback.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RefineProgress {
+    /// Accepted steps so far.
+    pub iteration: usize,
+    /// Training objective (mean squared scaled residual).
+    pub train_objective: f64,
+    /// Held-out objective, when windows are held out.
+    pub val_objective: Option<f64>,
+    /// Damping after the step.
+    pub mu: f64,
+}
+
+/// What refinement did. Objectives are mean squared residuals in units of each channel's
+/// standard deviation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefineReport {
+    /// Why it stopped.
+    pub termination: RefineStop,
+    /// Accepted steps.
+    pub iterations: usize,
+    /// Step whose weights were returned (best held-out objective; the last step without
+    /// held-out windows; 0 = the initial weights).
+    pub best_iteration: usize,
+    /// Training objective with every window started from the given state estimates and
+    /// the initial weights (before the start states are fitted).
+    pub objective_at_estimates: f64,
+    /// Training objective per accepted step; index 0 is the initial network (with start
+    /// states fitted to it).
+    pub train_history: Vec<f64>,
+    /// Held-out objective per accepted step (index 0 = initial); empty without held-out
+    /// windows.
+    pub val_history: Vec<f64>,
+    /// Windows used for the steps.
+    pub train_windows: usize,
+    /// Windows held out for early stopping.
+    pub val_windows: usize,
+    /// Residual divisor per output channel (its standard deviation over all records).
+    pub output_scale: Vec<f64>,
+}
+
+impl RefineReport {
+    /// Training objective of the initial weights.
+    pub fn initial_train_objective(&self) -> f64 {
+        self.train_history[0]
+    }
+
+    /// Training objective of the returned weights.
+    pub fn final_train_objective(&self) -> f64 {
+        self.train_history[self.best_iteration]
+    }
+}
+
+/// Check shapes of the hybrid parts, records and network against each other.
+fn check_problem<F: Dynamics>(
+    net: &Mlp,
+    parts: &HybridParts<'_, F>,
+    records: &[ShootingRecord<'_>],
+) -> Result<()> {
+    let n = parts.base.n_states();
+    let m = parts.base.n_inputs();
+    let q = net.n_outputs();
+    let shape = |matrix, rows: usize, cols: usize, er: usize, ec: usize| {
+        if rows == er && cols == ec {
+            Ok(())
+        } else {
+            Err(NnError::Shape {
+                matrix,
+                rows,
+                cols,
+                expected_rows: er,
+                expected_cols: ec,
+            })
+        }
+    };
+    if net.n_inputs() != n + m {
+        return Err(NnError::Length {
+            what: "network inputs (states + model inputs)",
+            found: net.n_inputs(),
+            expected: n + m,
+        });
+    }
+    shape("E", parts.e.nrows(), parts.e.ncols(), n, q)?;
+    let p = parts.c.nrows();
+    shape("C", p, parts.c.ncols(), p, n)?;
+    if records.is_empty() {
+        return Err(NnError::TooFewSamples {
+            what: "trajectory records",
+            found: 0,
+            needed: 1,
+        });
+    }
+    for rec in records {
+        let exp = rec.experiment;
+        shape("record inputs", exp.n_inputs(), exp.len(), m, exp.len())?;
+        shape("record outputs", exp.n_outputs(), exp.len(), p, exp.len())?;
+        shape(
+            "record states",
+            rec.states.nrows(),
+            rec.states.ncols(),
+            n,
+            exp.len(),
+        )?;
+        crate::error::check_finite("record states", rec.states)?;
+        crate::error::check_finite("record inputs", exp.inputs())?;
+    }
+    Ok(())
+}
+
+/// Standard deviation of every output channel over all observed samples of all records
+/// (a constant channel gets 1, so its residuals stay in its own units).
+fn output_scales(records: &[ShootingRecord<'_>], p: usize) -> Vec<f64> {
+    (0..p)
+        .map(|o| {
+            let vals = || {
+                records
+                    .iter()
+                    .flat_map(|r| {
+                        r.experiment
+                            .outputs()
+                            .row(o)
+                            .iter()
+                            .copied()
+                            .collect::<Vec<_>>()
+                    })
+                    .filter(|v| v.is_finite())
+            };
+            let count = vals().count();
+            if count < 2 {
+                return 1.0;
+            }
+            let mean = vals().sum::<f64>() / count as f64;
+            let var = vals().map(|v| (v - mean) * (v - mean)).sum::<f64>() / (count - 1) as f64;
+            let sd = var.sqrt();
+            if sd > 0.0 && sd.is_finite() { sd } else { 1.0 }
+        })
+        .collect()
+}
+
+/// Observed residual entries of a set of windows (the objective's denominator).
+fn observed(records: &[ShootingRecord<'_>], windows: &[Window]) -> usize {
+    windows
+        .iter()
+        .map(|w| {
+            let out = records[w.record].experiment.outputs();
+            (w.start + 1..=w.end)
+                .map(|k| out.column(k).iter().filter(|v| !v.is_nan()).count())
+                .sum::<usize>()
+        })
+        .sum()
+}
+
+/// Refine `net` (inputs `[x; u]`, outputs the corrections) in place so that the hybrid
+/// model `ẋ = f(x, u) + E·NN([x; u])`, `y = C x` reproduces the records' measured outputs
+/// over short free-run windows (multiple shooting, Bock & Plitt 1984).
+///
+/// Unknowns are the flat weight vector and the start state of every training window
+/// (initialised at the given estimates, so a biased `x̂` is not blamed on the network).
+/// The objective is the mean over observed window samples of `((y_meas − y_sim)/σ_o)²`,
+/// with `σ_o` the standard deviation of output channel `o` over all records. Each
+/// iteration forms the forward-difference Jacobian of the residuals (step
+/// `√ε·max(1, |θ_j|)`, start states in units of each state's standard deviation), solves
+/// `(JᵀJ + μI)δ = −Jᵀr` by Cholesky, and accepts the step only if the training objective
+/// falls (μ ← μ·`mu_decrease`), else retries with μ ← μ·`mu_increase` — so the training
+/// objective never increases. A window that diverges under trial weights rejects the
+/// step.
+///
+/// Held-out windows — every window of `val_records` when given, else every
+/// [`TrajectoryConfig::holdout_every`]-th window of `train_records` — are scored with
+/// their start states fitted for the current weights; the weights of the step with the
+/// lowest held-out objective are returned.
+///
+/// Errors: invalid config, shapes that do not fit together, no records or no window with
+/// an observed sample, non-finite states or inputs, and
+/// [`NnError::TrajectoryDiverged`] when the *initial* network already diverges on a
+/// window. On error `net` is unchanged.
+pub fn refine_on_trajectories<F: Dynamics>(
+    net: &mut Mlp,
+    parts: &HybridParts<'_, F>,
+    train_records: &[ShootingRecord<'_>],
+    val_records: &[ShootingRecord<'_>],
+    config: &TrajectoryConfig,
+    mut progress: Option<&mut dyn FnMut(RefineProgress)>,
+) -> Result<RefineReport> {
+    config.validate()?;
+    check_problem(net, parts, train_records)?;
+    if !val_records.is_empty() {
+        check_problem(net, parts, val_records)?;
+    }
+    let records: Vec<ShootingRecord<'_>> =
+        train_records.iter().chain(val_records).copied().collect();
+    let records = records.as_slice();
+    let (n, m, q, p) = (
+        parts.base.n_states(),
+        parts.base.n_inputs(),
+        net.n_outputs(),
+        parts.c.nrows(),
+    );
+
+    // Windows tile each record: [0, L], [L, 2L], …; the last may be shorter.
+    let mut train_w = Vec::new();
+    let mut val_w = Vec::new();
+    let mut index = 0usize;
+    for (ri, rec) in records.iter().enumerate() {
+        let len = rec.experiment.len();
+        let mut start = 0;
+        while start + 1 < len {
+            let end = (start + config.window).min(len - 1);
+            let w = Window {
+                record: ri,
+                start,
+                end,
+            };
+            index += 1;
+            if ri >= train_records.len()
+                || (val_records.is_empty()
+                    && config.holdout_every > 0
+                    && index.is_multiple_of(config.holdout_every))
+            {
+                val_w.push(w);
+            } else {
+                train_w.push(w);
+            }
+            start = end;
+        }
+    }
+    let m_train = observed(records, &train_w);
+    if m_train == 0 {
+        return Err(NnError::TooFewSamples {
+            what: "observed samples in training windows",
+            found: 0,
+            needed: 1,
+        });
+    }
+    let m_val = observed(records, &val_w);
+    if m_val == 0 {
+        val_w.clear();
+    }
+    let rows_train: usize = train_w.iter().map(|w| (w.end - w.start) * p).sum();
+    let starts_of = |ws: &[Window]| -> Vec<f64> {
+        ws.iter()
+            .flat_map(|w| {
+                records[w.record]
+                    .states
+                    .column(w.start)
+                    .iter()
+                    .copied()
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    let x_hat = starts_of(&train_w);
+    let val_starts = starts_of(&val_w);
+    let x_scale = state_scales(train_records, n);
+
+    let output_scale = output_scales(train_records, p);
+    let shooter = Shooter {
+        parts,
+        records,
+        inv_scale: output_scale.iter().map(|s| 1.0 / s).collect(),
+        substeps: config.substeps,
+        blow_up: config.blow_up,
+    };
+    let mut bufs = Buffers::new(n, m, q);
+    let mut r = DVector::zeros(rows_train);
+    let diverged = |w: &Window| NnError::TrajectoryDiverged {
+        record: w.record,
+        sample: w.start,
+    };
+    shooter
+        .residuals(net, &train_w, &x_hat, r.as_mut_slice(), &mut bufs)
+        .map_err(|wi| diverged(&train_w[wi]))?;
+    let objective_at_estimates = r.norm_squared() / m_train as f64;
+    // Start states first fitted with the weights fixed, as for held-out windows, so the
+    // objective's history measures what the weights do.
+    let mut starts = x_hat.clone();
+    for (i, w) in train_w.iter().enumerate() {
+        let sse = shooter.fitted_window_sse(
+            net,
+            w,
+            &x_hat[i * n..(i + 1) * n],
+            &x_scale,
+            &mut bufs,
+            &mut starts[i * n..(i + 1) * n],
+        );
+        if !sse.is_finite() {
+            return Err(diverged(w));
+        }
+    }
+    shooter
+        .residuals(net, &train_w, &starts, r.as_mut_slice(), &mut bufs)
+        .map_err(|wi| diverged(&train_w[wi]))?;
+    let mut objective = r.norm_squared() / m_train as f64;
+    let mut val_fitted = vec![0.0; n];
+    let mut val_objective = |net: &Mlp, bufs: &mut Buffers| -> Option<f64> {
+        if val_w.is_empty() {
+            return None;
+        }
+        let sse: f64 = val_w
+            .iter()
+            .enumerate()
+            .map(|(i, w)| {
+                let x0 = &val_starts[i * n..(i + 1) * n];
+                shooter.fitted_window_sse(net, w, x0, &x_scale, bufs, &mut val_fitted)
+            })
+            .sum();
+        Some(sse / m_val as f64)
+    };
+
+    // Unknowns θ = [weights; z], start states = x̂ + σ_x ⊙ z.
+    let nw = net.n_weights();
+    let n_theta = nw + x_hat.len();
+    let mut theta = DVector::zeros(n_theta);
+    theta.as_mut_slice()[..nw].copy_from_slice(net.weights());
+    for (k, s) in starts.iter().enumerate() {
+        theta[nw + k] = (s - x_hat[k]) / x_scale[k % n];
+    }
+    let mut train_history = vec![objective];
+    let mut val_history = Vec::new();
+    let mut best = (f64::INFINITY, theta.clone(), 0usize);
+    if let Some(v) = val_objective(net, &mut bufs) {
+        if !v.is_finite() {
+            return Err(diverged(&val_w[0]));
+        }
+        val_history.push(v);
+        best = (v, theta.clone(), 0);
+    }
+
+    let mut jac = DMatrix::zeros(rows_train, n_theta);
+    let mut jtj = DMatrix::zeros(n_theta, n_theta);
+    let mut rhs = DVector::zeros(n_theta);
+    let mut trial_r = DVector::zeros(rows_train);
+    let mut trial_starts = starts.clone();
+    let mut trial_net = net.clone();
+    let mut mu: Option<f64> = None;
+    let mut fails = 0;
+    let mut iteration = 0;
+    let to_starts = |theta: &DVector<f64>, out: &mut [f64]| {
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = x_hat[k] + x_scale[k % n] * theta[nw + k];
+        }
+    };
+    let termination = loop {
+        if iteration >= config.max_iterations {
+            break RefineStop::MaxIterations;
+        }
+        if fails >= config.max_fail {
+            break RefineStop::ValidationStop;
+        }
+        let lin = Linearisation {
+            shooter: &shooter,
+            net,
+            windows: &train_w,
+            starts: &starts,
+            theta: theta.as_slice(),
+            x_scale: &x_scale,
+            dims: (n, m, q),
+        };
+        lin.jacobian(&r, &mut jac);
+        jtj.gemm_tr(1.0, &jac, &jac, 0.0);
+        rhs.gemv_tr(-1.0, &jac, &r, 0.0);
+        let diag_max = (0..n_theta)
+            .map(|i| jtj[(i, i)])
+            .fold(0.0, f64::max)
+            .max(f64::MIN_POSITIVE);
+        let mut mu_now = mu.unwrap_or(config.mu_initial * diag_max);
+        let mu_max = config.mu_max_ratio * diag_max;
+        let mut accepted = None;
+        while mu_now <= mu_max {
+            let mut a = jtj.clone();
+            for i in 0..n_theta {
+                a[(i, i)] += mu_now;
+            }
+            if let Some(chol) = Cholesky::new(a) {
+                let delta = chol.solve(&rhs);
+                let trial = &theta + &delta;
+                if trial.iter().all(|v| v.is_finite()) {
+                    trial_net
+                        .weights_mut()
+                        .copy_from_slice(&trial.as_slice()[..nw]);
+                    to_starts(&trial, &mut trial_starts);
+                    if shooter
+                        .residuals(
+                            &trial_net,
+                            &train_w,
+                            &trial_starts,
+                            trial_r.as_mut_slice(),
+                            &mut bufs,
+                        )
+                        .is_ok()
+                    {
+                        let obj = trial_r.norm_squared() / m_train as f64;
+                        if obj < objective {
+                            accepted = Some((trial, obj));
+                            break;
+                        }
+                    }
+                }
+            }
+            mu_now *= config.mu_increase;
+        }
+        let Some((trial, obj)) = accepted else {
+            break RefineStop::MuMax;
+        };
+        mu = Some(mu_now * config.mu_decrease);
+        iteration += 1;
+        let decrease = (objective - obj) / objective;
+        theta = trial;
+        objective = obj;
+        std::mem::swap(&mut r, &mut trial_r);
+        std::mem::swap(&mut starts, &mut trial_starts);
+        net.weights_mut().copy_from_slice(&theta.as_slice()[..nw]);
+        train_history.push(objective);
+        let v = val_objective(net, &mut bufs);
+        if let Some(v) = v {
+            val_history.push(v);
+            if v < best.0 {
+                best = (v, theta.clone(), iteration);
+                fails = 0;
+            } else {
+                fails += 1;
+            }
+        }
+        if let Some(cb) = progress.as_mut() {
+            cb(RefineProgress {
+                iteration,
+                train_objective: objective,
+                val_objective: v,
+                mu: mu_now * config.mu_decrease,
+            });
+        }
+        if decrease < config.min_relative_decrease {
+            break RefineStop::SmallDecrease;
+        }
+    };
+    let best_iteration = if val_w.is_empty() {
+        iteration
+    } else {
+        net.weights_mut().copy_from_slice(&best.1.as_slice()[..nw]);
+        best.2
+    };
+    Ok(RefineReport {
+        termination,
+        iterations: iteration,
+        best_iteration,
+        objective_at_estimates,
+        train_history,
+        val_history,
+        train_windows: train_w.len(),
+        val_windows: val_w.len(),
+        output_scale,
+    })
+}
+
+/// Standard deviation of every state over all records' estimates (1 for a constant one).
+fn state_scales(records: &[ShootingRecord<'_>], n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| {
+            let count: usize = records.iter().map(|r| r.states.ncols()).sum();
+            if count < 2 {
+                return 1.0;
+            }
+            let sum: f64 = records.iter().map(|r| r.states.row(i).sum()).sum();
+            let mean = sum / count as f64;
+            let ss: f64 = records
+                .iter()
+                .map(|r| {
+                    r.states
+                        .row(i)
+                        .iter()
+                        .map(|v| (v - mean) * (v - mean))
+                        .sum::<f64>()
+                })
+                .sum();
+            let sd = (ss / (count - 1) as f64).sqrt();
+            if sd > 0.0 && sd.is_finite() { sd } else { 1.0 }
+        })
+        .collect()
+}
