@@ -69,9 +69,14 @@ struct DiscoverArgs {
     /// Model file (TOML).
     #[arg(long)]
     model: PathBuf,
-    /// Validation data file(s): adds validation figures to the gap.
+    /// Validation data file(s): they judge the free-run search's candidate sets and get
+    /// their own before/after gap.
     #[arg(long, num_args = 1..)]
     val: Vec<PathBuf>,
+    /// Without --val: fraction at the end of every estimation record held out to judge
+    /// the free-run search (0: judge on the estimation records).
+    #[arg(long, default_value_t = 0.5)]
+    holdout_fraction: f64,
     /// Most discover–augment rounds.
     #[arg(long, default_value_t = 3)]
     max_rounds: usize,
@@ -431,6 +436,7 @@ fn discover(a: DiscoverArgs) -> Result<()> {
     let opts = mmenn::discover::DiscoverOptions {
         max_rounds: a.max_rounds,
         seed: a.seed,
+        holdout_fraction: a.holdout_fraction,
         ..Default::default()
     };
     let s = mmenn::discover::run_discover(&a.data, &a.model, &a.val, &opts, &a.out)?;
