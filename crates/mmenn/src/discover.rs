@@ -235,6 +235,33 @@ fn holdout_initial_states(
         .collect()
 }
 
+/// Calibrate the kept terms of `refined` on `data` (all estimation records), replacing
+/// its model, coefficients' standard errors and initial states; unchanged when that
+/// calibration fails.
+fn recalibrate_on(
+    mut refined: discovery::Refinement,
+    base: &TermModel,
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    noise: &[f64],
+) -> discovery::Refinement {
+    let first_new = base.terms().len();
+    let end = refined.model.terms().len();
+    let config = discovery::CalibrationConfig {
+        terms: Some((first_new..end).collect()),
+        weights: discovery::OutputWeights::NoiseVariance(noise.to_vec()),
+        ..RefineConfig::default().calibration
+    };
+    if let Ok(fit) = discovery::calibrate(&refined.model, data, x0, &config)
+        && fit.cost_after.is_finite()
+    {
+        refined.coefficient_std = fit.coefficient_std[first_new..end].to_vec();
+        refined.model = fit.model;
+        refined.x0 = fit.x0;
+    }
+    refined
+}
+
 /// Measured (non-missing) output values over every record.
 fn measured_values(data: &Dataset) -> usize {
     data.experiments()
@@ -582,6 +609,14 @@ pub fn run_discover(
             holdout,
             &RefineConfig::default(),
         )?;
+        // The held-out half chose the terms; their coefficients (and intervals) come
+        // from the whole estimation records.
+        let refined = match &split {
+            Some(_) if !refined.selected.is_empty() => {
+                recalibrate_on(refined, &current, &data, &x0s, &est.noise_variance)
+            }
+            _ => refined,
+        };
         if refined.selected.is_empty() {
             rounds.push(Round {
                 discovery: found,
