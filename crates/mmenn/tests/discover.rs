@@ -87,35 +87,46 @@ fn cubic_spring_and_damping_hidden_from_the_msd_model() {
 
 #[test]
 fn gravity_nonlinearity_hidden_from_the_linearised_pendulum() {
-    let dir = scratch("pendulum");
-    let req = SimulationRequest {
-        system: "pendulum".into(),
-        recipe: Recipe::Train,
-        seed: 4,
-        ..Default::default()
-    };
-    let train = run_simulate(&req, &dir.join("train")).unwrap();
-    let s = run_discover(
-        std::slice::from_ref(&train.data),
-        &train.model,
-        &[],
-        &DiscoverOptions::default(),
-        &dir.join("out"),
-    )
-    .unwrap();
-    // θ̈ = −(g/l) sin θ − … − (1/l) cos θ·u with g/l = 19.62, 1/l = 2: the linearised model
-    // misses −19.62·(sin θ − θ) and −2·(u cos θ − u).
-    let g = coefficient(&s, "gravity_nonlinearity");
-    let u = coefficient(&s, "input_coupling_cos");
-    assert!((g + 19.62).abs() < 0.02 * 19.62, "gravity coefficient {g}");
-    assert!(
-        (u + 2.0).abs() < 0.05 * 2.0,
-        "input coupling coefficient {u}"
-    );
-    assert!(s.gap.after.d_rms["omega"] < 0.1 * s.gap.before.d_rms["omega"]);
-    let text = std::fs::read_to_string(dir.join("out/model.discovered.toml")).unwrap();
-    assert!(text.contains("sin(theta) - theta"));
-    std::fs::remove_dir_all(&dir).unwrap();
+    // At the system's default noise (σ² = 0.01 rad², σ = 0.1 rad) and at 1e-4 rad².
+    for noise in [None, Some(1e-4)] {
+        let dir = scratch(&format!("pendulum-{noise:?}"));
+        let req = SimulationRequest {
+            system: "pendulum".into(),
+            recipe: Recipe::Train,
+            seed: 4,
+            noise_variance: noise,
+            ..Default::default()
+        };
+        let train = run_simulate(&req, &dir.join("train")).unwrap();
+        let s = run_discover(
+            std::slice::from_ref(&train.data),
+            &train.model,
+            &[],
+            &DiscoverOptions::default(),
+            &dir.join("out"),
+        )
+        .unwrap();
+        // θ̈ = −(g/l) sin θ − … − (1/l) cos θ·u with g/l = 19.62, 1/l = 2: the linearised
+        // model misses −19.62·(sin θ − θ) and −2·(u cos θ − u).
+        let mut names: Vec<&str> = s.effects.iter().map(|e| e.name.as_str()).collect();
+        names.sort_unstable();
+        assert_eq!(
+            names,
+            ["gravity_nonlinearity", "input_coupling_cos"],
+            "{noise:?}"
+        );
+        let g = coefficient(&s, "gravity_nonlinearity");
+        let u = coefficient(&s, "input_coupling_cos");
+        assert!((g + 19.62).abs() < 0.02 * 19.62, "gravity coefficient {g}");
+        assert!(
+            (u + 2.0).abs() < 0.05 * 2.0,
+            "input coupling coefficient {u}"
+        );
+        assert!(s.gap.after.d_rms["omega"] < 0.1 * s.gap.before.d_rms["omega"]);
+        let text = std::fs::read_to_string(dir.join("out/model.discovered.toml")).unwrap();
+        assert!(text.contains("sin(theta) - theta"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
 
 #[test]
