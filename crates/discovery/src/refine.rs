@@ -139,7 +139,12 @@ struct Eval {
     std: Vec<f64>,
 }
 
-fn build(base: &TermModel, candidates: &[RefineCandidate], set: &[usize]) -> Result<TermModel> {
+/// `base` plus the candidates of `set`, at their `coefficient`s.
+pub(crate) fn build(
+    base: &TermModel,
+    candidates: &[RefineCandidate],
+    set: &[usize],
+) -> Result<TermModel> {
     let mut specs: Vec<(String, String, String, f64)> = base
         .terms()
         .iter()

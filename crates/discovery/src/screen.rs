@@ -20,7 +20,7 @@
 //! along the current trajectory.
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{Dataset, Dynamics, Integrator, Term, TermModel, TermSpec};
+use sysid_core::{Dataset, Dynamics, Integrator, Term, TermModel};
 
 use crate::augment::simulate_outputs;
 use crate::error::{DiscoveryError, Result};
@@ -91,34 +91,11 @@ fn with_coefficient(model: &TermModel, k: usize, value: f64) -> Result<TermModel
 
 /// The current model plus one candidate term with coefficient `value`.
 fn with_candidate(model: &TermModel, cand: &RefineCandidate, value: f64) -> Result<TermModel> {
-    let names = model.linear().state_names();
-    let mut specs: Vec<(String, String, String, f64)> = model
-        .terms()
-        .iter()
-        .map(|t| {
-            (
-                names[t.state].clone(),
-                t.effect.clone(),
-                t.expr.to_string(),
-                t.coefficient,
-            )
-        })
-        .collect();
-    specs.push((
-        cand.state.clone(),
-        cand.effect.clone(),
-        cand.term.clone(),
-        value,
-    ));
-    Ok(TermModel::from_specs(
-        model.linear().clone(),
-        specs.iter().map(|(s, e, t, k)| TermSpec {
-            state: s,
-            effect: e,
-            term: t,
-            coefficient: *k,
-        }),
-    )?)
+    let one = RefineCandidate {
+        coefficient: value,
+        ..cand.clone()
+    };
+    crate::refine::build(model, std::slice::from_ref(&one), &[0])
 }
 
 /// RMS of each state's right-hand side and of a candidate's basis along a trajectory.
