@@ -171,6 +171,16 @@ pub struct DiscoverSummary {
     pub rounds: Vec<Round>,
 }
 
+/// The spec's term model; a spec built in memory that does not form one is a model error.
+fn term_model_of(spec: &ModelSpec) -> Result<TermModel> {
+    spec.term_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })
+}
+
 fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennError {
     move |source| MmennError::Core { context, source }
 }
@@ -348,12 +358,7 @@ fn noise_floor(
     est: &sysid_core::MmeEstimate,
     opts: &DiscoverOptions,
 ) -> Result<NoiseFloor> {
-    let model = spec.term_model().map_err(|problem| MmennError::Model {
-        path: "<model>".into(),
-        line: None,
-        column: None,
-        problem,
-    })?;
+    let model = term_model_of(spec)?;
     let c = spec.linear.c();
     let mut experiments = Vec::new();
     for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
@@ -455,12 +460,7 @@ pub fn run_discover(
             &DiscoveryConfig::default(),
         )?;
         first_verdict.get_or_insert(found.verdict);
-        let current = spec.term_model().map_err(|problem| MmennError::Model {
-            path: "<model>".into(),
-            line: None,
-            column: None,
-            problem,
-        })?;
+        let current = term_model_of(&spec)?;
         let exp = &data.experiments()[0];
         let x0: Vec<f64> = est.experiments[0]
             .states
@@ -557,12 +557,7 @@ pub fn run_discover(
                 }
             }
         }
-        let current = spec.term_model().map_err(|problem| MmennError::Model {
-            path: "<model>".into(),
-            line: None,
-            column: None,
-            problem,
-        })?;
+        let current = term_model_of(&spec)?;
         let x0s: Vec<Vec<f64>> = est
             .experiments
             .iter()
@@ -726,20 +721,8 @@ pub fn run_discover(
                 "d̂ did not shrink: mean square / floor² {ms_before:.4e} → {ms_after:.4e}"
             ));
         } else if let Some(v) = &val {
-            let prev = spec.term_model().map_err(|problem| MmennError::Model {
-                path: "<model>".into(),
-                line: None,
-                column: None,
-                problem,
-            })?;
-            let next = augmented
-                .term_model()
-                .map_err(|problem| MmennError::Model {
-                    path: "<model>".into(),
-                    line: None,
-                    column: None,
-                    problem,
-                })?;
+            let prev = term_model_of(&spec)?;
+            let next = term_model_of(&augmented)?;
             let cost = |m: &TermModel| -> Result<f64> {
                 match free_run_gap(m, &spec, v, &x0_guess, opts.x0_window) {
                     Ok((g, _)) => Ok(g
@@ -780,12 +763,7 @@ pub fn run_discover(
         result = new_result;
     }
 
-    let final_model = spec.term_model().map_err(|problem| MmennError::Model {
-        path: "<model>".into(),
-        line: None,
-        column: None,
-        problem,
-    })?;
+    let final_model = term_model_of(&spec)?;
     let (mut after, y_after) = free_run_gap(&final_model, &spec, &data, &x0_guess, opts.x0_window)?;
     if d_after_known {
         after.d_rms = d_rms(&result.estimate);
