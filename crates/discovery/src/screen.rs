@@ -169,9 +169,8 @@ impl Screen {
             let mut count = 0usize;
             for (xs, us) in &trajectories {
                 for k in 0..xs.ncols() {
-                    let x: Vec<f64> = xs.column(k).iter().copied().collect();
-                    let u: Vec<f64> = us.column(k).iter().copied().collect();
-                    model.rhs(0.0, &x, &u, &mut dx);
+                    let (x, u) = at_sample(xs, us, k);
+                    model.rhs(0.0, x, u, &mut dx);
                     for (s, d) in sums.iter_mut().zip(&dx) {
                         *s += d * d;
                     }
@@ -185,9 +184,8 @@ impl Screen {
         let basis_rms = |t: &Term| {
             rms_along(trajectories.iter().flat_map(|(xs, us)| {
                 (0..xs.ncols()).map(move |k| {
-                    let x: Vec<f64> = xs.column(k).iter().copied().collect();
-                    let u: Vec<f64> = us.column(k).iter().copied().collect();
-                    t.eval(&x, &u)
+                    let (x, u) = at_sample(xs, us, k);
+                    t.eval(x, u)
                 })
             }))
         };
@@ -356,6 +354,15 @@ impl Screen {
         let cj = (aa * br - ab * ar) / det;
         Some((ci * ar + cj * br, [ci, cj]))
     }
+}
+
+/// State and input at sample `k` as slices of the column-major matrices (no copy).
+fn at_sample<'a>(xs: &'a DMatrix<f64>, us: &'a DMatrix<f64>, k: usize) -> (&'a [f64], &'a [f64]) {
+    let (n, m) = (xs.nrows(), us.nrows());
+    (
+        &xs.as_slice()[k * n..(k + 1) * n],
+        &us.as_slice()[k * m..(k + 1) * m],
+    )
 }
 
 /// `v` minus its projection on the orthonormal `basis`.
