@@ -171,6 +171,24 @@ pub struct DiscoverSummary {
     pub rounds: Vec<Round>,
 }
 
+/// Free-run states of `model` over one record from `x0` (default integrator, inputs held
+/// between samples).
+fn free_run_states(
+    model: &TermModel,
+    x0: &[f64],
+    exp: &Experiment,
+) -> sysid_core::Result<DMatrix<f64>> {
+    sysid_core::simulate(
+        model,
+        x0,
+        exp.t0(),
+        exp.dt(),
+        exp.inputs(),
+        &sysid_core::Integrator::default(),
+        sysid_core::integrate::DEFAULT_BLOW_UP,
+    )
+}
+
 /// The spec's term model; a spec built in memory that does not form one is a model error.
 fn term_model_of(spec: &ModelSpec) -> Result<TermModel> {
     spec.term_model().map_err(|problem| MmennError::Model {
@@ -363,16 +381,8 @@ fn noise_floor(
     let mut experiments = Vec::new();
     for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
         let x0: Vec<f64> = e.states.column(0).iter().copied().collect();
-        let xs = sysid_core::simulate(
-            &model,
-            &x0,
-            exp.t0(),
-            exp.dt(),
-            exp.inputs(),
-            &sysid_core::Integrator::default(),
-            1e12,
-        )
-        .map_err(core("simulating the assumed model for the noise floor"))?;
+        let xs = free_run_states(&model, &x0, exp)
+            .map_err(core("simulating the assumed model for the noise floor"))?;
         let noise =
             plants::noise::gaussian_noise(&est.noise_variance, exp.len(), opts.seed, i as u64)?;
         let y = c * xs + noise;
@@ -468,16 +478,7 @@ pub fn run_discover(
             .iter()
             .copied()
             .collect();
-        let xs = sysid_core::simulate(
-            &current,
-            &x0,
-            exp.t0(),
-            exp.dt(),
-            exp.inputs(),
-            &sysid_core::Integrator::default(),
-            1e12,
-        )
-        .map_err(core("free-run simulation"))?;
+        let xs = free_run_states(&current, &x0, exp).map_err(core("free-run simulation"))?;
         let simulated = spec.linear.c() * xs;
         let fr = discovery::FreeRun {
             measured: exp.outputs(),

@@ -194,3 +194,15 @@ pub(crate) fn check_config(
         })
     }
 }
+
+/// Error unless the k-step prediction horizon `k` is at least 1.
+pub(crate) fn check_horizon(k: usize) -> Result<()> {
+    if k == 0 {
+        return Err(BaselineError::InvalidConfig {
+            field: "k",
+            value: 0.0,
+            reason: "prediction horizon must be at least 1 step",
+        });
+    }
+    Ok(())
+}

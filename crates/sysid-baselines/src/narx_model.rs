@@ -283,13 +283,7 @@ impl Model for NarxModel {
     /// first `k − 1` samples after the start, its free run). `initial_samples = s + k − 1`
     /// with `s` as in [`Model::simulate`]; earlier columns are NaN.
     fn predict(&self, experiment: &Experiment, k: usize) -> Result<Prediction> {
-        if k == 0 {
-            return Err(BaselineError::InvalidConfig {
-                field: "k",
-                value: 0.0,
-                reason: "prediction horizon must be at least 1 step",
-            });
-        }
+        crate::error::check_horizon(k)?;
         self.check(experiment)?;
         let s = self.first_complete_window(experiment)?;
         let len = experiment.len();

@@ -264,13 +264,7 @@ impl Model for OeModel {
     /// whose measurements do not determine the state ([`BaselineError::Unobservable`],
     /// e.g. when too few outputs are measured or too many samples are missing).
     fn predict(&self, experiment: &Experiment, k: usize) -> Result<Prediction> {
-        if k == 0 {
-            return Err(BaselineError::InvalidConfig {
-                field: "k",
-                value: 0.0,
-                reason: "prediction horizon must be at least 1 step",
-            });
-        }
+        crate::error::check_horizon(k)?;
         self.check(experiment, true)?;
         let w = self.observer_window;
         let len = experiment.len();
