@@ -44,6 +44,7 @@ use crate::error::{DiscoveryError, Result};
 pub fn augment(model: &LinearModel, effects: &[FoundEffect]) -> Result<TermModel> {
     let specs = effects.iter().map(|e| TermSpec {
         state: &e.state,
+        into: None,
         effect: &e.model_effect,
         term: &e.model_term,
         coefficient: e.coefficient,
@@ -149,7 +150,11 @@ impl Dynamics for Trial<'_> {
     fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
         self.linear.rhs(t, x, u, dx);
         for (term, c) in self.terms.iter().zip(self.coefficients) {
-            dx[term.state] += c * term.expr.eval_parts(x, u);
+            let v = c * term.expr.eval_parts(x, u);
+            dx[term.state] += v;
+            if let Some(r) = term.into {
+                dx[r] -= v;
+            }
         }
     }
 }

@@ -14,6 +14,7 @@ pub mod samples;
 mod screen;
 pub mod select;
 pub mod stats;
+pub mod transfer;
 
 pub use augment::{
     Calibration, CalibrationConfig, InitialState, OutputWeights, augment, calibrate, free_run_cost,
@@ -40,3 +41,4 @@ pub use samples::{Samples, centred_corrections, samples_from_estimate};
 pub use select::{
     Design, Screened, SelectedTerm, Selection, SelectionConfig, Step, StepAction, select,
 };
+pub use transfer::{conserved_variant, refine_with_transfers, routings, transfer_candidates};

@@ -38,6 +38,11 @@ pub struct RefineCandidate {
     pub effect: String,
     /// Equation (state name) it enters.
     pub state: String,
+    /// For a transfer: the equation (state name) that receives the negated term — one
+    /// coefficient for a flow that leaves `state` and enters `into` (see
+    /// [`sysid_core::Term::into`]). `None` for an ordinary term.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub into: Option<String>,
     /// Integrable expression (model form).
     pub term: String,
     /// Starting coefficient (e.g. from the regression on `d̂`; 0 if unknown).
@@ -145,12 +150,14 @@ pub(crate) fn build(
     candidates: &[RefineCandidate],
     set: &[usize],
 ) -> Result<TermModel> {
-    let mut specs: Vec<(String, String, String, f64)> = base
+    let names = base.linear().state_names();
+    let mut specs: Vec<(String, Option<String>, String, String, f64)> = base
         .terms()
         .iter()
         .map(|t| {
             (
-                base.linear().state_names()[t.state].clone(),
+                names[t.state].clone(),
+                t.into.map(|r| names[r].clone()),
                 t.effect.clone(),
                 t.expr.to_string(),
                 t.coefficient,
@@ -161,6 +168,7 @@ pub(crate) fn build(
         let c = &candidates[i];
         specs.push((
             c.state.clone(),
+            c.into.clone(),
             c.effect.clone(),
             c.term.clone(),
             c.coefficient,
@@ -168,8 +176,9 @@ pub(crate) fn build(
     }
     Ok(TermModel::from_specs(
         base.linear().clone(),
-        specs.iter().map(|(s, e, t, k)| TermSpec {
+        specs.iter().map(|(s, r, e, t, k)| TermSpec {
             state: s,
+            into: r.as_deref(),
             effect: e,
             term: t,
             coefficient: *k,
@@ -772,6 +781,7 @@ mod tests {
         let cand = |effect: &str, term: &str| RefineCandidate {
             effect: effect.into(),
             state: "v".into(),
+            into: None,
             term: term.into(),
             coefficient: 0.0,
         };
@@ -853,6 +863,7 @@ mod tests {
         let cand = |effect: &str, term: String| RefineCandidate {
             effect: effect.into(),
             state: state.clone(),
+            into: None,
             term,
             coefficient: 0.0,
         };

@@ -23,7 +23,11 @@ use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
-use crate::plot::{Figure, Series};
+use holdout::{holdout_initial_states, measured_values, recalibrate_on, split_records};
+use report::{figures, report};
+
+mod holdout;
+mod report;
 
 /// Largest free-run cost `J = (1/M) Σ r²/R` (1 for a right model and right noise
 /// variance) at which named effects are claimed: twice the noise power leaves room for an
@@ -115,6 +119,10 @@ pub struct NamedEffect {
     pub name: String,
     /// Equation (state) it enters.
     pub state: String,
+    /// For a transfer: the equation (state) that receives the negated term — the flow
+    /// leaves `state` and enters `into` (absent for an ordinary term).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub into: Option<String>,
     /// Expression, as written into the model.
     pub term: String,
     /// Coefficient calibrated by free-run simulation error.
@@ -128,6 +136,72 @@ pub struct NamedEffect {
     /// 95 % interval of the calibrated coefficient (free-run fit's Gauss–Newton standard
     /// error, inflated for residual colour; ±1.96 σ).
     pub ci95_calibrated: Option<[f64; 2]>,
+    /// For a linear term (a bare state or input): the assumed model's entry it adds to.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adjusts: Option<AssumedEntry>,
+}
+
+/// The entry of the assumed `A` or `B` that a linear named term adds to: a linear term
+/// is a recalibration of the assumed model, and when it cancels the entry
+/// (`effective ≈ 0`) the named effect beside it *replaces* the assumed law (an orifice
+/// outflow replacing a linear one).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AssumedEntry {
+    /// `A` or `B`.
+    pub matrix: &'static str,
+    /// Row (state) name.
+    pub row: String,
+    /// Column (state or input) name.
+    pub column: String,
+    /// The assumed value.
+    pub assumed: f64,
+    /// Assumed value plus the term's coefficient.
+    pub effective: f64,
+    /// Whether the 95 % interval of `effective` (the coefficient's calibrated interval,
+    /// shifted) contains 0: the assumed term is cancelled.
+    pub cancelled: bool,
+}
+
+/// The assumed entry a bare-variable term `term` in equation `state` adds to.
+fn assumed_entry(
+    spec: &ModelSpec,
+    state: &str,
+    term: &str,
+    coefficient: f64,
+    ci: Option<[f64; 2]>,
+) -> Option<AssumedEntry> {
+    let lin = &spec.linear;
+    let row = lin.state_names().iter().position(|s| s == state)?;
+    let (matrix, value) = match lin.state_names().iter().position(|s| s == term) {
+        Some(j) => ("A", lin.a()[(row, j)]),
+        None => {
+            let j = lin.input_names().iter().position(|s| s == term)?;
+            ("B", lin.b()[(row, j)])
+        }
+    };
+    let effective = value + coefficient;
+    Some(AssumedEntry {
+        matrix,
+        row: state.to_string(),
+        column: term.to_string(),
+        assumed: value,
+        effective,
+        cancelled: value != 0.0
+            && ci.is_some_and(|[lo, hi]| lo + value <= 0.0 && 0.0 <= hi + value),
+    })
+}
+
+impl NamedEffect {
+    /// Where it enters, for reports: `d(h1)`, or `d(h1) and −d(h2) (transfer h1 → h2)`.
+    pub fn equations(&self) -> String {
+        match &self.into {
+            None => format!("d({})", self.state),
+            Some(r) => format!(
+                "d({}) and −d({r}) (transfer {} → {r})",
+                self.state, self.state
+            ),
+        }
+    }
 }
 
 /// One round of discovery.
@@ -240,117 +314,6 @@ fn free_run_gap(
         gap.rmse.insert(name.clone(), m.rmse);
     }
     Ok((gap, y))
-}
-
-/// Initial states of every record, fitted to its first `window` samples with `model`.
-fn holdout_initial_states(
-    model: &TermModel,
-    spec: &ModelSpec,
-    data: &Dataset,
-    guess: &[f64],
-    window: usize,
-) -> Result<Vec<Vec<f64>>> {
-    let fit = InitialStateFit {
-        window,
-        ..InitialStateFit::default()
-    };
-    data.experiments()
-        .iter()
-        .map(|exp| {
-            fit_initial_state(model, spec.linear.c(), exp, guess, &fit)
-                .map_err(core("fitting a validation record's initial state"))
-        })
-        .collect()
-}
-
-/// Calibrate the kept terms of `refined` on `data` (all estimation records), replacing
-/// its model, coefficients' standard errors and initial states; unchanged when that
-/// calibration fails.
-fn recalibrate_on(
-    mut refined: discovery::Refinement,
-    base: &TermModel,
-    data: &Dataset,
-    x0: &[Vec<f64>],
-    noise: &[f64],
-) -> discovery::Refinement {
-    let first_new = base.terms().len();
-    let end = refined.model.terms().len();
-    let config = discovery::CalibrationConfig {
-        terms: Some((first_new..end).collect()),
-        weights: discovery::OutputWeights::NoiseVariance(noise.to_vec()),
-        ..RefineConfig::default().calibration
-    };
-    if let Ok(fit) = discovery::calibrate(&refined.model, data, x0, &config)
-        && fit.cost_after.is_finite()
-    {
-        refined.coefficient_std = fit.coefficient_std[first_new..end].to_vec();
-        refined.model = fit.model;
-        refined.x0 = fit.x0;
-    }
-    refined
-}
-
-/// Measured (non-missing) output values over every record.
-fn measured_values(data: &Dataset) -> usize {
-    data.experiments()
-        .iter()
-        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-        .sum()
-}
-
-/// Estimation records cut in two for the free-run search: the first part calibrates, the
-/// last `fraction` judges.
-struct Split {
-    cal: Dataset,
-    cal_x0: Vec<Vec<f64>>,
-    hold: Dataset,
-    hold_x0: Vec<Vec<f64>>,
-}
-
-/// Cut every record at `1 − fraction` of its length; initial states of both parts from
-/// MME's `x̂`. `None` when `fraction` is 0 or a part would be shorter than 50 samples.
-fn split_records(
-    data: &Dataset,
-    est: &sysid_core::MmeEstimate,
-    fraction: f64,
-) -> Result<Option<Split>> {
-    if !(fraction > 0.0 && fraction < 1.0) {
-        return Ok(None);
-    }
-    const MIN_PART: usize = 50;
-    let (mut cal, mut hold) = (Vec::new(), Vec::new());
-    let (mut cal_x0, mut hold_x0) = (Vec::new(), Vec::new());
-    for (exp, e) in data.experiments().iter().zip(&est.experiments) {
-        let n = exp.len();
-        let k = ((n as f64) * (1.0 - fraction)).round() as usize;
-        if k < MIN_PART || n.saturating_sub(k) < MIN_PART || e.states.ncols() < n {
-            return Ok(None);
-        }
-        let part = |from: usize, len: usize| {
-            Experiment::new(
-                exp.t0() + from as f64 * exp.dt(),
-                exp.dt(),
-                exp.inputs().columns(from, len).into_owned(),
-                exp.outputs().columns(from, len).into_owned(),
-            )
-            .map_err(core("splitting an estimation record"))
-        };
-        cal.push(part(0, k)?);
-        hold.push(part(k, n - k)?);
-        cal_x0.push(e.states.column(0).iter().copied().collect());
-        hold_x0.push(e.states.column(k).iter().copied().collect());
-    }
-    let names = |v: Vec<String>| v.into_iter().map(Channel::new).collect::<Vec<_>>();
-    let dataset = |exps| {
-        Dataset::new(names(data.input_names()), names(data.output_names()), exps)
-            .map_err(core("splitting an estimation record"))
-    };
-    Ok(Some(Split {
-        cal: dataset(cal)?,
-        cal_x0,
-        hold: dataset(hold)?,
-        hold_x0,
-    }))
 }
 
 fn d_rms(est: &sysid_core::MmeEstimate) -> BTreeMap<String, f64> {
@@ -532,6 +495,7 @@ pub fn run_discover(
                 candidates.push(RefineCandidate {
                     effect: c.model_effect.name().to_string(),
                     state: c.state.clone(),
+                    into: None,
                     term: c.model_term.clone(),
                     coefficient: 0.0,
                 });
@@ -541,7 +505,7 @@ pub fn run_discover(
         for e in &proposed {
             match candidates
                 .iter()
-                .position(|c| c.state == e.state && c.term == e.model_term)
+                .position(|c| c.into.is_none() && c.state == e.state && c.term == e.model_term)
             {
                 Some(i) => {
                     candidates[i].coefficient = e.coefficient;
@@ -551,6 +515,7 @@ pub fn run_discover(
                     candidates.push(RefineCandidate {
                         effect: e.model_effect.clone(),
                         state: e.state.clone(),
+                        into: None,
                         term: e.model_term.clone(),
                         coefficient: e.coefficient,
                     });
@@ -595,7 +560,10 @@ pub fn run_discover(
             Some(sp) => (&sp.cal, &sp.cal_x0),
             None => (&data, &x0s),
         };
-        let refined = discovery::refine_with_holdout(
+        // Flows the assumed model already routes between two equations are also tried as
+        // transfers (one coefficient, both equations; see `discovery::transfer`), and the
+        // better search is kept with the candidate list it indexes.
+        let (refined, candidates) = discovery::refine_with_transfers(
             &current,
             &candidates,
             &initial,
@@ -641,21 +609,25 @@ pub fn run_discover(
             let cand = &candidates[i];
             augmented.terms.push(TermEntry {
                 state: cand.state.clone(),
+                into: cand.into.clone(),
                 effect: cand.effect.clone(),
                 term: cand.term.clone(),
                 coefficient: *c,
             });
             // Report the regression's evidence for it when the regression named it.
-            let regression = proposed
-                .iter()
-                .find(|e| e.state == cand.state && e.model_term == cand.term);
+            // (A transfer's regression evidence covers only its own equation: not reported.)
+            let regression = proposed.iter().find(|e| {
+                cand.into.is_none() && e.state == cand.state && e.model_term == cand.term
+            });
             effects.push(NamedEffect {
                 name: cand.effect.clone(),
                 state: cand.state.clone(),
+                into: cand.into.clone(),
                 term: cand.term.clone(),
                 coefficient: *c,
                 ci95: regression.map(|e| e.ci95),
                 share_of_d: regression.map(|e| e.share_of_d),
+                adjusts: assumed_entry(&spec, &cand.state, &cand.term, *c, ci95_calibrated),
                 ci95_calibrated,
                 named_by: if regression.is_some() {
                     "regression on d̂, kept by free-run search".into()
@@ -826,171 +798,4 @@ pub fn run_discover(
     )?;
     write_atomic(&out.join("report.md"), report(&summary).as_bytes())?;
     Ok(summary)
-}
-
-fn figures(
-    s: &DiscoverSummary,
-    data: &Dataset,
-    spec: &ModelSpec,
-    y_before: &DMatrix<f64>,
-    y_after: &DMatrix<f64>,
-    out: &Path,
-) -> Result<()> {
-    let exp = &data.experiments()[0];
-    let t = exp.times();
-    for (i, name) in spec.linear.output_names().iter().enumerate() {
-        let fit_b = s
-            .gap
-            .before
-            .fit_percent
-            .get(name)
-            .copied()
-            .unwrap_or(f64::NAN);
-        let fit_a = s
-            .gap
-            .after
-            .fit_percent
-            .get(name)
-            .copied()
-            .unwrap_or(f64::NAN);
-        Figure {
-            title: format!("{name}: free-run simulation before and after discovery"),
-            x_label: "t (s)".into(),
-            y_label: name.clone(),
-            series: vec![
-                Series::points(
-                    "measured",
-                    t.clone(),
-                    exp.outputs().row(i).iter().copied().collect(),
-                ),
-                Series::line(
-                    format!("assumed model (fit {fit_b:.1} %)"),
-                    t.clone(),
-                    y_before.row(i).iter().copied().collect(),
-                ),
-                Series::line(
-                    format!("discovered model (fit {fit_a:.1} %)"),
-                    t.clone(),
-                    y_after.row(i).iter().copied().collect(),
-                ),
-            ],
-            bands: vec![],
-        }
-        .write(&out.join(format!("gap_{name}.svg")))?;
-    }
-    if let Some(round) = s.rounds.first() {
-        for p in &round.localisation.profiles {
-            Figure {
-                title: format!("d̂ of {} against {} (round 1)", p.equation, p.variable),
-                x_label: p.variable.clone(),
-                y_label: format!("d_{}", p.equation),
-                series: vec![Series::points(
-                    "MME d̂",
-                    p.points.iter().map(|q| q[0]).collect(),
-                    p.points.iter().map(|q| q[1]).collect(),
-                )],
-                bands: round
-                    .floor_rms
-                    .iter()
-                    .take(1)
-                    .map(|f| ("d̂ noise floor (RMS)".to_string(), *f))
-                    .collect(),
-            }
-            .write(&out.join(format!("d_{}_vs_{}.svg", p.equation, p.variable)))?;
-        }
-    }
-    Ok(())
-}
-
-fn gap_table(g: &GapPair) -> String {
-    let mut s = String::from("| quantity | channel | before | after |\n|---|---|---|---|\n");
-    for (k, v) in &g.before.fit_percent {
-        s.push_str(&format!(
-            "| free-run fit % | {k} | {v:.2} | {:.2} |\n",
-            g.after.fit_percent.get(k).copied().unwrap_or(f64::NAN)
-        ));
-    }
-    for (k, v) in &g.before.rmse {
-        s.push_str(&format!(
-            "| free-run RMSE | {k} | {v:.4e} | {:.4e} |\n",
-            g.after.rmse.get(k).copied().unwrap_or(f64::NAN)
-        ));
-    }
-    for (k, v) in &g.before.d_rms {
-        s.push_str(&format!(
-            "| d̂ RMS | {k} | {v:.4e} | {:.4e} |\n",
-            g.after.d_rms.get(k).copied().unwrap_or(f64::NAN)
-        ));
-    }
-    s
-}
-
-fn report(s: &DiscoverSummary) -> String {
-    let mut r = format!("# Discovery\n\nVerdict: **{:?}**.\n\n", s.verdict);
-    if !s.effects.is_empty() {
-        r.push_str("| effect | equation | term | coefficient (free-run calibrated) | its 95 % CI | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|---|\n");
-        for e in &s.effects {
-            let ci = e
-                .ci95
-                .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
-            let share = e.share_of_d.map_or("—".to_string(), |v| format!("{v:.2}"));
-            let cal = e
-                .ci95_calibrated
-                .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
-            r.push_str(&format!(
-                "| {} | {} | `{}` | {:.6} | {cal} | {ci} | {share} | {} |\n",
-                e.name, e.state, e.term, e.coefficient, e.named_by
-            ));
-        }
-        r.push_str("\nThe regression on d̂ is shrunk by W, so coefficients are recalibrated by free-run simulation error; the interval is the regression's.\n");
-    }
-    if !s.unconfirmed.is_empty() {
-        r.push_str(&format!(
-            "These terms improved the model (they are in `model.discovered.toml`) but left its free-run cost above {CONFIRM_COST} × the noise level, so they are **not claimed** as the missing physics — something outside the catalogue may be at work:\n\n"
-        ));
-        for e in &s.unconfirmed {
-            r.push_str(&format!(
-                "- {} in d({}): `{}` × {:.6}\n",
-                e.name, e.state, e.term, e.coefficient
-            ));
-        }
-    }
-    r.push_str("\n## Gap on the estimation data (free-run simulation; d̂ from MME)\n\n");
-    r.push_str(&gap_table(&s.gap));
-    if let Some(v) = &s.validation_gap {
-        r.push_str("\n## Gap on the validation data (free-run simulation)\n\n");
-        r.push_str(&gap_table(v));
-    }
-    for (i, round) in s.rounds.iter().enumerate() {
-        r.push_str(&format!(
-            "\n## Round {}: verdict {:?}\n\n",
-            i + 1,
-            round.discovery.verdict
-        ));
-        if let Some(why) = &round.rejected {
-            r.push_str(&format!(
-                "The terms this round proposed were **not accepted**: {why}.\n\n"
-            ));
-        }
-        for st in &round.refinement {
-            r.push_str(&format!(
-                "- free-run search: {} {} (`{}`), cost {:.4} → {:.4}, statistic {:.2} vs {:.2}\n",
-                st.action, st.effect, st.term, st.cost[0], st.cost[1], st.statistic, st.threshold
-            ));
-        }
-        for w in &round.localisation.windows {
-            r.push_str(&format!(
-                "- disagreement in {} ({:?}) from {:.2} s to {:.2} s\n",
-                w.channel, w.source, w.start, w.end
-            ));
-        }
-        for reg in round.localisation.regions.iter().take(10) {
-            r.push_str(&format!(
-                "- d_{} is significant for {} in [{:.3}, {:.3}] (mean {:.3e})\n",
-                reg.equation, reg.variable, reg.lo, reg.hi, reg.mean_d
-            ));
-        }
-    }
-    r.push_str(&format!("\nThe augmented model is `{}`.\n", s.model));
-    r
 }

@@ -1,14 +1,14 @@
 //! The TOML model file of SPEC §5. Its keys are a contract (extend, never rename):
 //! `states`, `inputs`, `A`, `B`, `measured` or `C` + `outputs`, `corrected`,
 //! `noise_variance` (list or `"auto"`), `units`, and `[[terms]]` (`state`, `effect`,
-//! `term`, `coefficient`).
+//! `term`, `coefficient`, and for a transfer between two equations `into`).
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use sysid_core::{LinearModel, ModelNames, TermModel};
+use sysid_core::{LinearModel, ModelNames, TermModel, TermSpec};
 
 use crate::atomic::write_atomic;
 use crate::error::{MmennError, ModelProblem, Result};
@@ -17,13 +17,12 @@ impl ModelSpec {
     /// The assumed model with its named terms, as `Dynamics` (the linear model alone when
     /// there are no terms). Errors name the term and, for expressions, the column.
     pub fn term_model(&self) -> Result<TermModel, ModelProblem> {
-        let specs = self.terms.iter().map(|t| {
-            (
-                t.state.as_str(),
-                t.effect.as_str(),
-                t.term.as_str(),
-                t.coefficient,
-            )
+        let specs = self.terms.iter().map(|t| TermSpec {
+            state: &t.state,
+            into: t.into.as_deref(),
+            effect: &t.effect,
+            term: &t.term,
+            coefficient: t.coefficient,
         });
         Ok(TermModel::from_specs(self.linear.clone(), specs)?)
     }
@@ -45,6 +44,10 @@ pub enum NoiseVariance {
 pub struct TermEntry {
     /// State equation it enters.
     pub state: String,
+    /// For a transfer: the state equation that receives the negated term (what `state`
+    /// loses, `into` gains, under one coefficient). Absent for an ordinary term.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub into: Option<String>,
     /// Catalogue name of the effect.
     pub effect: String,
     /// The expression, in state and input names.
@@ -238,6 +241,15 @@ fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
                 kind: "state",
             });
         }
+        if let Some(into) = &t.into
+            && (!raw.states.contains(into) || into == &t.state)
+        {
+            return Err(ModelProblem::UnknownName {
+                key: "terms.into",
+                name: into.clone(),
+                kind: "state other than the term's own",
+            });
+        }
     }
     let names = ModelNames {
         states: raw.states.clone(),
@@ -414,6 +426,22 @@ coefficient = -0.3
         assert_eq!(spec.terms[0].term, "sign(omega)");
         let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
         assert_eq!(spec, again);
+        assert_eq!(spec.terms[0].into, None);
+        // A transfer term keeps its receiving equation through a round trip, and the
+        // model it builds subtracts the term there.
+        let text = SPEC_EXAMPLE.replace("state = \"omega\"", "state = \"omega\"\ninto = \"theta\"");
+        let spec = parse_model(Path::new("m.toml"), &text).unwrap();
+        assert_eq!(spec.terms[0].into.as_deref(), Some("theta"));
+        let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+        assert_eq!(spec, again);
+        let model = spec.term_model().unwrap();
+        let mut dx = [0.0; 2];
+        sysid_core::Dynamics::rhs(&model, 0.0, &[0.0, 1.0], &[0.0], &mut dx);
+        // theta' = omega + 0.3·sign(omega) (the transfer), omega' = −0.3 (the term).
+        assert!(
+            (dx[0] - 1.3).abs() < 1e-15 && (dx[1] + 0.3).abs() < 1e-15,
+            "{dx:?}"
+        );
     }
 
     #[test]
@@ -511,6 +539,20 @@ noise_variance = "auto"
                 ..
             }
         ));
+        for into in ["into = \"w\"", "into = \"omega\""] {
+            let text =
+                SPEC_EXAMPLE.replace("state = \"omega\"", &format!("state = \"omega\"\n{into}"));
+            assert!(
+                matches!(
+                    problem(&text),
+                    ModelProblem::UnknownName {
+                        key: "terms.into",
+                        ..
+                    }
+                ),
+                "{into}"
+            );
+        }
         assert!(matches!(
             problem(&SPEC_EXAMPLE.replace("B = [[0.0], [-1.0]]", "")),
             ModelProblem::MissingKey { key: "B", .. }

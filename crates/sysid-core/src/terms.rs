@@ -2,6 +2,11 @@
 //! with the assumed linear part: `ẋ = A x + B u + Σ_k c_k·g_k(x, u)·e_{s_k}`, where term
 //! `k` adds its coefficient `c_k` times its expression `g_k` to state equation `s_k`.
 //!
+//! A term may also be a **transfer** (`into`): the same flow `c_k·g_k` leaves equation
+//! `s_k` and enters equation `into` with the opposite sign, so what one state loses
+//! another gains (the outflow of an upper tank is the inflow of the lower one) under one
+//! coefficient.
+//!
 //! The variables of every term expression are the model's **state names followed by its
 //! input names**: index `i < n` is state `i`, index `n + j` is input `j`
 //! ([`term_variables`]).
@@ -42,6 +47,23 @@ pub enum TermError {
         /// Number of states of the model.
         n_states: usize,
     },
+    /// A transfer term's `into` is its own equation or out of range.
+    #[error(
+        "term {index} ({effect}): transfer into state index {into} must differ from its own \
+         equation {state} and be below {n_states}"
+    )]
+    TransferTarget {
+        /// Position of the term.
+        index: usize,
+        /// Its effect name.
+        effect: String,
+        /// The term's own equation.
+        state: usize,
+        /// The equation it transfers into.
+        into: usize,
+        /// Number of states of the model.
+        n_states: usize,
+    },
     /// The coefficient is NaN or infinite.
     #[error("term {index} ({effect}): coefficient {value} is not finite")]
     NonFiniteCoefficient {
@@ -68,11 +90,14 @@ pub enum TermError {
 }
 
 /// One named nonlinear term: `coefficient · expr(x, u)` added to the right-hand side of
-/// state equation `state`.
+/// state equation `state` (and, for a transfer, subtracted from equation `into`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Term {
     /// Index of the state equation it enters.
     pub state: usize,
+    /// For a transfer: the equation that receives the negated term (what `state` loses,
+    /// `into` gains). `None` for an ordinary term.
+    pub into: Option<usize>,
     /// Catalogue name of the effect (e.g. `coulomb_friction`).
     pub effect: String,
     /// The term, over the model's state names followed by its input names.
@@ -86,15 +111,34 @@ impl Term {
     pub fn eval(&self, x: &[f64], u: &[f64]) -> f64 {
         self.coefficient * self.expr.eval_parts(x, u)
     }
+
+    /// Add the term to a right-hand side `dx`: `+value` to its equation and, for a
+    /// transfer, `−value` to the receiving one.
+    pub fn add_to(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.add_scaled(self.expr.eval_parts(x, u), dx);
+    }
+
+    /// Add `coefficient·g` to equation `state` (and subtract it from `into`): the term
+    /// at an already evaluated basis value `g`, for callers that vary coefficients.
+    pub fn add_scaled(&self, g: f64, dx: &mut [f64]) {
+        let v = self.coefficient * g;
+        dx[self.state] += v;
+        if let Some(into) = self.into {
+            dx[into] -= v;
+        }
+    }
 }
 
-/// A term as written in a model file: state name, effect, expression text, coefficient.
+/// A term as written in a model file: state name, effect, expression text, coefficient,
+/// and for a transfer the receiving state.
 ///
-/// A tuple `(state, effect, term, coefficient)` converts into it.
+/// A tuple `(state, effect, term, coefficient)` converts into an ordinary term.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TermSpec<'a> {
     /// Name of the state equation it enters.
     pub state: &'a str,
+    /// For a transfer: name of the state equation that receives the negated term.
+    pub into: Option<&'a str>,
     /// Catalogue name of the effect.
     pub effect: &'a str,
     /// The expression text, in state and input names.
@@ -107,6 +151,7 @@ impl<'a> From<(&'a str, &'a str, &'a str, f64)> for TermSpec<'a> {
     fn from((state, effect, term, coefficient): (&'a str, &'a str, &'a str, f64)) -> Self {
         Self {
             state,
+            into: None,
             effect,
             term,
             coefficient,
@@ -135,8 +180,9 @@ struct Partial {
 }
 
 /// The assumed linear model plus named nonlinear terms, as a [`Dynamics`]:
-/// `f(x, u) = A x + B u + Σ_k c_k·g_k(x, u)·e_{s_k}`, with analytic Jacobians
-/// `∂f/∂x = A + Σ_k c_k·e_{s_k}·∂g_k/∂x` and `∂f/∂u = B + Σ_k c_k·e_{s_k}·∂g_k/∂u`
+/// `f(x, u) = A x + B u + Σ_k c_k·g_k(x, u)·(e_{s_k} − e_{r_k})` (`e_{r_k}` only for a
+/// transfer into `r_k`), with analytic Jacobians
+/// `∂f/∂x = A + Σ_k c_k·(e_{s_k} − e_{r_k})·∂g_k/∂x` and likewise for `∂f/∂u`
 /// (derivatives precompiled; evaluation allocates nothing).
 ///
 /// ```
@@ -181,6 +227,7 @@ impl TermModel {
         for (index, term) in terms.into_iter().enumerate() {
             let Term {
                 state,
+                into,
                 effect,
                 expr,
                 coefficient,
@@ -190,6 +237,17 @@ impl TermModel {
                     index,
                     effect,
                     state,
+                    n_states: n,
+                });
+            }
+            if let Some(into) = into
+                && (into == state || into >= n)
+            {
+                return Err(TermError::TransferTarget {
+                    index,
+                    effect,
+                    state,
+                    into,
                     n_states: n,
                 });
             }
@@ -224,6 +282,14 @@ impl TermModel {
                 if d.constant().is_some_and(|c| c.abs() == 0.0) {
                     continue;
                 }
+                if let Some(into) = into {
+                    partials.push(Partial {
+                        row: into,
+                        var,
+                        coefficient: -coefficient,
+                        expr: d.clone(),
+                    });
+                }
                 partials.push(Partial {
                     row: state,
                     var,
@@ -233,6 +299,7 @@ impl TermModel {
             }
             bound.push(Term {
                 state,
+                into,
                 effect,
                 expr,
                 coefficient,
@@ -257,14 +324,20 @@ impl TermModel {
         for (index, spec) in specs.into_iter().enumerate() {
             let spec: TermSpec<'a> = spec.into();
             let effect = spec.effect.to_owned();
-            let Some(state) = linear.state_names().iter().position(|s| s == spec.state) else {
-                return Err(TermError::UnknownState {
-                    index,
-                    effect,
-                    state: spec.state.to_owned(),
-                    known: linear.state_names().to_vec(),
-                });
+            let position = |name: &str| {
+                linear
+                    .state_names()
+                    .iter()
+                    .position(|s| s == name)
+                    .ok_or_else(|| TermError::UnknownState {
+                        index,
+                        effect: effect.clone(),
+                        state: name.to_owned(),
+                        known: linear.state_names().to_vec(),
+                    })
             };
+            let state = position(spec.state)?;
+            let into = spec.into.map(position).transpose()?;
             let expr =
                 Expr::parse(spec.term, &variables).map_err(|source| TermError::Expression {
                     index,
@@ -274,6 +347,7 @@ impl TermModel {
                 })?;
             terms.push(Term {
                 state,
+                into,
                 effect,
                 expr,
                 coefficient: spec.coefficient,
@@ -301,7 +375,7 @@ impl TermModel {
     pub fn nonlinear_rhs(&self, x: &[f64], u: &[f64], out: &mut [f64]) {
         out.iter_mut().for_each(|v| *v = 0.0);
         for term in &self.terms {
-            out[term.state] += term.eval(x, u);
+            term.add_to(x, u, out);
         }
     }
 }
@@ -318,7 +392,7 @@ impl Dynamics for TermModel {
     fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
         self.linear.rhs(t, x, u, dx);
         for term in &self.terms {
-            dx[term.state] += term.eval(x, u);
+            term.add_to(x, u, dx);
         }
     }
 
@@ -426,6 +500,7 @@ mod tests {
         let expr = Expr::parse("u*cos(theta)", &["u", "theta"]).unwrap_or_else(|e| panic!("{e}"));
         let term = |state| Term {
             state,
+            into: None,
             effect: "coupling".into(),
             expr: expr.clone(),
             coefficient: 2.0,
@@ -452,6 +527,7 @@ mod tests {
             pendulum(),
             vec![Term {
                 state: 0,
+                into: None,
                 effect: "tank".into(),
                 expr: foreign,
                 coefficient: 1.0,
@@ -474,5 +550,81 @@ mod tests {
         let mut n = [9.0; 2];
         model.nonlinear_rhs(&[1.0, 2.0], &[3.0], &mut n);
         assert_eq!(n.map(f64::to_bits), [0.0, 0.2 * 1.5].map(f64::to_bits));
+    }
+
+    /// Two tanks, states (h1, h2): a transfer term is one flow under one coefficient —
+    /// it moves exactly its value from one equation to the other, its Jacobian matches
+    /// central differences, and bad targets are errors naming the term.
+    #[test]
+    fn transfer_terms_move_flow_between_equations() {
+        let names = ModelNames {
+            states: vec!["h1".into(), "h2".into()],
+            inputs: vec!["u".into()],
+            outputs: vec!["h1".into(), "h2".into()],
+            corrections: vec!["d1".into(), "d2".into()],
+        };
+        let a = DMatrix::from_row_slice(2, 2, &[-0.06, 0.0, 0.06, -0.08]);
+        let b = DMatrix::from_row_slice(2, 1, &[0.003, 0.0]);
+        let linear = LinearModel::with_names(
+            a,
+            b,
+            DMatrix::identity(2, 2),
+            DMatrix::identity(2, 2),
+            names,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let spec = |into| TermSpec {
+            state: "h1",
+            into,
+            effect: "orifice_outflow",
+            term: "sqrt(abs(h1))",
+            coefficient: -0.03,
+        };
+        let model = TermModel::from_specs(linear.clone(), [spec(Some("h2"))])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let (x, u) = ([0.3, 0.2], [5.0]);
+        let mut with = [0.0; 2];
+        let mut without = [0.0; 2];
+        model.rhs(0.0, &x, &u, &mut with);
+        linear.rhs(0.0, &x, &u, &mut without);
+        let flow = -0.03 * 0.3_f64.sqrt();
+        assert!((with[0] - without[0] - flow).abs() < 1e-15);
+        assert!((with[1] - without[1] + flow).abs() < 1e-15);
+        // Jacobian against central differences: step 1e-6, truncation O(h²) ≈ 1e-12 here,
+        // rounding ≈ 1e-16/1e-6 = 1e-10.
+        let mut ja = DMatrix::zeros(2, 2);
+        let mut jb = DMatrix::zeros(2, 1);
+        model.jacobians(0.0, &x, &u, &mut ja, &mut jb);
+        let h = 1e-6;
+        for j in 0..2 {
+            let (mut xp, mut xm) = (x, x);
+            xp[j] += h;
+            xm[j] -= h;
+            let (mut fp, mut fm) = ([0.0; 2], [0.0; 2]);
+            model.rhs(0.0, &xp, &u, &mut fp);
+            model.rhs(0.0, &xm, &u, &mut fm);
+            for i in 0..2 {
+                let fd = (fp[i] - fm[i]) / (2.0 * h);
+                assert!(
+                    (ja[(i, j)] - fd).abs() < 1e-8,
+                    "({i},{j}) {} vs {fd}",
+                    ja[(i, j)]
+                );
+            }
+        }
+        let r = TermModel::from_specs(linear.clone(), [spec(Some("h3"))]);
+        assert!(
+            matches!(r, Err(TermError::UnknownState { index: 0, ref state, .. }) if state == "h3")
+        );
+        let r = TermModel::from_specs(linear, [spec(Some("h1"))]);
+        assert!(matches!(
+            r,
+            Err(TermError::TransferTarget {
+                index: 0,
+                state: 0,
+                into: 0,
+                ..
+            })
+        ));
     }
 }

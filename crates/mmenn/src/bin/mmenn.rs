@@ -443,14 +443,21 @@ fn discover(a: DiscoverArgs) -> Result<()> {
     println!("verdict: {:?}", s.verdict);
     for e in &s.effects {
         println!(
-            "  {} in d({}): {} × {:.6} (free-run calibrated; {})",
-            e.name, e.state, e.term, e.coefficient, e.named_by
+            "  {} in {}: {} × {:.6} (free-run calibrated; {})",
+            e.name,
+            e.equations(),
+            e.term,
+            e.coefficient,
+            e.named_by
         );
     }
     for e in &s.unconfirmed {
         println!(
-            "  not claimed (cost stays above the noise level): {} in d({}): {} × {:.6}",
-            e.name, e.state, e.term, e.coefficient
+            "  not claimed (cost stays above the noise level): {} in {}: {} × {:.6}",
+            e.name,
+            e.equations(),
+            e.term,
+            e.coefficient
         );
     }
     let show = |label: &str, g: &mmenn::discover::GapPair| {

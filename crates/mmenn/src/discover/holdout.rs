@@ -1,0 +1,121 @@
+//! What judges the free-run search in `mmenn discover`: validation records with fitted
+//! initial states, or the held-out end of every estimation record, and the
+//! recalibration of the chosen terms on the whole estimation records afterwards.
+
+use discovery::RefineConfig;
+use sysid_core::{Channel, Dataset, Experiment, InitialStateFit, TermModel, fit_initial_state};
+
+use super::core;
+use crate::error::Result;
+use crate::model_file::ModelSpec;
+
+/// Initial states of every record, fitted to its first `window` samples with `model`.
+pub(super) fn holdout_initial_states(
+    model: &TermModel,
+    spec: &ModelSpec,
+    data: &Dataset,
+    guess: &[f64],
+    window: usize,
+) -> Result<Vec<Vec<f64>>> {
+    let fit = InitialStateFit {
+        window,
+        ..InitialStateFit::default()
+    };
+    data.experiments()
+        .iter()
+        .map(|exp| {
+            fit_initial_state(model, spec.linear.c(), exp, guess, &fit)
+                .map_err(core("fitting a validation record's initial state"))
+        })
+        .collect()
+}
+
+/// Calibrate the kept terms of `refined` on `data` (all estimation records), replacing
+/// its model, coefficients' standard errors and initial states; unchanged when that
+/// calibration fails.
+pub(super) fn recalibrate_on(
+    mut refined: discovery::Refinement,
+    base: &TermModel,
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    noise: &[f64],
+) -> discovery::Refinement {
+    let first_new = base.terms().len();
+    let end = refined.model.terms().len();
+    let config = discovery::CalibrationConfig {
+        terms: Some((first_new..end).collect()),
+        weights: discovery::OutputWeights::NoiseVariance(noise.to_vec()),
+        ..RefineConfig::default().calibration
+    };
+    if let Ok(fit) = discovery::calibrate(&refined.model, data, x0, &config)
+        && fit.cost_after.is_finite()
+    {
+        refined.coefficient_std = fit.coefficient_std[first_new..end].to_vec();
+        refined.model = fit.model;
+        refined.x0 = fit.x0;
+    }
+    refined
+}
+
+/// Measured (non-missing) output values over every record.
+pub(super) fn measured_values(data: &Dataset) -> usize {
+    data.experiments()
+        .iter()
+        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
+        .sum()
+}
+
+/// Estimation records cut in two for the free-run search: the first part calibrates, the
+/// last `fraction` judges.
+pub(super) struct Split {
+    pub(super) cal: Dataset,
+    pub(super) cal_x0: Vec<Vec<f64>>,
+    pub(super) hold: Dataset,
+    pub(super) hold_x0: Vec<Vec<f64>>,
+}
+
+/// Cut every record at `1 − fraction` of its length; initial states of both parts from
+/// MME's `x̂`. `None` when `fraction` is 0 or a part would be shorter than 50 samples.
+pub(super) fn split_records(
+    data: &Dataset,
+    est: &sysid_core::MmeEstimate,
+    fraction: f64,
+) -> Result<Option<Split>> {
+    if !(fraction > 0.0 && fraction < 1.0) {
+        return Ok(None);
+    }
+    const MIN_PART: usize = 50;
+    let (mut cal, mut hold) = (Vec::new(), Vec::new());
+    let (mut cal_x0, mut hold_x0) = (Vec::new(), Vec::new());
+    for (exp, e) in data.experiments().iter().zip(&est.experiments) {
+        let n = exp.len();
+        let k = ((n as f64) * (1.0 - fraction)).round() as usize;
+        if k < MIN_PART || n.saturating_sub(k) < MIN_PART || e.states.ncols() < n {
+            return Ok(None);
+        }
+        let part = |from: usize, len: usize| {
+            Experiment::new(
+                exp.t0() + from as f64 * exp.dt(),
+                exp.dt(),
+                exp.inputs().columns(from, len).into_owned(),
+                exp.outputs().columns(from, len).into_owned(),
+            )
+            .map_err(core("splitting an estimation record"))
+        };
+        cal.push(part(0, k)?);
+        hold.push(part(k, n - k)?);
+        cal_x0.push(e.states.column(0).iter().copied().collect());
+        hold_x0.push(e.states.column(k).iter().copied().collect());
+    }
+    let names = |v: Vec<String>| v.into_iter().map(Channel::new).collect::<Vec<_>>();
+    let dataset = |exps| {
+        Dataset::new(names(data.input_names()), names(data.output_names()), exps)
+            .map_err(core("splitting an estimation record"))
+    };
+    Ok(Some(Split {
+        cal: dataset(cal)?,
+        cal_x0,
+        hold: dataset(hold)?,
+        hold_x0,
+    }))
+}

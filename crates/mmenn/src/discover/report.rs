@@ -1,0 +1,211 @@
+//! The human side of `mmenn discover`: `report.md` (verdict, named effects with their
+//! equations and intervals, the gap tables, the search's decisions) and the before/after
+//! figures. Nothing here computes a result.
+
+use std::path::Path;
+
+use nalgebra::DMatrix;
+use sysid_core::Dataset;
+
+use super::{CONFIRM_COST, DiscoverSummary, GapPair};
+use crate::error::Result;
+use crate::model_file::ModelSpec;
+use crate::plot::{Figure, Series};
+
+pub(super) fn figures(
+    s: &DiscoverSummary,
+    data: &Dataset,
+    spec: &ModelSpec,
+    y_before: &DMatrix<f64>,
+    y_after: &DMatrix<f64>,
+    out: &Path,
+) -> Result<()> {
+    let exp = &data.experiments()[0];
+    let t = exp.times();
+    for (i, name) in spec.linear.output_names().iter().enumerate() {
+        let fit_b = s
+            .gap
+            .before
+            .fit_percent
+            .get(name)
+            .copied()
+            .unwrap_or(f64::NAN);
+        let fit_a = s
+            .gap
+            .after
+            .fit_percent
+            .get(name)
+            .copied()
+            .unwrap_or(f64::NAN);
+        Figure {
+            title: format!("{name}: free-run simulation before and after discovery"),
+            x_label: "t (s)".into(),
+            y_label: name.clone(),
+            series: vec![
+                Series::points(
+                    "measured",
+                    t.clone(),
+                    exp.outputs().row(i).iter().copied().collect(),
+                ),
+                Series::line(
+                    format!("assumed model (fit {fit_b:.1} %)"),
+                    t.clone(),
+                    y_before.row(i).iter().copied().collect(),
+                ),
+                Series::line(
+                    format!("discovered model (fit {fit_a:.1} %)"),
+                    t.clone(),
+                    y_after.row(i).iter().copied().collect(),
+                ),
+            ],
+            bands: vec![],
+        }
+        .write(&out.join(format!("gap_{name}.svg")))?;
+    }
+    if let Some(round) = s.rounds.first() {
+        for p in &round.localisation.profiles {
+            Figure {
+                title: format!("d̂ of {} against {} (round 1)", p.equation, p.variable),
+                x_label: p.variable.clone(),
+                y_label: format!("d_{}", p.equation),
+                series: vec![Series::points(
+                    "MME d̂",
+                    p.points.iter().map(|q| q[0]).collect(),
+                    p.points.iter().map(|q| q[1]).collect(),
+                )],
+                bands: round
+                    .floor_rms
+                    .iter()
+                    .take(1)
+                    .map(|f| ("d̂ noise floor (RMS)".to_string(), *f))
+                    .collect(),
+            }
+            .write(&out.join(format!("d_{}_vs_{}.svg", p.equation, p.variable)))?;
+        }
+    }
+    Ok(())
+}
+
+fn gap_table(g: &GapPair) -> String {
+    let mut s = String::from("| quantity | channel | before | after |\n|---|---|---|---|\n");
+    for (k, v) in &g.before.fit_percent {
+        s.push_str(&format!(
+            "| free-run fit % | {k} | {v:.2} | {:.2} |\n",
+            g.after.fit_percent.get(k).copied().unwrap_or(f64::NAN)
+        ));
+    }
+    for (k, v) in &g.before.rmse {
+        s.push_str(&format!(
+            "| free-run RMSE | {k} | {v:.4e} | {:.4e} |\n",
+            g.after.rmse.get(k).copied().unwrap_or(f64::NAN)
+        ));
+    }
+    for (k, v) in &g.before.d_rms {
+        s.push_str(&format!(
+            "| d̂ RMS | {k} | {v:.4e} | {:.4e} |\n",
+            g.after.d_rms.get(k).copied().unwrap_or(f64::NAN)
+        ));
+    }
+    s
+}
+
+pub(super) fn report(s: &DiscoverSummary) -> String {
+    let mut r = format!("# Discovery\n\nVerdict: **{:?}**.\n\n", s.verdict);
+    if !s.effects.is_empty() {
+        r.push_str("| effect | equation | term | coefficient (free-run calibrated) | its 95 % CI | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|---|\n");
+        for e in &s.effects {
+            let ci = e
+                .ci95
+                .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
+            let share = e.share_of_d.map_or("—".to_string(), |v| format!("{v:.2}"));
+            let cal = e
+                .ci95_calibrated
+                .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
+            r.push_str(&format!(
+                "| {} | {} | `{}` | {:.6} | {cal} | {ci} | {share} | {} |\n",
+                e.name,
+                e.equations(),
+                e.term,
+                e.coefficient,
+                e.named_by
+            ));
+        }
+        r.push_str("\nThe regression on d̂ is shrunk by W, so coefficients are recalibrated by free-run simulation error; the interval is the regression's.\n");
+        let adjusted: Vec<_> = s
+            .effects
+            .iter()
+            .filter_map(|e| e.adjusts.as_ref())
+            .collect();
+        if !adjusted.is_empty() {
+            r.push_str("\nLinear terms recalibrate entries of the assumed model:\n\n");
+            for a in adjusted {
+                r.push_str(&format!(
+                    "- {}[{}, {}]: {:.6} → {:.6}{}\n",
+                    a.matrix,
+                    a.row,
+                    a.column,
+                    a.assumed,
+                    a.effective,
+                    if a.cancelled {
+                        " (cancelled within its 95 % interval: the assumed linear term is \
+                         replaced by the named effects)"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+        }
+    }
+    if !s.unconfirmed.is_empty() {
+        r.push_str(&format!(
+            "These terms improved the model (they are in `model.discovered.toml`) but left its free-run cost above {CONFIRM_COST} × the noise level, so they are **not claimed** as the missing physics — something outside the catalogue may be at work:\n\n"
+        ));
+        for e in &s.unconfirmed {
+            r.push_str(&format!(
+                "- {} in {}: `{}` × {:.6}\n",
+                e.name,
+                e.equations(),
+                e.term,
+                e.coefficient
+            ));
+        }
+    }
+    r.push_str("\n## Gap on the estimation data (free-run simulation; d̂ from MME)\n\n");
+    r.push_str(&gap_table(&s.gap));
+    if let Some(v) = &s.validation_gap {
+        r.push_str("\n## Gap on the validation data (free-run simulation)\n\n");
+        r.push_str(&gap_table(v));
+    }
+    for (i, round) in s.rounds.iter().enumerate() {
+        r.push_str(&format!(
+            "\n## Round {}: verdict {:?}\n\n",
+            i + 1,
+            round.discovery.verdict
+        ));
+        if let Some(why) = &round.rejected {
+            r.push_str(&format!(
+                "The terms this round proposed were **not accepted**: {why}.\n\n"
+            ));
+        }
+        for st in &round.refinement {
+            r.push_str(&format!(
+                "- free-run search: {} {} (`{}`), cost {:.4} → {:.4}, statistic {:.2} vs {:.2}\n",
+                st.action, st.effect, st.term, st.cost[0], st.cost[1], st.statistic, st.threshold
+            ));
+        }
+        for w in &round.localisation.windows {
+            r.push_str(&format!(
+                "- disagreement in {} ({:?}) from {:.2} s to {:.2} s\n",
+                w.channel, w.source, w.start, w.end
+            ));
+        }
+        for reg in round.localisation.regions.iter().take(10) {
+            r.push_str(&format!(
+                "- d_{} is significant for {} in [{:.3}, {:.3}] (mean {:.3e})\n",
+                reg.equation, reg.variable, reg.lo, reg.hi, reg.mean_d
+            ));
+        }
+    }
+    r.push_str(&format!("\nThe augmented model is `{}`.\n", s.model));
+    r
+}
