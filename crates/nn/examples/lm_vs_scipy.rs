@@ -2,18 +2,21 @@
 //! 20,000 samples of the `lm_grid` bench data (3 inputs, 1 output) and H = 1…10 hidden units,
 //! write the scaled data and the initial weights for `benches/scipy_lm.py`, train with
 //! [`train_lm`] from those weights, and record the training MSE and the elapsed time after
-//! every epoch (best of `REPEATS` runs per epoch). Time is the thread's CPU time, so other
-//! processes on a shared machine do not inflate it (the Python side does the same).
+//! every epoch (best of `REPEATS` runs per epoch). Two clocks: the process's CPU time (all
+//! threads; other processes on a shared machine do not inflate it, and the Python side
+//! measures the same for single-threaded scipy) and wall-clock time.
 //!
-//! Run: `cargo run --release -p nn --example lm_vs_scipy -- OUT_DIR [N [H]]`, then
-//! `python3 crates/nn/benches/scipy_lm.py OUT_DIR` (see the crate README).
+//! Run: `cargo run --release -p nn --example lm_vs_scipy -- OUT_DIR [N [H]] [--threads K]
+//! [--damping trainlm|nielsen|nielsen-marquardt]`, then `python3 crates/nn/benches/scipy_lm.py OUT_DIR` (see the
+//! crate README). `--threads` sizes rayon's pool (default 1); `--damping` picks
+//! [`nn::Damping`] (default `trainlm`).
 
 #![allow(clippy::print_stderr)]
 
 use std::fmt::Write as _;
 
 use nalgebra::DMatrix;
-use nn::{EpochInfo, LmConfig, Mlp, ValidationSplit, train_lm};
+use nn::{Damping, EpochInfo, LmConfig, Mlp, ValidationSplit, train_lm};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 
@@ -33,10 +36,18 @@ fn data(n: usize) -> (DMatrix<f64>, DMatrix<f64>) {
     (x, t)
 }
 
-/// CPU time of the calling thread, s.
+/// CPU time of the process (all threads), s.
 fn cpu_seconds() -> f64 {
-    let t = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
+    let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
     t.tv_sec as f64 + 1e-9 * t.tv_nsec as f64
+}
+
+/// Value following the flag `name` on the command line.
+fn flag(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1).cloned())
 }
 
 fn list(v: &[f64]) -> String {
@@ -51,13 +62,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .ok_or("usage: lm_vs_scipy OUT_DIR")?,
     );
     std::fs::create_dir_all(&out)?;
-    // Optional filters (for profiling one case): N, then H.
-    let only = |i: usize| {
-        std::env::args()
-            .nth(i)
-            .and_then(|v| v.parse::<usize>().ok())
+    let threads: usize = flag("--threads").map_or(Ok(1), |v| v.parse())?;
+    let damping = match flag("--damping").as_deref() {
+        None | Some("trainlm") => Damping::Trainlm,
+        Some("nielsen") => Damping::Nielsen,
+        Some("nielsen-marquardt") => Damping::NielsenMarquardt,
+        Some(other) => return Err(format!("unknown damping {other}").into()),
     };
-    let (only_n, only_h) = (only(2), only(3));
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build_global()?;
+    // Optional filters (for profiling one case): N, then H (positional, after OUT_DIR).
+    let mut positional = Vec::new();
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        if a.starts_with("--") {
+            args.next();
+        } else {
+            positional.push(a);
+        }
+    }
+    let only = |i: usize| positional.get(i).and_then(|v| v.parse::<usize>().ok());
+    let (only_n, only_h) = (only(1), only(2));
     let mut cases = Vec::new();
     for n in [2_000usize, 20_000] {
         if only_n.is_some_and(|v| v != n) {
@@ -86,33 +112,41 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let config = LmConfig {
                 max_epochs: MAX_EPOCHS,
                 validation: ValidationSplit::None,
+                damping,
                 ..LmConfig::default()
             };
             let mut best_times: Vec<f64> = Vec::new();
+            let mut best_walls: Vec<f64> = Vec::new();
             let mut history = Vec::new();
             let mut termination = String::new();
             for _ in 0..REPEATS {
                 let mut trained = net.clone();
-                let mut times = vec![0.0];
-                let start = cpu_seconds();
-                let mut on_epoch = |_: EpochInfo| times.push(cpu_seconds() - start);
+                let (mut times, mut walls) = (vec![0.0], vec![0.0]);
+                let (start, wall) = (cpu_seconds(), std::time::Instant::now());
+                let mut on_epoch = |_: EpochInfo| {
+                    times.push(cpu_seconds() - start);
+                    walls.push(wall.elapsed().as_secs_f64());
+                };
                 let report = train_lm(&mut trained, &x, &t, &config, Some(&mut on_epoch))?;
-                if best_times.is_empty() {
-                    best_times = times;
-                } else {
-                    for (b, t) in best_times.iter_mut().zip(&times) {
-                        *b = b.min(*t);
+                for (best, new) in [(&mut best_times, times), (&mut best_walls, walls)] {
+                    if best.is_empty() {
+                        *best = new;
+                    } else {
+                        for (b, t) in best.iter_mut().zip(&new) {
+                            *b = b.min(*t);
+                        }
                     }
                 }
                 history = report.train_history.clone();
                 termination = format!("{:?}", report.termination);
             }
             cases.push(format!(
-                "{{\"n\":{n},\"h\":{h},\"rho\":{:e},\"w0\":{},\"rust_mse\":{},\"rust_time\":{},\"rust_stop\":\"{termination}\"}}",
+                "{{\"n\":{n},\"h\":{h},\"rho\":{:e},\"w0\":{},\"rust_mse\":{},\"rust_time\":{},\"rust_wall\":{},\"rust_stop\":\"{termination}\"}}",
                 net.output_scaler().half_range()[0],
                 list(net.weights()),
                 list(&history),
                 list(&best_times),
+                list(&best_walls),
             ));
             eprintln!(
                 "N {n} H {h}: {} epochs, MSE {:.4e}, {:.4} s",
@@ -125,7 +159,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::write(
         out.join("rust.json"),
         format!(
-            "{{\"max_epochs\":{MAX_EPOCHS},\"cases\":[\n{}\n]}}\n",
+            "{{\"max_epochs\":{MAX_EPOCHS},\"threads\":{threads},\"damping\":\"{damping:?}\",\"cases\":[\n{}\n]}}\n",
             cases.join(",\n")
         ),
     )?;

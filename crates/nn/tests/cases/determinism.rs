@@ -1,7 +1,9 @@
 //! Same seed ⇒ same bits: single trainings, and the parallel sizing sweep in rayon pools
 //! of different sizes.
 
-use nn::{LmConfig, Mlp, SweepConfig, SweepResult, ValidationSplit, sizing_sweep, train_lm};
+use nn::{
+    Damping, LmConfig, Mlp, SweepConfig, SweepResult, ValidationSplit, sizing_sweep, train_lm,
+};
 
 use nalgebra::DMatrix;
 
@@ -30,6 +32,47 @@ fn same_seed_same_weights() {
     assert_eq!(a.1, b.1);
     assert_eq!(a.2, b.2);
     assert_ne!(run(6).0, a.0);
+}
+
+#[test]
+fn training_on_many_chunks_is_identical_for_one_and_two_threads() {
+    // 3,000 samples (2,550 training, 450 validation): the normal equations are summed over
+    // three chunks in parallel, and rejected steps are cut off chunk group by chunk group,
+    // where a group is as many chunks as the pool has threads. Neither may change a bit,
+    // for either damping schedule, with one hidden layer (block kernel) or two
+    // (back-propagation).
+    let x = uniform_inputs(3, 3000, -2.0, 2.0, 41);
+    let t = DMatrix::from_fn(1, 3000, |_, k| {
+        x[(0, k)].sin() * (0.5 * x[(1, k)]).cos() + 0.3 * x[(2, k)].tanh()
+    });
+    for hidden in [vec![6], vec![4, 3]] {
+        for damping in [
+            Damping::Trainlm,
+            Damping::Nielsen,
+            Damping::NielsenMarquardt,
+        ] {
+            let config = LmConfig {
+                max_epochs: 25,
+                damping,
+                ..LmConfig::default()
+            };
+            let run = |threads: usize| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| {
+                    let mut net = Mlp::for_data(&x, &t, &hidden, 8).unwrap();
+                    let report = train_lm(&mut net, &x, &t, &config, None).unwrap();
+                    (bits(net.weights()), report)
+                })
+            };
+            let (one, two) = (run(1), run(2));
+            assert_eq!(one.0, two.0, "{hidden:?} {damping:?}");
+            assert_eq!(one.1, two.1);
+            assert_eq!(one.1.epochs, 25, "the comparison covers 25 epochs");
+        }
+    }
 }
 
 type Data = (DMatrix<f64>, DMatrix<f64>);
