@@ -9,11 +9,16 @@
 //! * Saturation limits `L` at the `saturation_quantiles` of `|u|` (default 75 % and 90 %:
 //!   the excess is nonzero on a quarter and a tenth of the samples).
 //! * Dead-zone widths `δ` at the `dead_zone_quantiles` of `|u|` (default 10 % and 25 %).
+//! * Orifice outflow `√h_j` only in the balance of tank `j` itself and of tanks the
+//!   assumed model connects it to (`A[i][j] ≠ 0`).
 //!
 //! Saturation and dead zone are tried only in equations where the input acts in the
 //! assumed model (`B[i, j] ≠ 0`): they are the missing part `b·(sat(u) − u)` of an
 //! existing input path, not a new one. Every other effect is tried wherever its roles fit
 //! (see [`crate::catalogue`]).
+//!
+//! Thresholds, widths and velocities are starting values: the free-run search calibrates
+//! those of every term it keeps (`refine`'s `polish` module).
 //!
 //! All are rounded to 3 significant digits ([`crate::catalogue::number`]) so that the
 //! model file shows the value actually used.
@@ -111,6 +116,9 @@ pub struct Candidate {
     pub term: String,
     /// The effect written into a model for integration.
     pub model_effect: Effect,
+    /// The model effect's parameter values, in its [`Effect::parameters`] order (the
+    /// smooth variants add a smoothing velocity `eps`).
+    pub model_parameters: Vec<f64>,
     /// The integrable term (the same as `expr` unless the effect jumps).
     pub model_expr: Expr,
     /// Its canonical text.
@@ -247,6 +255,7 @@ pub fn build_library(
                 expr,
                 model_effect,
                 model_term: model_expr.to_string(),
+                model_parameters: model_params,
                 model_expr,
                 coefficient_unit,
             });
@@ -305,6 +314,17 @@ pub fn build_library(
                             if roles.roles[a] == Role::Angle {
                                 push(effect, vec![n + j, a], vec![])?;
                             }
+                        }
+                    }
+                }
+                Effect::OrificeOutflow => {
+                    // A level's orifice flow enters its own tank's balance and those the
+                    // assumed model already connects it to (the tank it drains into):
+                    // a flow between tanks the model does not connect is not an orifice
+                    // law but a missing pipe, outside this effect.
+                    for v in states_with(effect, roles) {
+                        if v == eq || model.a()[(eq, v)] != 0.0 {
+                            push(effect, vec![v], vec![])?;
                         }
                     }
                 }
@@ -440,5 +460,55 @@ mod tests {
             .find(|c| c.effect == Effect::GravityNonlinearity)
             .unwrap_or_else(|| panic!("no gravity"));
         assert_eq!(gravity.coefficient_unit.as_deref(), Some("rad/s^2"));
+    }
+
+    /// Two cascaded tanks (h1 drains into h2): tank 1's balance may get only its own
+    /// orifice law, tank 2's its own and the upstream one, never the reverse pipe.
+    #[test]
+    fn orifice_terms_follow_the_assumed_connections() {
+        let names = ModelNames {
+            states: vec!["h1".into(), "h2".into()],
+            inputs: vec!["u".into()],
+            outputs: vec!["h1".into(), "h2".into()],
+            corrections: vec!["h1".into(), "h2".into()],
+        };
+        let model = LinearModel::with_names(
+            DMatrix::from_row_slice(2, 2, &[-0.06, 0.0, 0.06, -0.08]),
+            DMatrix::from_row_slice(2, 1, &[0.003, 0.0]),
+            DMatrix::identity(2, 2),
+            DMatrix::identity(2, 2),
+            names,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let units = BTreeMap::from([
+            ("h1".to_string(), "m".to_string()),
+            ("h2".to_string(), "m".to_string()),
+            ("d_h1".to_string(), "m/s".to_string()),
+            ("d_h2".to_string(), "m/s".to_string()),
+            ("u".to_string(), "V".to_string()),
+        ]);
+        let roles = StateRoles::infer(&model, &units, &[]).unwrap_or_else(|e| panic!("{e}"));
+        let len = 100;
+        let states = DMatrix::from_fn(2, len, |i, k| {
+            0.2 + 0.01 * (i + 1) as f64 * (k as f64 * 0.1).sin()
+        });
+        let inputs = DMatrix::from_fn(1, len, |_, k| 5.0 + (k as f64 * 0.07).cos());
+        let s =
+            Samples::new(states, inputs, DMatrix::zeros(2, len)).unwrap_or_else(|e| panic!("{e}"));
+        let lib = build_library(&model, &roles, &units, &[s], &LibraryConfig::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        let orifices = |eq: usize| -> Vec<String> {
+            lib[eq]
+                .candidates
+                .iter()
+                .filter(|c| c.effect == Effect::OrificeOutflow)
+                .map(|c| c.term.clone())
+                .collect()
+        };
+        assert_eq!(orifices(0), vec!["sqrt(abs(h1))".to_string()]);
+        assert_eq!(
+            orifices(1),
+            vec!["sqrt(abs(h1))".to_string(), "sqrt(abs(h2))".to_string()]
+        );
     }
 }

@@ -31,6 +31,8 @@ use rayon::prelude::*;
 use crate::screen::Screen;
 use crate::stats::chi2_quantile;
 
+mod polish;
+
 /// A candidate term for the free-run search.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RefineCandidate {
@@ -47,6 +49,16 @@ pub struct RefineCandidate {
     pub term: String,
     /// Starting coefficient (e.g. from the regression on `d̂`; 0 if unknown).
     pub coefficient: f64,
+    /// The variables the effect's template reads, in slot order (see
+    /// [`crate::Effect::template`]); empty when unknown. With `parameters`, lets the
+    /// search re-write the term for other parameter values.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub variables: Vec<String>,
+    /// The term's parameter values (thresholds, velocity scales) in
+    /// [`crate::Effect::parameters`] order; empty when it has none or they are unknown.
+    /// The search calibrates the ones that shape the term (see the `polish` module).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parameters: Vec<f64>,
 }
 
 /// Settings of [`refine_by_free_run`].
@@ -103,9 +115,12 @@ pub struct RefineStep {
 /// Result of the search.
 #[derive(Debug, Clone)]
 pub struct Refinement {
-    /// Indices into the candidate list of the terms kept, in the order of `model`'s new
-    /// terms.
+    /// Indices into `candidates` of the terms kept, in the order of `model`'s new terms.
     pub selected: Vec<usize>,
+    /// The candidate list as the search left it: the given one with calibrated
+    /// coefficients and, for terms whose shaping parameters were calibrated, re-written
+    /// terms (same length and order as the list given).
+    pub candidates: Vec<RefineCandidate>,
     /// The base model plus the kept terms, calibrated.
     pub model: TermModel,
     /// Calibrated initial states.
@@ -403,6 +418,44 @@ fn residual_neff_ratio(
     Ok(((1.0 - rho) / (1.0 + rho)).clamp(1e-3, 1.0))
 }
 
+/// Calibrate the shaping parameters (thresholds, velocity scales) of every term of `set`
+/// not calibrated yet (`polished` is indexed like `cands`), keeping a re-written term
+/// unless the judged cost rises significantly (`M·ΔJ` above `threshold`, the price of
+/// one parameter: the parameter is fitted on the estimation records, so on held-out
+/// ones it may lose a little to noise).
+#[allow(clippy::too_many_arguments)]
+fn polish_set(
+    ctx: &Ctx<'_>,
+    cands: &mut [RefineCandidate],
+    set: &[usize],
+    current: &mut Eval,
+    steps: &mut Vec<RefineStep>,
+    polished: &mut [bool],
+    m: f64,
+    threshold: f64,
+) -> Result<()> {
+    let first_new = ctx.base.terms().len();
+    for pos in 0..set.len() {
+        let i = set[pos];
+        if std::mem::replace(&mut polished[i], true) {
+            continue;
+        }
+        for (p, &k) in set.iter().enumerate() {
+            if let Some(t) = current.model.terms().get(first_new + p) {
+                cands[k].coefficient = t.coefficient;
+            }
+        }
+        if let Some((cand, eval, step)) = polish::polish(ctx, cands, set, pos)?
+            && m * (eval.cost - current.cost) < threshold
+        {
+            cands[i] = cand;
+            *current = eval;
+            steps.push(step);
+        }
+    }
+    Ok(())
+}
+
 /// Held-out records for [`refine_with_holdout`]: data not used to calibrate, on which
 /// every candidate set is judged (coefficients as calibrated, initial states re-fitted).
 #[derive(Debug, Clone, Copy)]
@@ -527,6 +580,17 @@ pub fn refine_with_holdout(
     };
     let cost_before = base_eval.as_ref().map_or(f64::NAN, |e| e.cost);
     let mut steps = Vec::new();
+    let mut polished = vec![false; cands.len()];
+    polish_set(
+        &ctx,
+        &mut cands,
+        &set,
+        &mut current,
+        &mut steps,
+        &mut polished,
+        m,
+        threshold,
+    )?;
     let remove_step = |set: &mut Vec<usize>,
                        current: &mut Eval,
                        steps: &mut Vec<RefineStep>,
@@ -641,6 +705,16 @@ pub fn refine_with_holdout(
             set.push(i);
             visited.insert(sorted(&set));
             current = e;
+            polish_set(
+                &ctx,
+                &mut cands,
+                &set,
+                &mut current,
+                &mut steps,
+                &mut polished,
+                m,
+                threshold,
+            )?;
             for (pos, &i) in set.iter().enumerate() {
                 if let Some(t) = current.model.terms().get(first_new + pos) {
                     cands[i].coefficient = t.coefficient;
@@ -682,6 +756,16 @@ pub fn refine_with_holdout(
                 });
                 set.push(i);
                 current = e;
+                polish_set(
+                    &ctx,
+                    &mut cands,
+                    &set,
+                    &mut current,
+                    &mut steps,
+                    &mut polished,
+                    m,
+                    threshold,
+                )?;
             }
             _ => {
                 // No single term helps significantly: pairs within one equation (terms
@@ -735,6 +819,16 @@ pub fn refine_with_holdout(
                         }
                         set.extend([i, j]);
                         current = e;
+                        polish_set(
+                            &ctx,
+                            &mut cands,
+                            &set,
+                            &mut current,
+                            &mut steps,
+                            &mut polished,
+                            m,
+                            threshold,
+                        )?;
                     }
                     _ => break,
                 }
@@ -747,10 +841,55 @@ pub fn refine_with_holdout(
             }
         }
     }
+    // An input gain beside a saturation (or dead zone) at the same threshold is the other
+    // law alone: one term fewer, kept unless it fits significantly worse.
+    let first_new = base.terms().len();
+    let coefficients: Vec<f64> = (0..set.len())
+        .map(|p| {
+            current
+                .model
+                .terms()
+                .get(first_new + p)
+                .map_or(0.0, |t| t.coefficient)
+        })
+        .collect();
+    if let Some((pg, pl, k, replacement)) = polish::input_identity(&cands, &set, &coefficients) {
+        let mut trial_cands = cands.clone();
+        trial_cands[k] = replacement;
+        let mut trial: Vec<usize> = set
+            .iter()
+            .enumerate()
+            .filter(|(p, _)| *p != pg && *p != pl)
+            .map(|(_, &i)| i)
+            .collect();
+        trial.push(k);
+        if let Some(e) = evaluate(&ctx, &trial_cands, &trial, 0)?
+            && m * (e.cost - current.cost) * current.neff_ratio < threshold
+        {
+            steps.push(RefineStep {
+                action: "simplify".into(),
+                effect: format!(
+                    "{} + {} → {}",
+                    cands[set[pg]].effect, cands[set[pl]].effect, trial_cands[k].effect
+                ),
+                term: format!(
+                    "{} + {} → {}",
+                    cands[set[pg]].term, cands[set[pl]].term, trial_cands[k].term
+                ),
+                cost: [current.cost, e.cost],
+                statistic: m * (e.cost - current.cost) * current.neff_ratio,
+                threshold,
+            });
+            cands = trial_cands;
+            set = trial;
+            current = e;
+        }
+    }
     // Whatever stopped the search, end with no term whose removal is insignificant.
     while !set.is_empty() && remove_step(&mut set, &mut current, &mut steps, &cands)? {}
     Ok(Refinement {
         selected: set,
+        candidates: cands,
         model: current.model,
         x0: current.x0,
         cost: [cost_before, current.cost],
@@ -784,6 +923,8 @@ mod tests {
             into: None,
             term: term.into(),
             coefficient: 0.0,
+            variables: vec![],
+            parameters: vec![],
         };
         let candidates = vec![
             cand("linear_stiffness", "x"),
@@ -866,6 +1007,8 @@ mod tests {
             into: None,
             term,
             coefficient: 0.0,
+            variables: vec![],
+            parameters: vec![],
         };
         let candidates = vec![
             cand("cubic_stiffness", format!("{x}^3")),

@@ -121,8 +121,8 @@ pub fn conserved_variant(
 /// breaking it: the plain search wins only when its score is lower by more than one
 /// more χ²₁(1 − α) — the same test as for adding a term. (When both reach the noise
 /// level the data cannot tell them apart, and the routed explanation is kept.) Returns
-/// the refinement and the candidate list its `selected` indices refer to. Without
-/// routings this is one plain search.
+/// the refinement and the candidate list its `selected` indices refer to (the search's
+/// own `candidates`, as it left them). Without routings this is one plain search.
 #[allow(clippy::too_many_arguments)]
 pub fn refine_with_transfers(
     base: &TermModel,
@@ -140,7 +140,8 @@ pub fn refine_with_transfers(
     let plain = search(candidates, initial)?;
     let transfers = transfer_candidates(base.linear(), candidates);
     if transfers.is_empty() {
-        return Ok((plain, candidates.to_vec()));
+        let list = plain.candidates.clone();
+        return Ok((plain, list));
     }
     let (conserved, conserved_initial) = conserved_variant(candidates, &transfers, initial);
     let routed = search(&conserved, &conserved_initial)?;
@@ -159,11 +160,13 @@ pub fn refine_with_transfers(
             f64::INFINITY
         }
     };
-    if score(&routed) <= score(&plain) + price {
-        Ok((routed, conserved))
+    let best = if score(&routed) <= score(&plain) + price {
+        routed
     } else {
-        Ok((plain, candidates.to_vec()))
-    }
+        plain
+    };
+    let list = best.candidates.clone();
+    Ok((best, list))
 }
 
 #[cfg(test)]
@@ -197,6 +200,8 @@ mod tests {
             into: None,
             term: term.into(),
             coefficient: 0.1,
+            variables: vec![],
+            parameters: vec![],
         }
     }
 

@@ -127,15 +127,20 @@ pub struct NamedEffect {
     pub term: String,
     /// Coefficient calibrated by free-run simulation error.
     pub coefficient: f64,
-    /// 95 % interval of the regression on `d̂` (when the regression named it).
+    /// 95 % interval of `coefficient` (the free-run fit's Gauss–Newton standard error,
+    /// inflated for residual colour; ±1.96 σ).
     pub ci95: Option<[f64; 2]>,
+    /// 95 % interval of the regression on `d̂` (when the regression named it): of the
+    /// regression's own, shrunk coefficient, not of `coefficient`.
+    pub ci95_regression: Option<[f64; 2]>,
     /// Share of `d̂` it explains in the regression (when the regression named it).
     pub share_of_d: Option<f64>,
     /// Which stage named it.
     pub named_by: String,
-    /// 95 % interval of the calibrated coefficient (free-run fit's Gauss–Newton standard
-    /// error, inflated for residual colour; ±1.96 σ).
-    pub ci95_calibrated: Option<[f64; 2]>,
+    /// The term's shaping parameters by name (a saturation's `limit`, a dead zone's
+    /// `width`, a smoothed Coulomb law's `eps`, a Stribeck `v_s`), as calibrated.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub parameters: BTreeMap<String, f64>,
     /// For a linear term (a bare state or input): the assumed model's entry it adds to.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adjusts: Option<AssumedEntry>,
@@ -465,7 +470,14 @@ pub fn run_discover(
             .iter()
             .flat_map(|e| e.terms.iter().cloned())
             .collect();
-        if found.verdict == Verdict::None || proposed.is_empty() {
+        // With nothing proposed in the first round while `d̂` is above its floor (the
+        // regression saw a disagreement it could not name — or `d̂` is so shrunk that it
+        // cannot), the free-run search still runs, from the empty set: it adds what
+        // lowers the free-run cost significantly, and otherwise measures the assumed
+        // model's cost on the judging records, which decides `none` against
+        // `unexplained` below. In later rounds the previous search already screened
+        // every candidate.
+        if found.verdict == Verdict::None || (proposed.is_empty() && !rounds.is_empty()) {
             rounds.push(Round {
                 discovery: found,
                 localisation,
@@ -498,6 +510,8 @@ pub fn run_discover(
                     into: None,
                     term: c.model_term.clone(),
                     coefficient: 0.0,
+                    variables: c.variables.clone(),
+                    parameters: c.model_parameters.clone(),
                 });
             }
         }
@@ -518,6 +532,8 @@ pub fn run_discover(
                         into: None,
                         term: e.model_term.clone(),
                         coefficient: e.coefficient,
+                        variables: vec![],
+                        parameters: vec![],
                     });
                     initial.push(candidates.len() - 1);
                 }
@@ -625,10 +641,19 @@ pub fn run_discover(
                 into: cand.into.clone(),
                 term: cand.term.clone(),
                 coefficient: *c,
-                ci95: regression.map(|e| e.ci95),
+                ci95_regression: regression.map(|e| e.ci95),
                 share_of_d: regression.map(|e| e.share_of_d),
+                parameters: discovery::Effect::from_name(&cand.effect)
+                    .map(|e| {
+                        e.parameters()
+                            .iter()
+                            .zip(&cand.parameters)
+                            .map(|(n, v)| (n.to_string(), *v))
+                            .collect()
+                    })
+                    .unwrap_or_default(),
                 adjusts: assumed_entry(&spec, &cand.state, &cand.term, *c, ci95_calibrated),
-                ci95_calibrated,
+                ci95: ci95_calibrated,
                 named_by: if regression.is_some() {
                     "regression on d̂, kept by free-run search".into()
                 } else {

@@ -2,7 +2,8 @@
 //! workflow. The assumed model is always the linear oscillator `m ẍ + c ẋ + k x = u`; the
 //! truth adds any of: cubic stiffness (hardening `k3 > 0` or softening `k3 < 0`),
 //! quadratic drag `cq·v|v|`, Coulomb friction `fc·tanh(v/eps)`, and a one-sided contact
-//! spring `kc·max(0, x − gap)` (an effect no catalogue of smooth named terms holds).
+//! spring `kc·max(0, x − gap)` (an effect no catalogue of smooth named terms holds), and
+//! an actuator that saturates at `u_max`.
 //! With every hidden parameter at its default 0 the assumed model is the truth.
 
 use std::collections::BTreeMap;
@@ -40,11 +41,13 @@ pub struct OscillatorParams {
     pub kc: f64,
     /// Gap before the contact spring engages, m.
     pub gap: f64,
+    /// Actuator limit: the force applied is `u` clipped to `±u_max`, N (0: no limit).
+    pub u_max: f64,
 }
 
 impl Default for OscillatorParams {
     /// `m = 1`, `c = 0.2`, `k = 4` (natural frequency 2 rad/s, damping ratio 0.05), no
-    /// hidden effect, `eps = 0.001`, `gap = 0.3`.
+    /// hidden effect, `eps = 0.001`, `gap = 0.3`, `u_max = 0` (no actuator limit).
     fn default() -> Self {
         Self {
             m: 1.0,
@@ -56,6 +59,7 @@ impl Default for OscillatorParams {
             eps: 0.001,
             kc: 0.0,
             gap: 0.3,
+            u_max: 0.0,
         }
     }
 }
@@ -72,20 +76,23 @@ param_table!(
         (fc, "N"),
         (eps, "m/s"),
         (kc, "N/m"),
-        (gap, "m")
+        (gap, "m"),
+        (u_max, "N")
     ]
 );
 
-/// Truth: `ẋ = v`, `m v̇ = u − c v − k x − k3 x³ − cq v|v| − fc tanh(v/eps) − kc max(0,
-/// x − gap)`; state `[x, v]`. Assumed model: the linear part; `x` measured, `v` corrected.
+/// Truth: `ẋ = v`, `m v̇ = sat(u) − c v − k x − k3 x³ − cq v|v| − fc tanh(v/eps) −
+/// kc max(0, x − gap)` with `sat(u)` = `u` clipped to `±u_max` (no clipping when
+/// `u_max = 0`); state `[x, v]`. Assumed model: the linear part; `x` measured, `v`
+/// corrected.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Oscillator {
     params: OscillatorParams,
 }
 
 impl Oscillator {
-    /// Build from parameters: `m`, `k`, `eps` positive; `c`, `cq`, `fc`, `kc`, `gap`
-    /// non-negative; `k3` finite, and if negative soft enough only that the spring's
+    /// Build from parameters: `m`, `k`, `eps` positive; `c`, `cq`, `fc`, `kc`, `gap`,
+    /// `u_max` non-negative; `k3` finite, and if negative soft enough only that the spring's
     /// tangent stiffness stays positive up to |x| = 1.5 m (`k + 3·k3·1.5² > 0`).
     pub fn new(params: OscillatorParams) -> Result<Self> {
         positive(NAME, "m", params.m)?;
@@ -97,6 +104,7 @@ impl Oscillator {
             ("fc", params.fc),
             ("kc", params.kc),
             ("gap", params.gap),
+            ("u_max", params.u_max),
         ] {
             non_negative(NAME, name, v)?;
         }
@@ -116,13 +124,20 @@ impl Oscillator {
         &self.params
     }
 
+    /// The force the actuator does not deliver: `u − sat(u)`, N.
+    fn clipped(&self, u: f64) -> f64 {
+        let l = self.params.u_max;
+        if l > 0.0 { u - u.clamp(-l, l) } else { 0.0 }
+    }
+
     /// The hidden force on the mass (N), truth minus assumed model, times `1/m`.
-    fn hidden(&self, x: f64, v: f64) -> f64 {
+    fn hidden(&self, x: f64, v: f64, u: f64) -> f64 {
         let p = &self.params;
         -(p.k3 * x * x * x
             + p.cq * v * v.abs()
             + p.fc * (v / p.eps).tanh()
-            + p.kc * (x - p.gap).max(0.0))
+            + p.kc * (x - p.gap).max(0.0)
+            + self.clipped(u))
             / p.m
     }
 }
@@ -137,16 +152,9 @@ impl Dynamics for Oscillator {
     fn rhs(&self, _t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
         let p = &self.params;
         dx[0] = x[1];
-        dx[1] = (u[0] - p.c * x[1] - p.k * x[0]) / p.m + self.hidden(x[0], x[1]);
+        dx[1] = (u[0] - p.c * x[1] - p.k * x[0]) / p.m + self.hidden(x[0], x[1], u[0]);
     }
-    fn jacobians(
-        &self,
-        _t: f64,
-        x: &[f64],
-        _u: &[f64],
-        a: &mut DMatrix<f64>,
-        b: &mut DMatrix<f64>,
-    ) {
+    fn jacobians(&self, _t: f64, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
         let p = &self.params;
         let contact = if x[0] > p.gap { p.kc } else { 0.0 };
         let sech2 = 1.0 - (x[1] / p.eps).tanh().powi(2);
@@ -155,7 +163,8 @@ impl Dynamics for Oscillator {
         a[(1, 0)] = -(p.k + 3.0 * p.k3 * x[0] * x[0] + contact) / p.m;
         a[(1, 1)] = -(p.c + 2.0 * p.cq * x[1].abs() + p.fc * sech2 / p.eps) / p.m;
         b[(0, 0)] = 0.0;
-        b[(1, 0)] = 1.0 / p.m;
+        let limited = p.u_max > 0.0 && u[0].abs() > p.u_max;
+        b[(1, 0)] = if limited { 0.0 } else { 1.0 / p.m };
     }
 }
 
@@ -165,7 +174,7 @@ impl TruthSystem for Oscillator {
     }
     fn description(&self) -> &'static str {
         "mass-spring-damper with switchable hidden effects: m x'' + c x' + k x = u - k3 x^3 \
-         - cq x'|x'| - fc tanh(x'/eps) - kc max(0, x - gap); assumed model linear; x measured \
+         - cq x'|x'| - fc tanh(x'/eps) - kc max(0, x - gap), u clipped to +-u_max; assumed model linear; x measured \
          (discovery test bench; all hidden effects 0 by default)"
     }
     fn parameters(&self) -> Vec<ParamInfo> {
@@ -185,8 +194,8 @@ impl TruthSystem for Oscillator {
         let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0 / p.m]);
         selection_model(a, b, &["x", "v"], &["u"], &["x"], &["v"])
     }
-    fn truth_correction(&self, x: &[f64], _u: &[f64], d: &mut [f64]) {
-        d[0] = self.hidden(x[0], x[1]);
+    fn truth_correction(&self, x: &[f64], u: &[f64], d: &mut [f64]) {
+        d[0] = self.hidden(x[0], x[1], u[0]);
     }
     fn units(&self) -> BTreeMap<String, String> {
         unit_map(&[("x", "m", "m/s"), ("v", "m/s", "m/s^2")], &[("u", "N")])
@@ -247,6 +256,30 @@ mod tests {
             lin.rhs(0.0, &[x, v], &[u], &mut b);
             assert!((a[0] - b[0]).abs() < 1e-15 && (a[1] - b[1]).abs() < 1e-15);
         }
+    }
+
+    /// An actuator limit clips the force: beyond `u_max` the response is that of
+    /// `±u_max`, below it that of the linear model; the truth correction is the clipped
+    /// part `−(u − sat(u))/m`.
+    #[test]
+    fn actuator_limit_clips_the_force() {
+        let o = Oscillator::new(OscillatorParams {
+            u_max: 1.0,
+            m: 2.0,
+            ..OscillatorParams::default()
+        })
+        .unwrap();
+        let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
+        o.rhs(0.0, &[0.1, 0.2], &[2.5], &mut a);
+        o.rhs(0.0, &[0.1, 0.2], &[1.0], &mut b);
+        assert!((a[1] - b[1]).abs() < 1e-15);
+        o.rhs(0.0, &[0.1, 0.2], &[-0.5], &mut a);
+        let lin = o.assumed_model().unwrap();
+        lin.rhs(0.0, &[0.1, 0.2], &[-0.5], &mut b);
+        assert!((a[1] - b[1]).abs() < 1e-15);
+        let mut d = [0.0];
+        o.truth_correction(&[0.1, 0.2], &[-3.0], &mut d);
+        assert!((d[0] - 1.0).abs() < 1e-15, "{}", d[0]);
     }
 
     #[test]

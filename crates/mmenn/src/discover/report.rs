@@ -115,11 +115,11 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
         r.push_str("| effect | equation | term | coefficient (free-run calibrated) | its 95 % CI | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|---|\n");
         for e in &s.effects {
             let ci = e
-                .ci95
+                .ci95_regression
                 .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
             let share = e.share_of_d.map_or("—".to_string(), |v| format!("{v:.2}"));
             let cal = e
-                .ci95_calibrated
+                .ci95
                 .map_or("—".to_string(), |c| format!("[{:.6}, {:.6}]", c[0], c[1]));
             r.push_str(&format!(
                 "| {} | {} | `{}` | {:.6} | {cal} | {ci} | {share} | {} |\n",
@@ -130,7 +130,7 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
                 e.named_by
             ));
         }
-        r.push_str("\nThe regression on d̂ is shrunk by W, so coefficients are recalibrated by free-run simulation error; the interval is the regression's.\n");
+        r.push_str("\nThe regression on d̂ is shrunk by W, so coefficients are recalibrated by free-run simulation error; their 95 % interval is the calibration's (Gauss–Newton, inflated for residual colour), the regression's is of its own shrunk coefficient.\n");
         let adjusted: Vec<_> = s
             .effects
             .iter()

@@ -1,0 +1,260 @@
+//! Calibration of the parameters that shape a term: an input saturation's limit, a dead
+//! zone's width, a smoothed Coulomb law's transition velocity, a Stribeck velocity. The
+//! library writes them from fixed rules (quantiles of `|u|`, a fraction of the velocity's
+//! RMS), and a term at the wrong threshold is a wrong model: the search then piles up a
+//! second threshold or a Stribeck hump to make up for it. So once such a term enters the
+//! set, its parameter is fitted like its coefficient — by free-run error on the
+//! estimation records — through a golden-section search on the parameter's logarithm
+//! (the cost is smooth in it but not cheap: every point is a full calibration of the
+//! set's coefficients and initial states).
+
+use crate::catalogue::Effect;
+use crate::error::Result;
+
+use super::{Ctx, Eval, RefineCandidate, RefineStep, evaluate, evaluate_on_data};
+
+/// The parameters of a model effect that shape its term (indices into
+/// [`Effect::parameters`]); the smoothing `eps` of a Stribeck term stays with its
+/// Coulomb partner's rule.
+fn shaping_parameters(effect: Effect) -> &'static [usize] {
+    match effect {
+        Effect::InputSaturation | Effect::DeadZone | Effect::CoulombFrictionSmooth => &[0],
+        Effect::StribeckFrictionSmooth => &[0],
+        _ => &[],
+    }
+}
+
+/// The search interval: a factor `SPAN` either side of the library's value (the
+/// library's smoothing velocity is 1 % of the velocity RMS; a real transition can be
+/// several times wider).
+const SPAN: f64 = 10.0;
+/// Golden-section evaluations per parameter: the bracket `ln(SPAN²)` shrinks by 0.618
+/// per evaluation, to about 1.4 % of the parameter after 14.
+const EVALUATIONS: usize = 14;
+
+/// The candidate `cand` with parameter `q` set to `value` (term re-written from the
+/// effect's template); `None` when the candidate cannot be re-written.
+fn with_parameter(cand: &RefineCandidate, q: usize, value: f64) -> Option<RefineCandidate> {
+    let effect = Effect::from_name(&cand.effect)?;
+    let mut parameters = cand.parameters.clone();
+    *parameters.get_mut(q)? = value;
+    let vars: Vec<&str> = cand.variables.iter().map(String::as_str).collect();
+    if vars.len() != effect.slots().len() {
+        return None;
+    }
+    Some(RefineCandidate {
+        term: effect.template(&vars, &parameters),
+        parameters,
+        ..cand.clone()
+    })
+}
+
+/// Fit the shaping parameters of the term at position `pos` of `set` (its coefficient
+/// and the rest of the set re-calibrated at every trial). Returns the re-written
+/// candidate, the evaluation of the set with it (judged as `evaluate` judges) and the
+/// step to record, or `None` when nothing improved the estimation-record cost.
+pub(super) fn polish(
+    ctx: &Ctx<'_>,
+    cands: &[RefineCandidate],
+    set: &[usize],
+    pos: usize,
+) -> Result<Option<(RefineCandidate, Eval, RefineStep)>> {
+    let i = set[pos];
+    let Some(effect) = Effect::from_name(&cands[i].effect) else {
+        return Ok(None);
+    };
+    let shaping = shaping_parameters(effect);
+    if shaping.is_empty() || cands[i].parameters.len() != effect.parameters().len() {
+        return Ok(None);
+    }
+    let cost_at = |cands: &[RefineCandidate]| -> Result<f64> {
+        Ok(evaluate_on_data(ctx, cands, set, 0)?.map_or(f64::INFINITY, |e| e.cost))
+    };
+    let start_term = cands[i].term.clone();
+    let start_cost = cost_at(cands)?;
+    let mut best_cost = start_cost;
+    let mut work = cands.to_vec();
+    for &q in shaping {
+        let p0 = work[i].parameters[q];
+        if !(p0.is_finite() && p0 > 0.0) {
+            continue;
+        }
+        let trial_cost = |s: f64| -> Result<(f64, Option<RefineCandidate>)> {
+            let Some(c) = with_parameter(&work[i], q, s.exp()) else {
+                return Ok((f64::INFINITY, None));
+            };
+            let mut trial = work.clone();
+            trial[i] = c.clone();
+            Ok((cost_at(&trial)?, Some(c)))
+        };
+        let ratio = (5f64.sqrt() - 1.0) / 2.0;
+        let (mut a, mut b) = (p0.ln() - SPAN.ln(), p0.ln() + SPAN.ln());
+        let mut x1 = b - ratio * (b - a);
+        let mut x2 = a + ratio * (b - a);
+        let (mut f1, mut c1) = trial_cost(x1)?;
+        let (mut f2, mut c2) = trial_cost(x2)?;
+        for _ in 2..EVALUATIONS {
+            if f1 <= f2 {
+                b = x2;
+                (x2, f2, c2) = (x1, f1, c1.clone());
+                x1 = b - ratio * (b - a);
+                (f1, c1) = trial_cost(x1)?;
+            } else {
+                a = x1;
+                (x1, f1, c1) = (x2, f2, c2.clone());
+                x2 = a + ratio * (b - a);
+                (f2, c2) = trial_cost(x2)?;
+            }
+        }
+        let (f, c) = if f1 <= f2 { (f1, c1) } else { (f2, c2) };
+        if let Some(c) = c
+            && f < best_cost
+        {
+            best_cost = f;
+            work[i] = c;
+        }
+    }
+    if best_cost >= start_cost || best_cost.is_nan() {
+        return Ok(None);
+    }
+    let Some(eval) = evaluate(ctx, &work, set, 0)? else {
+        return Ok(None);
+    };
+    let step = RefineStep {
+        action: "calibrate parameter".into(),
+        effect: work[i].effect.clone(),
+        term: format!("{start_term} → {}", work[i].term),
+        cost: [start_cost, best_cost],
+        statistic: 0.0,
+        threshold: 0.0,
+    };
+    Ok(Some((work[i].clone(), eval, step)))
+}
+
+/// The input-nonlinearity identity `sat_L(u) = u − dz_L(u)` (the saturation term is the
+/// excess over the limit, the dead-zone term the part below the width): `g·u + s·sat_L`
+/// with `g ≈ −s` is the single term `−s·dz_L`, and `g·u + s·dz_L` with `g ≈ −s` is
+/// `−s·sat_L`. The search can reach the two-term form (the input gain first, then the
+/// other law at the right threshold); this move offers the one-term form. Returns the
+/// positions in `set` of the gain and the law, and the replacement (the complementary
+/// law at the same threshold, coefficient `−s`, re-written from `cands`' own entry for
+/// it, whose index is returned too).
+pub(super) fn input_identity(
+    cands: &[RefineCandidate],
+    set: &[usize],
+    coefficients: &[f64],
+) -> Option<(usize, usize, usize, RefineCandidate)> {
+    for (pg, &g) in set.iter().enumerate() {
+        let gain = &cands[g];
+        if gain.effect != Effect::InputGain.name() || gain.into.is_some() {
+            continue;
+        }
+        for (pl, &l) in set.iter().enumerate() {
+            let law = &cands[l];
+            let other = match Effect::from_name(&law.effect) {
+                Some(Effect::InputSaturation) => Effect::DeadZone,
+                Some(Effect::DeadZone) => Effect::InputSaturation,
+                _ => continue,
+            };
+            if law.state != gain.state
+                || law.into.is_some()
+                || law.variables.first() != Some(&gain.term)
+                || law.parameters.len() != 1
+            {
+                continue;
+            }
+            let Some(k) = (0..cands.len()).find(|&k| {
+                let c = &cands[k];
+                !set.contains(&k)
+                    && c.effect == other.name()
+                    && c.state == law.state
+                    && c.into.is_none()
+                    && c.variables == law.variables
+            }) else {
+                continue;
+            };
+            let Some(mut replacement) = with_parameter(&cands[k], 0, law.parameters[0]) else {
+                continue;
+            };
+            replacement.coefficient = -coefficients.get(pl).copied().unwrap_or(0.0);
+            return Some((pg, pl, k, replacement));
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Re-writing a saturation term at another limit changes only the limit.
+    #[test]
+    fn parameters_rewrite_the_template() {
+        let cand = RefineCandidate {
+            effect: "input_saturation".into(),
+            state: "v".into(),
+            into: None,
+            term: Effect::InputSaturation.template(&["u"], &[0.865]),
+            coefficient: -0.5,
+            variables: vec!["u".into()],
+            parameters: vec![0.865],
+        };
+        let c = with_parameter(&cand, 0, 1.0).unwrap_or_else(|| panic!("rewrite"));
+        assert_eq!(c.term, Effect::InputSaturation.template(&["u"], &[1.0]));
+        assert_eq!(c.parameters, vec![1.0]);
+        assert!(with_parameter(&cand, 1, 1.0).is_none());
+        let unknown = RefineCandidate {
+            variables: vec![],
+            ..cand
+        };
+        assert!(with_parameter(&unknown, 0, 1.0).is_none());
+    }
+
+    /// `sign(u)·max(|u| − L, 0) = u − sign(u)·min(|u|, L)` at sample points, so the
+    /// identity move's replacement is exact: `g·u + s·sat_L = −s·dz_L` when `g = −s`.
+    #[test]
+    fn saturation_plus_gain_is_a_dead_zone() {
+        let vars = ["u"];
+        let sat = Effect::InputSaturation.template(&vars, &[0.3]);
+        let dz = Effect::DeadZone.template(&vars, &[0.3]);
+        let sat = sysid_core::Expr::parse(&sat, &vars).unwrap_or_else(|e| panic!("{e}"));
+        let dz = sysid_core::Expr::parse(&dz, &vars).unwrap_or_else(|e| panic!("{e}"));
+        for u in [-1.3, -0.31, -0.2, 0.0, 0.05, 0.29, 0.3, 0.7, 2.0] {
+            let two = -0.9 * u + 0.9 * sat.eval_parts(&[], &[u]);
+            let one = -0.9 * dz.eval_parts(&[], &[u]);
+            assert!((two - one).abs() < 1e-14, "u = {u}: {two} vs {one}");
+        }
+        let cand = |effect: Effect, term: String, parameters: Vec<f64>| RefineCandidate {
+            effect: effect.name().into(),
+            state: "v".into(),
+            into: None,
+            term,
+            coefficient: 0.0,
+            variables: if parameters.is_empty() {
+                vec![]
+            } else {
+                vec!["u".into()]
+            },
+            parameters,
+        };
+        let cands = vec![
+            cand(Effect::InputGain, "u".into(), vec![]),
+            cand(
+                Effect::InputSaturation,
+                Effect::InputSaturation.template(&vars, &[0.3]),
+                vec![0.3],
+            ),
+            cand(
+                Effect::DeadZone,
+                Effect::DeadZone.template(&vars, &[0.1]),
+                vec![0.1],
+            ),
+        ];
+        let (pg, pl, k, r) =
+            input_identity(&cands, &[0, 1], &[-0.9, 0.9]).unwrap_or_else(|| panic!("no move"));
+        assert_eq!((pg, pl, k), (0, 1, 2));
+        assert_eq!(r.term, Effect::DeadZone.template(&vars, &[0.3]));
+        assert!((r.coefficient + 0.9).abs() < 1e-15);
+        assert!(input_identity(&cands, &[1], &[0.9]).is_none());
+    }
+}
