@@ -445,7 +445,7 @@ fn polish_set(
                 cands[k].coefficient = t.coefficient;
             }
         }
-        if let Some((cand, eval, step)) = polish::polish(ctx, cands, set, pos)?
+        if let Some((cand, eval, step)) = polish::polish(ctx, cands, set, pos, current)?
             && m * (eval.cost - current.cost) < threshold
         {
             cands[i] = cand;

@@ -49,15 +49,19 @@ fn with_parameter(cand: &RefineCandidate, q: usize, value: f64) -> Option<Refine
     })
 }
 
-/// Fit the shaping parameters of the term at position `pos` of `set` (its coefficient
-/// and the rest of the set re-calibrated at every trial). Returns the re-written
-/// candidate, the evaluation of the set with it (judged as `evaluate` judges) and the
-/// step to record, or `None` when nothing improved the estimation-record cost.
+/// Fit the shaping parameters of the term at position `pos` of `set`: each trial value
+/// re-calibrates the set's coefficients and initial states from `current`'s (a
+/// parameter off by a factor pulls the other coefficients along, so fixing them would
+/// bias it); the chosen value is then evaluated in full. Returns the
+/// re-written candidate, the full evaluation of the set with it (judged as `evaluate`
+/// judges) and the step to record, or `None` when nothing improved the
+/// estimation-record cost.
 pub(super) fn polish(
     ctx: &Ctx<'_>,
     cands: &[RefineCandidate],
     set: &[usize],
     pos: usize,
+    current: &Eval,
 ) -> Result<Option<(RefineCandidate, Eval, RefineStep)>> {
     let i = set[pos];
     let Some(effect) = Effect::from_name(&cands[i].effect) else {
@@ -67,8 +71,17 @@ pub(super) fn polish(
     if shaping.is_empty() || cands[i].parameters.len() != effect.parameters().len() {
         return Ok(None);
     }
+    // Trials start from `current`'s calibration, close to their optimum: one calibration
+    // stage over the whole record instead of the growing horizons.
+    let mut config = ctx.config.clone();
+    config.calibration.horizons = vec![1.0];
+    let trial_ctx = Ctx {
+        config: &config,
+        x0: &current.x0,
+        ..*ctx
+    };
     let cost_at = |cands: &[RefineCandidate]| -> Result<f64> {
-        Ok(evaluate_on_data(ctx, cands, set, 0)?.map_or(f64::INFINITY, |e| e.cost))
+        Ok(evaluate_on_data(&trial_ctx, cands, set, 0)?.map_or(f64::INFINITY, |e| e.cost))
     };
     let start_term = cands[i].term.clone();
     let start_cost = cost_at(cands)?;
