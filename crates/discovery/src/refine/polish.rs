@@ -10,6 +10,7 @@
 
 use crate::catalogue::Effect;
 use crate::error::Result;
+use crate::stats::chi2_quantile;
 
 use super::{Ctx, Eval, RefineCandidate, RefineStep, evaluate, evaluate_on_data};
 
@@ -54,8 +55,8 @@ fn with_parameter(cand: &RefineCandidate, q: usize, value: f64) -> Option<Refine
 /// parameter off by a factor pulls the other coefficients along, so fixing them would
 /// bias it); the chosen value is then evaluated in full. Returns the
 /// re-written candidate, the full evaluation of the set with it (judged as `evaluate`
-/// judges) and the step to record, or `None` when nothing improved the
-/// estimation-record cost.
+/// judges) and the step to record, or `None` when no value lowers the
+/// estimation-record cost significantly.
 pub(super) fn polish(
     ctx: &Ctx<'_>,
     cands: &[RefineCandidate],
@@ -127,7 +128,17 @@ pub(super) fn polish(
             work[i] = c;
         }
     }
-    if best_cost >= start_cost || best_cost.is_nan() {
+    // A parameter is a degree of freedom like a coefficient: moved from the library's
+    // value only when the estimation records say so significantly (`M·ΔJ` above
+    // χ²₁(1 − α)); otherwise the documented starting rule stands.
+    let measured: usize = ctx
+        .data
+        .experiments()
+        .iter()
+        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
+        .sum();
+    let threshold = chi2_quantile(1.0 - ctx.config.alpha, 1.0)?;
+    if best_cost.is_nan() || (start_cost - best_cost) * measured as f64 <= threshold {
         return Ok(None);
     }
     let Some(eval) = evaluate(ctx, &work, set, 0)? else {
