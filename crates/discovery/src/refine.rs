@@ -132,8 +132,13 @@ pub struct Refinement {
     pub steps: Vec<RefineStep>,
     /// Standard error of each kept term's calibrated coefficient (order of `selected`):
     /// the Gauss–Newton covariance of the estimation-record fit, inflated by
-    /// `√(N/N_eff)` of its residual's lag-1 autocorrelation.
+    /// `√(N/N_eff)` of its residual's lag-1 autocorrelation, plus `parameter_variance`.
     pub coefficient_std: Vec<f64>,
+    /// The part of each coefficient's variance that comes from the uncertainty of the
+    /// set's calibrated shaping parameters (thresholds, velocities; see the `polish`
+    /// module), already included in `coefficient_std`; a caller that recalibrates the
+    /// coefficients adds it to the new conditional variances.
+    pub parameter_variance: Vec<f64>,
 }
 
 /// What every evaluation shares.
@@ -887,14 +892,22 @@ pub fn refine_with_holdout(
     }
     // Whatever stopped the search, end with no term whose removal is insignificant.
     while !set.is_empty() && remove_step(&mut set, &mut current, &mut steps, &cands)? {}
+    let parameter_variance = polish::parameter_variance(&ctx, &cands, &set, &current)?;
+    let coefficient_std = current
+        .std
+        .iter()
+        .zip(&parameter_variance)
+        .map(|(sd, v)| (sd * sd + v).sqrt())
+        .collect();
     Ok(Refinement {
         selected: set,
         candidates: cands,
+        parameter_variance,
         model: current.model,
         x0: current.x0,
         cost: [cost_before, current.cost],
         steps,
-        coefficient_std: current.std,
+        coefficient_std,
     })
 }
 

@@ -3,7 +3,7 @@
 //! truth adds any of: cubic stiffness (hardening `k3 > 0` or softening `k3 < 0`),
 //! quadratic drag `cq·v|v|`, Coulomb friction `fc·tanh(v/eps)`, and a one-sided contact
 //! spring `kc·max(0, x − gap)` (an effect no catalogue of smooth named terms holds), and
-//! an actuator that saturates at `u_max`.
+//! an actuator that saturates at `u_max` or has a dead zone of half-width `u_dead`.
 //! With every hidden parameter at its default 0 the assumed model is the truth.
 
 use std::collections::BTreeMap;
@@ -43,11 +43,13 @@ pub struct OscillatorParams {
     pub gap: f64,
     /// Actuator limit: the force applied is `u` clipped to `±u_max`, N (0: no limit).
     pub u_max: f64,
+    /// Actuator dead zone: no force for `|u| ≤ u_dead`, `u ∓ u_dead` beyond, N (0: none).
+    pub u_dead: f64,
 }
 
 impl Default for OscillatorParams {
     /// `m = 1`, `c = 0.2`, `k = 4` (natural frequency 2 rad/s, damping ratio 0.05), no
-    /// hidden effect, `eps = 0.001`, `gap = 0.3`, `u_max = 0` (no actuator limit).
+    /// hidden effect, `eps = 0.001`, `gap = 0.3`, `u_max = u_dead = 0` (an ideal actuator).
     fn default() -> Self {
         Self {
             m: 1.0,
@@ -60,6 +62,7 @@ impl Default for OscillatorParams {
             kc: 0.0,
             gap: 0.3,
             u_max: 0.0,
+            u_dead: 0.0,
         }
     }
 }
@@ -77,13 +80,15 @@ param_table!(
         (eps, "m/s"),
         (kc, "N/m"),
         (gap, "m"),
-        (u_max, "N")
+        (u_max, "N"),
+        (u_dead, "N")
     ]
 );
 
 /// Truth: `ẋ = v`, `m v̇ = sat(u) − c v − k x − k3 x³ − cq v|v| − fc tanh(v/eps) −
-/// kc max(0, x − gap)` with `sat(u)` = `u` clipped to `±u_max` (no clipping when
-/// `u_max = 0`); state `[x, v]`. Assumed model: the linear part; `x` measured, `v`
+/// kc max(0, x − gap)` with `sat(u)` the actuator's force: `u` with a dead zone of
+/// half-width `u_dead` removed, then clipped to `±u_max` (either off at 0); state
+/// `[x, v]`. Assumed model: the linear part; `x` measured, `v`
 /// corrected.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Oscillator {
@@ -92,7 +97,7 @@ pub struct Oscillator {
 
 impl Oscillator {
     /// Build from parameters: `m`, `k`, `eps` positive; `c`, `cq`, `fc`, `kc`, `gap`,
-    /// `u_max` non-negative; `k3` finite, and if negative soft enough only that the spring's
+    /// `u_max`, `u_dead` non-negative (and `u_dead < u_max` when both are set); `k3` finite, and if negative soft enough only that the spring's
     /// tangent stiffness stays positive up to |x| = 1.5 m (`k + 3·k3·1.5² > 0`).
     pub fn new(params: OscillatorParams) -> Result<Self> {
         positive(NAME, "m", params.m)?;
@@ -105,8 +110,17 @@ impl Oscillator {
             ("kc", params.kc),
             ("gap", params.gap),
             ("u_max", params.u_max),
+            ("u_dead", params.u_dead),
         ] {
             non_negative(NAME, name, v)?;
+        }
+        if params.u_max > 0.0 && params.u_dead >= params.u_max {
+            return Err(PlantError::InvalidParameter {
+                system: NAME,
+                name: "u_dead".into(),
+                value: params.u_dead,
+                reason: "must be below u_max when both are set",
+            });
         }
         if !params.k3.is_finite() || params.k + 3.0 * params.k3 * 2.25 <= 0.0 {
             return Err(PlantError::InvalidParameter {
@@ -126,8 +140,14 @@ impl Oscillator {
 
     /// The force the actuator does not deliver: `u − sat(u)`, N.
     fn clipped(&self, u: f64) -> f64 {
-        let l = self.params.u_max;
-        if l > 0.0 { u - u.clamp(-l, l) } else { 0.0 }
+        let (l, w) = (self.params.u_max, self.params.u_dead);
+        let after_dead = u.signum() * (u.abs() - w).max(0.0);
+        let applied = if l > 0.0 {
+            after_dead.clamp(-l, l)
+        } else {
+            after_dead
+        };
+        u - applied
     }
 
     /// The hidden force on the mass (N), truth minus assumed model, times `1/m`.
@@ -163,8 +183,10 @@ impl Dynamics for Oscillator {
         a[(1, 0)] = -(p.k + 3.0 * p.k3 * x[0] * x[0] + contact) / p.m;
         a[(1, 1)] = -(p.c + 2.0 * p.cq * x[1].abs() + p.fc * sech2 / p.eps) / p.m;
         b[(0, 0)] = 0.0;
-        let limited = p.u_max > 0.0 && u[0].abs() > p.u_max;
-        b[(1, 0)] = if limited { 0.0 } else { 1.0 / p.m };
+        let after_dead = u[0].abs() - p.u_dead;
+        let limited = p.u_max > 0.0 && after_dead > p.u_max;
+        let dead = after_dead <= 0.0 && p.u_dead > 0.0;
+        b[(1, 0)] = if limited || dead { 0.0 } else { 1.0 / p.m };
     }
 }
 
@@ -174,7 +196,7 @@ impl TruthSystem for Oscillator {
     }
     fn description(&self) -> &'static str {
         "mass-spring-damper with switchable hidden effects: m x'' + c x' + k x = u - k3 x^3 \
-         - cq x'|x'| - fc tanh(x'/eps) - kc max(0, x - gap), u clipped to +-u_max; assumed model linear; x measured \
+         - cq x'|x'| - fc tanh(x'/eps) - kc max(0, x - gap), actuator dead zone u_dead and limit u_max; assumed model linear; x measured \
          (discovery test bench; all hidden effects 0 by default)"
     }
     fn parameters(&self) -> Vec<ParamInfo> {
@@ -280,6 +302,30 @@ mod tests {
         let mut d = [0.0];
         o.truth_correction(&[0.1, 0.2], &[-3.0], &mut d);
         assert!((d[0] - 1.0).abs() < 1e-15, "{}", d[0]);
+    }
+
+    /// A dead zone removes `u_dead` from the force's magnitude: inside it the force is
+    /// zero, beyond it `u ∓ u_dead`.
+    #[test]
+    fn actuator_dead_zone_removes_small_forces() {
+        let o = Oscillator::new(OscillatorParams {
+            u_dead: 0.3,
+            ..OscillatorParams::default()
+        })
+        .unwrap();
+        let mut d = [0.0];
+        for (u, applied) in [(0.2, 0.0), (-0.25, 0.0), (1.0, 0.7), (-2.0, -1.7)] {
+            o.truth_correction(&[0.0, 0.0], &[u], &mut d);
+            assert!((d[0] - (applied - u)).abs() < 1e-15, "u = {u}: {}", d[0]);
+        }
+        assert!(
+            Oscillator::new(OscillatorParams {
+                u_dead: 1.0,
+                u_max: 0.5,
+                ..OscillatorParams::default()
+            })
+            .is_err()
+        );
     }
 
     #[test]

@@ -155,6 +155,89 @@ pub(super) fn polish(
     Ok(Some((work[i].clone(), eval, step)))
 }
 
+/// Step in `ln p` of the profile used for a shaping parameter's uncertainty.
+const PROFILE_STEP: f64 = 0.05;
+
+/// The variance each term's coefficient gains from the uncertainty of the set's shaping
+/// parameters (one entry per position of `set`): the calibrated coefficients are
+/// conditional on the parameters, so their Gauss–Newton σ is too narrow when a parameter
+/// is itself estimated. From the profile at `ln p ± h` (everything else re-calibrated):
+/// `Var(ln p) = 2 / (M·∂²J/∂(ln p)²)` (`M·J` is a χ² in the residual), inflated by
+/// `N/N_eff` like the coefficients, and the profile's slope `∂c_k/∂ln p` carries it to
+/// every coefficient: `Var_k += (∂c_k/∂ln p)²·Var(ln p)`. A parameter whose profile is
+/// not convex there contributes nothing (it was not moved from the library's value, or
+/// the data cannot tell).
+pub(super) fn parameter_variance(
+    ctx: &Ctx<'_>,
+    cands: &[RefineCandidate],
+    set: &[usize],
+    current: &Eval,
+) -> Result<Vec<f64>> {
+    let mut extra = vec![0.0; set.len()];
+    let first_new = ctx.base.terms().len();
+    let measured: usize = ctx
+        .data
+        .experiments()
+        .iter()
+        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
+        .sum();
+    let mut config = ctx.config.clone();
+    config.calibration.horizons = vec![1.0];
+    let trial_ctx = Ctx {
+        config: &config,
+        x0: &current.x0,
+        ..*ctx
+    };
+    for &i in set {
+        let Some(effect) = Effect::from_name(&cands[i].effect) else {
+            continue;
+        };
+        if cands[i].parameters.len() != effect.parameters().len() {
+            continue;
+        }
+        for &q in shaping_parameters(effect) {
+            let p = cands[i].parameters[q];
+            if !(p.is_finite() && p > 0.0) {
+                continue;
+            }
+            let mut evals = Vec::with_capacity(3);
+            for s in [-PROFILE_STEP, 0.0, PROFILE_STEP] {
+                let Some(c) = with_parameter(&cands[i], q, p * s.exp()) else {
+                    break;
+                };
+                let mut trial = cands.to_vec();
+                trial[i] = c;
+                match evaluate_on_data(&trial_ctx, &trial, set, 0)? {
+                    Some(e) => evals.push(e),
+                    None => break,
+                }
+            }
+            let [minus, centre, plus] = evals.as_slice() else {
+                continue;
+            };
+            let curvature =
+                (plus.cost + minus.cost - 2.0 * centre.cost) / (PROFILE_STEP * PROFILE_STEP);
+            if !(curvature.is_finite() && curvature > 0.0) {
+                continue;
+            }
+            let var_log_p = 2.0 / (measured as f64 * curvature) / centre.neff_ratio;
+            for (k, e) in extra.iter_mut().enumerate() {
+                let coefficient = |ev: &Eval| {
+                    ev.model
+                        .terms()
+                        .get(first_new + k)
+                        .map_or(f64::NAN, |t| t.coefficient)
+                };
+                let slope = (coefficient(plus) - coefficient(minus)) / (2.0 * PROFILE_STEP);
+                if slope.is_finite() {
+                    *e += slope * slope * var_log_p;
+                }
+            }
+        }
+    }
+    Ok(extra)
+}
+
 /// The input-nonlinearity identity `sat_L(u) = u − dz_L(u)` (the saturation term is the
 /// excess over the limit, the dead-zone term the part below the width): `g·u + s·sat_L`
 /// with `g ≈ −s` is the single term `−s·dz_L`, and `g·u + s·dz_L` with `g ≈ −s` is

@@ -50,7 +50,11 @@ pub(super) fn recalibrate_on(
     if let Ok(fit) = discovery::calibrate(&refined.model, data, x0, &config)
         && fit.cost_after.is_finite()
     {
-        refined.coefficient_std = fit.coefficient_std[first_new..end].to_vec();
+        refined.coefficient_std = fit.coefficient_std[first_new..end]
+            .iter()
+            .zip(&refined.parameter_variance)
+            .map(|(sd, v)| (sd * sd + v).sqrt())
+            .collect();
         refined.model = fit.model;
         refined.x0 = fit.x0;
     }
