@@ -423,6 +423,9 @@ fn residual_neff_ratio(
     Ok(((1.0 - rho) / (1.0 + rho)).clamp(1e-3, 1.0))
 }
 
+/// Largest judged cost (1 = the noise level) at which shaping parameters are calibrated.
+const POLISH_GATE: f64 = 3.0;
+
 /// Calibrate the shaping parameters (thresholds, velocity scales) of every term of `set`
 /// not calibrated yet (`polished` is indexed like `cands`), keeping a re-written term
 /// unless the judged cost rises significantly (`M·ΔJ` above `threshold`, the price of
@@ -439,6 +442,12 @@ fn polish_set(
     m: f64,
     threshold: f64,
 ) -> Result<()> {
+    // Far from the noise level something larger than a threshold's shape is missing;
+    // the terms are polished once the set gets close (every calibration here is a full
+    // free-run fit, and stand-ins of an unexplained effect are not worth them).
+    if current.cost > POLISH_GATE {
+        return Ok(());
+    }
     let first_new = ctx.base.terms().len();
     for pos in 0..set.len() {
         let i = set[pos];
@@ -586,16 +595,14 @@ pub fn refine_with_holdout(
     let cost_before = base_eval.as_ref().map_or(f64::NAN, |e| e.cost);
     let mut steps = Vec::new();
     let mut polished = vec![false; cands.len()];
-    polish_set(
-        &ctx,
-        &mut cands,
-        &set,
-        &mut current,
-        &mut steps,
-        &mut polished,
-        m,
-        threshold,
-    )?;
+    let polish_now = |cands: &mut [RefineCandidate],
+                      set: &[usize],
+                      current: &mut Eval,
+                      steps: &mut Vec<RefineStep>,
+                      polished: &mut [bool]| {
+        polish_set(&ctx, cands, set, current, steps, polished, m, threshold)
+    };
+    polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
     let remove_step = |set: &mut Vec<usize>,
                        current: &mut Eval,
                        steps: &mut Vec<RefineStep>,
@@ -710,16 +717,7 @@ pub fn refine_with_holdout(
             set.push(i);
             visited.insert(sorted(&set));
             current = e;
-            polish_set(
-                &ctx,
-                &mut cands,
-                &set,
-                &mut current,
-                &mut steps,
-                &mut polished,
-                m,
-                threshold,
-            )?;
+            polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
             for (pos, &i) in set.iter().enumerate() {
                 if let Some(t) = current.model.terms().get(first_new + pos) {
                     cands[i].coefficient = t.coefficient;
@@ -761,16 +759,7 @@ pub fn refine_with_holdout(
                 });
                 set.push(i);
                 current = e;
-                polish_set(
-                    &ctx,
-                    &mut cands,
-                    &set,
-                    &mut current,
-                    &mut steps,
-                    &mut polished,
-                    m,
-                    threshold,
-                )?;
+                polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
             }
             _ => {
                 // No single term helps significantly: pairs within one equation (terms
@@ -824,16 +813,7 @@ pub fn refine_with_holdout(
                         }
                         set.extend([i, j]);
                         current = e;
-                        polish_set(
-                            &ctx,
-                            &mut cands,
-                            &set,
-                            &mut current,
-                            &mut steps,
-                            &mut polished,
-                            m,
-                            threshold,
-                        )?;
+                        polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
                     }
                     _ => break,
                 }
@@ -846,6 +826,8 @@ pub fn refine_with_holdout(
             }
         }
     }
+    // Terms that entered while the set was far from the data get their parameters now.
+    polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
     // An input gain beside a saturation (or dead zone) at the same threshold is the other
     // law alone: one term fewer, kept unless it fits significantly worse.
     let first_new = base.terms().len();
@@ -892,7 +874,13 @@ pub fn refine_with_holdout(
     }
     // Whatever stopped the search, end with no term whose removal is insignificant.
     while !set.is_empty() && remove_step(&mut set, &mut current, &mut steps, &cands)? {}
-    let parameter_variance = polish::parameter_variance(&ctx, &cands, &set, &current)?;
+    // (Far from the noise level the terms are stand-ins that will not be claimed, and
+    // their intervals stay conditional on the library's parameters.)
+    let parameter_variance = if current.cost <= POLISH_GATE {
+        polish::parameter_variance(&ctx, &cands, &set, &current)?
+    } else {
+        vec![0.0; set.len()]
+    };
     let coefficient_std = current
         .std
         .iter()

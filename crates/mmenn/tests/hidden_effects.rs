@@ -92,37 +92,45 @@ fn expect_found(s: &DiscoverSummary, expected: &[(&str, f64)]) {
 }
 
 #[test]
-fn cubic_hardening_low_noise() {
-    expect_found(
-        &run("hard", &[("k3", 1.0)], LOW),
-        &[("cubic_stiffness", -1.0)],
-    );
+fn cubic_hardening_at_both_noise_levels() {
+    for noise in [LOW, HIGH] {
+        expect_found(
+            &run("hard", &[("k3", 1.0)], noise),
+            &[("cubic_stiffness", -1.0)],
+        );
+    }
 }
 
 #[test]
-fn cubic_softening_high_noise() {
-    expect_found(
-        &run("soft", &[("k3", -0.4)], HIGH),
-        &[("cubic_stiffness", 0.4)],
-    );
+fn cubic_softening_at_both_noise_levels() {
+    for noise in [LOW, HIGH] {
+        expect_found(
+            &run("soft", &[("k3", -0.4)], noise),
+            &[("cubic_stiffness", 0.4)],
+        );
+    }
 }
 
 #[test]
-fn quadratic_drag_high_noise() {
-    expect_found(
-        &run("drag", &[("cq", 0.5)], HIGH),
-        &[("quadratic_drag", -0.5)],
-    );
+fn quadratic_drag_at_both_noise_levels() {
+    for noise in [LOW, HIGH] {
+        expect_found(
+            &run("drag", &[("cq", 0.5)], noise),
+            &[("quadratic_drag", -0.5)],
+        );
+    }
 }
 
 #[test]
-fn coulomb_friction_low_noise() {
+fn coulomb_friction_at_both_noise_levels() {
     // Truth −0.2·tanh(v/0.001); the catalogue's smooth Coulomb term uses its own
     // velocity scale, which is equivalent away from v = 0.
-    expect_found(
-        &run("coulomb", &[("fc", 0.2)], LOW),
-        &[("coulomb_friction_smooth", -0.2)],
-    );
+    for noise in [LOW, HIGH] {
+        expect_found(
+            &run("coulomb", &[("fc", 0.2)], noise),
+            &[("coulomb_friction_smooth", -0.2)],
+        );
+    }
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! The discovery workflow (`mmenn discover`) on hidden-effect data: the `oscillator` test
 //! bench with one hidden effect at a time, two at once, none, and one outside the
 //! catalogue, at 2 % and 5 % measurement noise — the truth is known, so every verdict
-//! and name can be judged. Full mode only (about a minute and a half on two cores).
+//! and name can be judged. Full mode only (two to three minutes on two cores).
 
 use anyhow::{Context, Result};
 use mmenn::discover::{DiscoverOptions, run_discover};
@@ -32,7 +32,7 @@ struct Scenario {
     truth: &'static str,
 }
 
-const SCENARIOS: [Scenario; 7] = [
+const SCENARIOS: [Scenario; 9] = [
     Scenario {
         label: "correct model",
         params: &[],
@@ -62,6 +62,16 @@ const SCENARIOS: [Scenario; 7] = [
         label: "cubic + Coulomb",
         params: &[("k3", 1.0), ("fc", 0.2)],
         truth: "cubic_stiffness −1, coulomb_friction −0.2",
+    },
+    Scenario {
+        label: "actuator saturation at 1 N",
+        params: &[("u_max", 1.0)],
+        truth: "input_saturation −1 (limit 1.0, off the library's grid)",
+    },
+    Scenario {
+        label: "actuator dead zone of 0.3 N",
+        params: &[("u_dead", 0.3)],
+        truth: "dead_zone −1 (width 0.3, off the library's grid)",
     },
     Scenario {
         label: "contact spring (outside the catalogue)",
