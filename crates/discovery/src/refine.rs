@@ -104,7 +104,10 @@ pub struct RefineStep {
     pub effect: String,
     /// Term.
     pub term: String,
-    /// Cost before and after.
+    /// Free-run cost before and after, on the records that judge the search: the held-out
+    /// records when the caller gave some (validation records, or the held-out end of the
+    /// estimation records), else the estimation records. For `calibrate parameter` steps
+    /// it is the estimation-record cost the parameter was fitted on.
     pub cost: [f64; 2],
     /// `M·ΔJ·N_eff/N` against the χ² threshold.
     pub statistic: f64,
