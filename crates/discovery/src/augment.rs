@@ -159,6 +159,15 @@ impl Dynamics for Trial<'_> {
     }
 }
 
+/// Number of measured (non-missing) output values over every record of `data`: the `M`
+/// of the free-run cost `J = (1/M) Σ r²/R`.
+pub fn measured_values(data: &Dataset) -> usize {
+    data.experiments()
+        .iter()
+        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
+        .sum()
+}
+
 /// Outputs `C x_sim` (`p × N`) of a free-run simulation of `f` over one experiment from
 /// `x0`, with the experiment's inputs held between samples.
 pub fn simulate_outputs<D: Dynamics + ?Sized>(

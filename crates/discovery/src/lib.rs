@@ -18,7 +18,7 @@ pub mod transfer;
 
 pub use augment::{
     Calibration, CalibrationConfig, InitialState, OutputWeights, augment, calibrate, free_run_cost,
-    simulate_outputs,
+    measured_values, simulate_outputs,
 };
 pub use candidates::{Candidate, EquationLibrary, LibraryConfig, build_library};
 pub use catalogue::{Effect, Slot, coefficient_unit};

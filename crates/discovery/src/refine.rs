@@ -23,7 +23,8 @@ use serde::{Deserialize, Serialize};
 use sysid_core::{Dataset, TermModel, TermSpec};
 
 use crate::augment::{
-    CalibrationConfig, InitialState, OutputWeights, calibrate, free_run_cost, simulate_outputs,
+    CalibrationConfig, InitialState, OutputWeights, calibrate, free_run_cost, measured_values,
+    simulate_outputs,
 };
 use crate::error::{DiscoveryError, Result};
 use rayon::prelude::*;
@@ -555,13 +556,7 @@ pub fn refine_with_holdout(
         noise: noise_variance,
         config,
     };
-    let measured: usize = holdout
-        .map_or(data, |h| h.data)
-        .experiments()
-        .iter()
-        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-        .sum();
-    let m = measured as f64;
+    let m = measured_values(holdout.map_or(data, |h| h.data)) as f64;
     // Working copy: starting coefficients follow the latest calibration.
     let mut cands: Vec<RefineCandidate> = candidates.to_vec();
     let base_eval = evaluate(&ctx, &cands, &[], 0)?;

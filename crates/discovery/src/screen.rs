@@ -22,7 +22,7 @@
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{Dataset, Dynamics, Integrator, Term, TermModel};
 
-use crate::augment::simulate_outputs;
+use crate::augment::{measured_values, simulate_outputs};
 use crate::error::{DiscoveryError, Result};
 use crate::refine::RefineCandidate;
 
@@ -126,12 +126,7 @@ impl Screen {
     ) -> Result<Self> {
         let linear = model.linear();
         let c = linear.c();
-        let measured: usize = data
-            .experiments()
-            .iter()
-            .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-            .sum();
-        let m = measured.max(1) as f64;
+        let m = measured_values(data).max(1) as f64;
         let scale: Vec<f64> = noise.iter().map(|r| 1.0 / (r * m).sqrt()).collect();
         let y0 = stacked_outputs(model, c, data, x0, &scale, integrator).ok_or(
             DiscoveryError::InvalidConfig {

@@ -13,6 +13,7 @@
 
 use sysid_core::{Dataset, Expr, LinearModel, TermModel, term_variables};
 
+use crate::augment::measured_values;
 use crate::error::Result;
 use crate::refine::{Holdout, RefineCandidate, RefineConfig, Refinement, refine_with_holdout};
 use crate::stats::chi2_quantile;
@@ -145,12 +146,7 @@ pub fn refine_with_transfers(
     }
     let (conserved, conserved_initial) = conserved_variant(candidates, &transfers, initial);
     let routed = search(&conserved, &conserved_initial)?;
-    let judged = holdout.map_or(data, |h| h.data);
-    let m = judged
-        .experiments()
-        .iter()
-        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-        .sum::<usize>() as f64;
+    let m = measured_values(holdout.map_or(data, |h| h.data)) as f64;
     let price = chi2_quantile(1.0 - config.alpha, 1.0)?;
     let score = |r: &Refinement| {
         let j = r.cost[1];

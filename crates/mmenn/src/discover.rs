@@ -23,7 +23,8 @@ use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
-use holdout::{holdout_initial_states, measured_values, recalibrate_on, split_records};
+use discovery::measured_values;
+use holdout::{holdout_initial_states, recalibrate_on, split_records};
 use report::{figures, report};
 
 mod holdout;
@@ -477,16 +478,24 @@ pub fn run_discover(
         // model's cost on the judging records, which decides `none` against
         // `unexplained` below. In later rounds the previous search already screened
         // every candidate.
-        if found.verdict == Verdict::None || (proposed.is_empty() && !rounds.is_empty()) {
-            rounds.push(Round {
-                discovery: found,
-                localisation,
-                floor_rms: floor.rms.clone(),
-                refinement: vec![],
-                calibrated: vec![],
-                calibration_cost: [f64::NAN; 2],
-                rejected: None,
-            });
+        let stop_now =
+            found.verdict == Verdict::None || (proposed.is_empty() && !rounds.is_empty());
+        // This round's record, once its outcome is known (each path below builds it once).
+        let floor_rms = floor.rms.clone();
+        let round = move |refinement: Vec<discovery::RefineStep>,
+                          calibrated: Vec<f64>,
+                          calibration_cost: [f64; 2],
+                          rejected: Option<String>| Round {
+            discovery: found,
+            localisation,
+            floor_rms,
+            refinement,
+            calibrated,
+            calibration_cost,
+            rejected,
+        };
+        if stop_now {
+            rounds.push(round(vec![], vec![], [f64::NAN; 2], None));
             break;
         }
         // The regression names candidates; the free-run search decides (see
@@ -598,15 +607,7 @@ pub fn run_discover(
             _ => refined,
         };
         if refined.selected.is_empty() {
-            rounds.push(Round {
-                discovery: found,
-                localisation,
-                floor_rms: floor.rms.clone(),
-                refinement: refined.steps,
-                calibrated: vec![],
-                calibration_cost: refined.cost,
-                rejected: None,
-            });
+            rounds.push(round(refined.steps, vec![], refined.cost, None));
             break;
         }
         let first_new = spec.terms.len();
@@ -665,19 +666,16 @@ pub fn run_discover(
         // keep the better model (its free-run error fell on the judged records) but skip
         // MME's proof and stop — more rounds would only pile up stand-ins.
         if refined.cost[1] > CONFIRM_COST && refined.cost[1] < refined.cost[0] {
-            rounds.push(Round {
-                discovery: found,
-                localisation,
-                floor_rms: floor.rms.clone(),
-                refinement: refined.steps,
+            rounds.push(round(
+                refined.steps,
                 calibrated,
-                calibration_cost: refined.cost,
-                rejected: Some(format!(
+                refined.cost,
+                Some(format!(
                     "free-run cost {:.4e} stays above {CONFIRM_COST} × the noise level: the \
                      terms improve the model but are not claimed (MME not rerun)",
                     refined.cost[1]
                 )),
-            });
+            ));
             accepted_cost = refined.cost[1];
             spec = augmented;
             d_after_known = false;
@@ -690,15 +688,12 @@ pub fn run_discover(
             match estimate_spec(&augmented, &data, &mme_config(&augmented, &opts.estimate)) {
                 Ok(r) => r,
                 Err(e) => {
-                    rounds.push(Round {
-                        discovery: found,
-                        localisation,
-                        floor_rms: floor.rms.clone(),
-                        refinement: refined.steps,
+                    rounds.push(round(
+                        refined.steps,
                         calibrated,
-                        calibration_cost: refined.cost,
-                        rejected: Some(format!("MME failed on the augmented model: {e}")),
-                    });
+                        refined.cost,
+                        Some(format!("MME failed on the augmented model: {e}")),
+                    ));
                     effects.truncate(effects_before_round);
                     any_rejected = true;
                     break;
@@ -742,15 +737,7 @@ pub fn run_discover(
             }
         }
         let accepted = rejection.is_none();
-        rounds.push(Round {
-            discovery: found,
-            localisation,
-            floor_rms: floor.rms.clone(),
-            refinement: refined.steps,
-            calibrated,
-            calibration_cost: refined.cost,
-            rejected: rejection,
-        });
+        rounds.push(round(refined.steps, calibrated, refined.cost, rejection));
         if !accepted {
             effects.truncate(effects_before_round);
             any_rejected = true;

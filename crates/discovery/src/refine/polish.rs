@@ -8,11 +8,12 @@
 //! (the cost is smooth in it but not cheap: every point is a full calibration of the
 //! set's coefficients and initial states).
 
+use crate::augment::measured_values;
 use crate::catalogue::Effect;
 use crate::error::Result;
 use crate::stats::chi2_quantile;
 
-use super::{Ctx, Eval, RefineCandidate, RefineStep, evaluate, evaluate_on_data};
+use super::{Ctx, Eval, RefineCandidate, RefineConfig, RefineStep, evaluate, evaluate_on_data};
 
 /// The parameters of a model effect that shape its term (indices into
 /// [`Effect::parameters`]); the smoothing `eps` of a Stribeck term stays with its
@@ -32,6 +33,15 @@ const SPAN: f64 = 10.0;
 /// Golden-section evaluations per parameter: the bracket `ln(SPAN²)` shrinks by 0.618
 /// per evaluation, to about 1.4 % of the parameter after 14.
 const EVALUATIONS: usize = 14;
+
+/// The search's settings with calibrations of one stage over the whole record: trials
+/// here start from the current calibration, close to their optimum, so the growing
+/// horizons that guard a cold start are not needed.
+fn one_stage(config: &RefineConfig) -> RefineConfig {
+    let mut config = config.clone();
+    config.calibration.horizons = vec![1.0];
+    config
+}
 
 /// The candidate `cand` with parameter `q` set to `value` (term re-written from the
 /// effect's template); `None` when the candidate cannot be re-written.
@@ -72,10 +82,7 @@ pub(super) fn polish(
     if shaping.is_empty() || cands[i].parameters.len() != effect.parameters().len() {
         return Ok(None);
     }
-    // Trials start from `current`'s calibration, close to their optimum: one calibration
-    // stage over the whole record instead of the growing horizons.
-    let mut config = ctx.config.clone();
-    config.calibration.horizons = vec![1.0];
+    let config = one_stage(ctx.config);
     let trial_ctx = Ctx {
         config: &config,
         x0: &current.x0,
@@ -131,12 +138,7 @@ pub(super) fn polish(
     // A parameter is a degree of freedom like a coefficient: moved from the library's
     // value only when the estimation records say so significantly (`M·ΔJ` above
     // χ²₁(1 − α)); otherwise the documented starting rule stands.
-    let measured: usize = ctx
-        .data
-        .experiments()
-        .iter()
-        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-        .sum();
+    let measured = measured_values(ctx.data);
     let threshold = chi2_quantile(1.0 - ctx.config.alpha, 1.0)?;
     if best_cost.is_nan() || (start_cost - best_cost) * measured as f64 <= threshold {
         return Ok(None);
@@ -175,14 +177,8 @@ pub(super) fn parameter_variance(
 ) -> Result<Vec<f64>> {
     let mut extra = vec![0.0; set.len()];
     let first_new = ctx.base.terms().len();
-    let measured: usize = ctx
-        .data
-        .experiments()
-        .iter()
-        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-        .sum();
-    let mut config = ctx.config.clone();
-    config.calibration.horizons = vec![1.0];
+    let measured = measured_values(ctx.data);
+    let config = one_stage(ctx.config);
     let trial_ctx = Ctx {
         config: &config,
         x0: &current.x0,

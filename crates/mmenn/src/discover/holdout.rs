@@ -61,14 +61,6 @@ pub(super) fn recalibrate_on(
     refined
 }
 
-/// Measured (non-missing) output values over every record.
-pub(super) fn measured_values(data: &Dataset) -> usize {
-    data.experiments()
-        .iter()
-        .map(|e| e.outputs().iter().filter(|v| !v.is_nan()).count())
-        .sum()
-}
-
 /// Estimation records cut in two for the free-run search: the first part calibrates, the
 /// last `fraction` judges.
 pub(super) struct Split {
