@@ -427,53 +427,6 @@ fn residual_neff_ratio(
     Ok(((1.0 - rho) / (1.0 + rho)).clamp(1e-3, 1.0))
 }
 
-/// Largest judged cost (1 = the noise level) at which shaping parameters are calibrated.
-const POLISH_GATE: f64 = 3.0;
-
-/// Calibrate the shaping parameters (thresholds, velocity scales) of every term of `set`
-/// not calibrated yet (`polished` is indexed like `cands`), keeping a re-written term
-/// unless the judged cost rises significantly (`M·ΔJ` above `threshold`, the price of
-/// one parameter: the parameter is fitted on the estimation records, so on held-out
-/// ones it may lose a little to noise).
-#[allow(clippy::too_many_arguments)]
-fn polish_set(
-    ctx: &Ctx<'_>,
-    cands: &mut [RefineCandidate],
-    set: &[usize],
-    current: &mut Eval,
-    steps: &mut Vec<RefineStep>,
-    polished: &mut [bool],
-    m: f64,
-    threshold: f64,
-) -> Result<()> {
-    // Far from the noise level something larger than a threshold's shape is missing;
-    // the terms are polished once the set gets close (every calibration here is a full
-    // free-run fit, and stand-ins of an unexplained effect are not worth them).
-    if current.cost > POLISH_GATE {
-        return Ok(());
-    }
-    let first_new = ctx.base.terms().len();
-    for pos in 0..set.len() {
-        let i = set[pos];
-        if std::mem::replace(&mut polished[i], true) {
-            continue;
-        }
-        for (p, &k) in set.iter().enumerate() {
-            if let Some(t) = current.model.terms().get(first_new + p) {
-                cands[k].coefficient = t.coefficient;
-            }
-        }
-        if let Some((cand, eval, step)) = polish::polish(ctx, cands, set, pos, current)?
-            && m * (eval.cost - current.cost) < threshold
-        {
-            cands[i] = cand;
-            *current = eval;
-            steps.push(step);
-        }
-    }
-    Ok(())
-}
-
 /// Held-out records for [`refine_with_holdout`]: data not used to calibrate, on which
 /// every candidate set is judged (coefficients as calibrated, initial states re-fitted).
 #[derive(Debug, Clone, Copy)]
@@ -598,7 +551,7 @@ pub fn refine_with_holdout(
                       current: &mut Eval,
                       steps: &mut Vec<RefineStep>,
                       polished: &mut [bool]| {
-        polish_set(&ctx, cands, set, current, steps, polished, m, threshold)
+        polish::polish_set(&ctx, cands, set, current, steps, polished, m, threshold)
     };
     polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
     let remove_step = |set: &mut Vec<usize>,
@@ -828,53 +781,20 @@ pub fn refine_with_holdout(
     polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
     // An input gain beside a saturation (or dead zone) at the same threshold is the other
     // law alone: one term fewer, kept unless it fits significantly worse.
-    let first_new = base.terms().len();
-    let coefficients: Vec<f64> = (0..set.len())
-        .map(|p| {
-            current
-                .model
-                .terms()
-                .get(first_new + p)
-                .map_or(0.0, |t| t.coefficient)
-        })
-        .collect();
-    if let Some((pg, pl, k, replacement)) = polish::input_identity(&cands, &set, &coefficients) {
-        let mut trial_cands = cands.clone();
-        trial_cands[k] = replacement;
-        let mut trial: Vec<usize> = set
-            .iter()
-            .enumerate()
-            .filter(|(p, _)| *p != pg && *p != pl)
-            .map(|(_, &i)| i)
-            .collect();
-        trial.push(k);
-        if let Some(e) = evaluate(&ctx, &trial_cands, &trial, 0)?
-            && m * (e.cost - current.cost) * current.neff_ratio < threshold
-        {
-            steps.push(RefineStep {
-                action: "simplify".into(),
-                effect: format!(
-                    "{} + {} → {}",
-                    cands[set[pg]].effect, cands[set[pl]].effect, trial_cands[k].effect
-                ),
-                term: format!(
-                    "{} + {} → {}",
-                    cands[set[pg]].term, cands[set[pl]].term, trial_cands[k].term
-                ),
-                cost: [current.cost, e.cost],
-                statistic: m * (e.cost - current.cost) * current.neff_ratio,
-                threshold,
-            });
-            cands = trial_cands;
-            set = trial;
-            current = e;
-        }
-    }
+    polish::simplify_input_pair(
+        &ctx,
+        &mut cands,
+        &mut set,
+        &mut current,
+        &mut steps,
+        m,
+        threshold,
+    )?;
     // Whatever stopped the search, end with no term whose removal is insignificant.
     while !set.is_empty() && remove_step(&mut set, &mut current, &mut steps, &cands)? {}
     // (Far from the noise level the terms are stand-ins that will not be claimed, and
     // their intervals stay conditional on the library's parameters.)
-    let parameter_variance = if current.cost <= POLISH_GATE {
+    let parameter_variance = if current.cost <= polish::POLISH_GATE {
         polish::parameter_variance(&ctx, &cands, &set, &current)?
     } else {
         vec![0.0; set.len()]
@@ -898,166 +818,4 @@ pub fn refine_with_holdout(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use plants::{Recipe, SimulationRequest, simulate_system};
-
-    /// The truth of the cubic mass–spring–damper is known (correction −0.5·x³ − 0.1·v on
-    /// the velocity equation). Started from a wrong set (a linear stiffness), the search
-    /// must drop it and end with exactly the cubic spring and the damper, with calibrated
-    /// coefficients near the truth (noise variance 0.09 m² on 1001 samples).
-    #[test]
-    fn free_run_search_finds_the_true_terms_from_a_wrong_start() {
-        let sim = simulate_system(&SimulationRequest {
-            system: "msd_cubic".into(),
-            recipe: Recipe::Train,
-            seed: 9,
-            ..Default::default()
-        })
-        .unwrap();
-        let base = TermModel::new(sim.assumed.model.clone(), vec![]).unwrap();
-        let cand = |effect: &str, term: &str| RefineCandidate {
-            effect: effect.into(),
-            state: "v".into(),
-            into: None,
-            term: term.into(),
-            coefficient: 0.0,
-            variables: vec![],
-            parameters: vec![],
-        };
-        let candidates = vec![
-            cand("linear_stiffness", "x"),
-            cand("cubic_stiffness", "x^3"),
-            cand("viscous_damping", "v"),
-            cand("quadratic_drag", "v*abs(v)"),
-        ];
-        let x0 = vec![
-            sim.truth
-                .states
-                .column(0)
-                .iter()
-                .copied()
-                .collect::<Vec<f64>>(),
-        ];
-        let r = refine_by_free_run(
-            &base,
-            &candidates,
-            &[0],
-            &sim.data,
-            &x0,
-            &sim.assumed.noise_variance,
-            &RefineConfig::default(),
-        )
-        .unwrap();
-        let mut names: Vec<&str> = r
-            .selected
-            .iter()
-            .map(|&i| candidates[i].effect.as_str())
-            .collect();
-        names.sort_unstable();
-        assert_eq!(
-            names,
-            ["cubic_stiffness", "viscous_damping"],
-            "steps: {:?}",
-            r.steps
-        );
-        for t in r.model.terms() {
-            let want = if t.expr.to_string() == "x^3" {
-                -0.5
-            } else {
-                -0.1
-            };
-            assert!(
-                (t.coefficient - want).abs() < 0.05 * want.abs() + 0.005,
-                "{}: {} vs {want}",
-                t.expr,
-                t.coefficient
-            );
-        }
-        // The final cost is the noise level: J ≈ 1 (±5σ of a χ² mean over ~1000 values).
-        assert!(
-            (r.cost[1] - 1.0).abs() < 5.0 * (2.0_f64 / 1001.0).sqrt(),
-            "final cost {}",
-            r.cost[1]
-        );
-    }
-
-    /// Van der Pol: the correction `μ(1 − x²)v` needs `v` and `x²v` together — either
-    /// alone destabilises or kills the limit cycle, so no single term helps and only the
-    /// pair step can name them (truth coefficients +1 and −1 for μ = 1).
-    #[test]
-    fn pair_step_names_terms_that_only_work_together() {
-        let sim = simulate_system(&SimulationRequest {
-            system: "van_der_pol".into(),
-            recipe: Recipe::Train,
-            seed: 3,
-            ..Default::default()
-        })
-        .unwrap();
-        let base = TermModel::new(sim.assumed.model.clone(), vec![]).unwrap();
-        let state = sim.assumed.model.correction_names()[0].clone();
-        let (x, v) = (
-            sim.assumed.model.state_names()[0].clone(),
-            sim.assumed.model.state_names()[1].clone(),
-        );
-        let cand = |effect: &str, term: String| RefineCandidate {
-            effect: effect.into(),
-            state: state.clone(),
-            into: None,
-            term,
-            coefficient: 0.0,
-            variables: vec![],
-            parameters: vec![],
-        };
-        let candidates = vec![
-            cand("cubic_stiffness", format!("{x}^3")),
-            cand("viscous_damping", v.clone()),
-            cand("amplitude_dependent_damping", format!("{x}^2*{v}")),
-            cand("quadratic_drag", format!("{v}*abs({v})")),
-        ];
-        let x0 = vec![
-            sim.truth
-                .states
-                .column(0)
-                .iter()
-                .copied()
-                .collect::<Vec<f64>>(),
-        ];
-        let r = refine_by_free_run(
-            &base,
-            &candidates,
-            &[],
-            &sim.data,
-            &x0,
-            &sim.assumed.noise_variance,
-            &RefineConfig::default(),
-        )
-        .unwrap();
-        let mut names: Vec<&str> = r
-            .selected
-            .iter()
-            .map(|&i| candidates[i].effect.as_str())
-            .collect();
-        names.sort_unstable();
-        assert_eq!(
-            names,
-            ["amplitude_dependent_damping", "viscous_damping"],
-            "steps: {:?}",
-            r.steps
-        );
-        assert!(r.steps.iter().any(|s| s.action == "add (pair)"));
-        for t in r.model.terms() {
-            let want = if t.expr.to_string().contains('^') {
-                -1.0
-            } else {
-                1.0
-            };
-            assert!(
-                (t.coefficient - want).abs() < 0.05,
-                "{}: {}",
-                t.expr,
-                t.coefficient
-            );
-        }
-    }
-}
+mod tests;

@@ -7,6 +7,10 @@
 //! estimation records — through a golden-section search on the parameter's logarithm
 //! (the cost is smooth in it but not cheap: every point is a full calibration of the
 //! set's coefficients and initial states).
+//!
+//! Also here, because both exist for threshold terms: the uncertainty a calibrated
+//! parameter adds to the coefficients' intervals, and the end-of-search identity move
+//! that rewrites an input gain plus a saturation as a dead zone (and back).
 
 use crate::augment::measured_values;
 use crate::catalogue::Effect;
@@ -155,6 +159,110 @@ pub(super) fn polish(
         threshold: 0.0,
     };
     Ok(Some((work[i].clone(), eval, step)))
+}
+
+/// Largest judged cost (1 = the noise level) at which shaping parameters are calibrated.
+pub(super) const POLISH_GATE: f64 = 3.0;
+
+/// Calibrate the shaping parameters (thresholds, velocity scales) of every term of `set`
+/// not calibrated yet (`polished` is indexed like `cands`), keeping a re-written term
+/// unless the judged cost rises significantly (`M·ΔJ` above `threshold`, the price of
+/// one parameter: the parameter is fitted on the estimation records, so on held-out
+/// ones it may lose a little to noise).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn polish_set(
+    ctx: &Ctx<'_>,
+    cands: &mut [RefineCandidate],
+    set: &[usize],
+    current: &mut Eval,
+    steps: &mut Vec<RefineStep>,
+    polished: &mut [bool],
+    m: f64,
+    threshold: f64,
+) -> Result<()> {
+    // Far from the noise level something larger than a threshold's shape is missing;
+    // the terms are polished once the set gets close (every calibration here is a full
+    // free-run fit, and stand-ins of an unexplained effect are not worth them).
+    if current.cost > POLISH_GATE {
+        return Ok(());
+    }
+    let first_new = ctx.base.terms().len();
+    for pos in 0..set.len() {
+        let i = set[pos];
+        if std::mem::replace(&mut polished[i], true) {
+            continue;
+        }
+        for (p, &k) in set.iter().enumerate() {
+            if let Some(t) = current.model.terms().get(first_new + p) {
+                cands[k].coefficient = t.coefficient;
+            }
+        }
+        if let Some((cand, eval, step)) = polish(ctx, cands, set, pos, current)?
+            && m * (eval.cost - current.cost) < threshold
+        {
+            cands[i] = cand;
+            *current = eval;
+            steps.push(step);
+        }
+    }
+    Ok(())
+}
+
+/// The identity move at the end of the search (see [`input_identity`]): rewrite an input
+/// gain and a saturation (or dead zone) at the same threshold as the other law alone,
+/// unless that fits significantly worse (`M·ΔJ` above `threshold`).
+pub(super) fn simplify_input_pair(
+    ctx: &Ctx<'_>,
+    cands: &mut [RefineCandidate],
+    set: &mut Vec<usize>,
+    current: &mut Eval,
+    steps: &mut Vec<RefineStep>,
+    m: f64,
+    threshold: f64,
+) -> Result<()> {
+    let first_new = ctx.base.terms().len();
+    let coefficients: Vec<f64> = (0..set.len())
+        .map(|p| {
+            current
+                .model
+                .terms()
+                .get(first_new + p)
+                .map_or(0.0, |t| t.coefficient)
+        })
+        .collect();
+    if let Some((pg, pl, k, replacement)) = input_identity(cands, set, &coefficients) {
+        let mut trial_cands = cands.to_vec();
+        trial_cands[k] = replacement;
+        let mut trial: Vec<usize> = set
+            .iter()
+            .enumerate()
+            .filter(|(p, _)| *p != pg && *p != pl)
+            .map(|(_, &i)| i)
+            .collect();
+        trial.push(k);
+        if let Some(e) = evaluate(ctx, &trial_cands, &trial, 0)?
+            && m * (e.cost - current.cost) * current.neff_ratio < threshold
+        {
+            steps.push(RefineStep {
+                action: "simplify".into(),
+                effect: format!(
+                    "{} + {} → {}",
+                    cands[set[pg]].effect, cands[set[pl]].effect, trial_cands[k].effect
+                ),
+                term: format!(
+                    "{} + {} → {}",
+                    cands[set[pg]].term, cands[set[pl]].term, trial_cands[k].term
+                ),
+                cost: [current.cost, e.cost],
+                statistic: m * (e.cost - current.cost) * current.neff_ratio,
+                threshold,
+            });
+            cands.clone_from_slice(&trial_cands);
+            *set = trial;
+            *current = e;
+        }
+    }
+    Ok(())
 }
 
 /// Step in `ln p` of the profile used for a shaping parameter's uncertainty.
