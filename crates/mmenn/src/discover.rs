@@ -31,9 +31,29 @@ mod holdout;
 mod report;
 
 /// Largest free-run cost `J = (1/M) Σ r²/R` (1 for a right model and right noise
-/// variance) at which named effects are claimed: twice the noise power leaves room for an
-/// estimated `R` and a coloured residual, but not for a missing effect.
+/// variance) at which named effects are claimed when `R` is estimated (`noise_variance =
+/// "auto"`): twice the noise power leaves room for an estimated `R` and a coloured
+/// residual, but not for a missing effect. It also ends the rounds: a round that leaves
+/// the cost above it is not proven by MME.
 pub const CONFIRM_COST: f64 = 2.0;
+
+/// The free-run cost on `measured` judged values below which named effects are claimed.
+/// With `R` given, a right model must reach the noise level itself: `J ≤ 1 + 3√(2/M)`
+/// (`M·J` is χ²_M, standard deviation `√(2M)`), the bound that also separates `none` from
+/// `unexplained`. A set of terms that fits "nearly" — a local optimum that names effects
+/// in the wrong equations, as on a partially observed cascade — stays unclaimed. With
+/// `R` estimated, [`CONFIRM_COST`].
+pub fn claim_bound(noise: &NoiseVariance, measured: usize) -> f64 {
+    match noise {
+        NoiseVariance::Given(_) => noise_level_bound(measured),
+        NoiseVariance::Auto => CONFIRM_COST,
+    }
+}
+
+/// `1 + 3√(2/M)`: the largest free-run cost of a right model on `M` values (3σ).
+fn noise_level_bound(measured: usize) -> f64 {
+    1.0 + 3.0 * (2.0 / measured.max(1) as f64).sqrt()
+}
 
 /// Options of [`run_discover`].
 #[derive(Debug, Clone, PartialEq)]
@@ -241,6 +261,9 @@ pub struct DiscoverSummary {
     /// bring its free-run cost down to the noise level, so they are not claimed as the
     /// missing physics (verdict `unexplained`).
     pub unconfirmed: Vec<NamedEffect>,
+    /// The free-run cost (on the judging records, 1 = the noise level) below which named
+    /// effects are claimed ([`claim_bound`]).
+    pub claim_bound: f64,
     /// Gap on the estimation data (`before`, `after`), and on validation data when given.
     pub gap: GapPair,
     /// Gap on the validation data.
@@ -775,12 +798,13 @@ pub fn run_discover(
         .last()
         .map(|r| r.calibration_cost[1])
         .filter(|c| c.is_finite());
-    let at_noise_level = |j: f64| j <= 1.0 + 3.0 * (2.0 / measured.max(1) as f64).sqrt();
+    let at_noise_level = |j: f64| j <= noise_level_bound(measured);
     // Named effects are claimed only when they bring the free-run cost down to the noise
-    // level (within `CONFIRM_COST`); otherwise a combination of catalogue terms may be
-    // standing in for something outside the catalogue.
+    // level (`claim_bound`); otherwise a combination of catalogue terms may be standing
+    // in for something outside the catalogue, or for the right effect in the wrong place.
+    let claim = claim_bound(&original.noise_variance, measured);
     let mut unconfirmed = Vec::new();
-    if !effects.is_empty() && (accepted_cost.is_nan() || accepted_cost > CONFIRM_COST) {
+    if !effects.is_empty() && (accepted_cost.is_nan() || accepted_cost > claim) {
         unconfirmed = std::mem::take(&mut effects);
     }
     let verdict = if !effects.is_empty() {
@@ -798,6 +822,7 @@ pub fn run_discover(
         verdict,
         effects,
         unconfirmed,
+        claim_bound: claim,
         gap: GapPair { before, after },
         validation_gap,
         model: "model.discovered.toml".into(),

@@ -7,7 +7,7 @@ use std::path::Path;
 use nalgebra::DMatrix;
 use sysid_core::Dataset;
 
-use super::{CONFIRM_COST, DiscoverSummary, GapPair};
+use super::{DiscoverSummary, GapPair};
 use crate::error::Result;
 use crate::model_file::ModelSpec;
 use crate::plot::{Figure, Series};
@@ -158,7 +158,8 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
     }
     if !s.unconfirmed.is_empty() {
         r.push_str(&format!(
-            "These terms improved the model (they are in `model.discovered.toml`) but left its free-run cost above {CONFIRM_COST} × the noise level, so they are **not claimed** as the missing physics — something outside the catalogue may be at work:\n\n"
+            "These terms improved the model (they are in `model.discovered.toml`) but left its free-run cost above {:.4} × the noise level, so they are **not claimed** as the missing physics — something outside the catalogue may be at work, or the data cannot tell where the effect acts:\n\n",
+            s.claim_bound
         ));
         for e in &s.unconfirmed {
             r.push_str(&format!(
