@@ -88,14 +88,13 @@ pub fn transfer_candidates(
 }
 
 /// The conserved variant of a candidate list: every candidate that has a transfer copy
-/// in `transfers` is replaced by it (the first copy), the rest kept; `initial` indices
-/// are mapped to the new list.
+/// in `transfers` is replaced by it in place (the first copy, keeping the starting
+/// coefficient), the rest kept — so indices into the list (a starting set) stay valid.
 pub fn conserved_variant(
     candidates: &[RefineCandidate],
     transfers: &[RefineCandidate],
-    initial: &[usize],
-) -> (Vec<RefineCandidate>, Vec<usize>) {
-    let list: Vec<RefineCandidate> = candidates
+) -> Vec<RefineCandidate> {
+    candidates
         .iter()
         .map(|c| {
             transfers
@@ -109,8 +108,7 @@ pub fn conserved_variant(
                     },
                 )
         })
-        .collect();
-    (list, initial.to_vec())
+        .collect()
 }
 
 /// [`refine_with_holdout`] twice when the assumed model routes flows ([`routings`]): once
@@ -144,8 +142,8 @@ pub fn refine_with_transfers(
         let list = plain.candidates.clone();
         return Ok((plain, list));
     }
-    let (conserved, conserved_initial) = conserved_variant(candidates, &transfers, initial);
-    let routed = search(&conserved, &conserved_initial)?;
+    let conserved = conserved_variant(candidates, &transfers);
+    let routed = search(&conserved, initial)?;
     let m = measured_values(holdout.map_or(data, |h| h.data)) as f64;
     let price = chi2_quantile(1.0 - config.alpha, 1.0)?;
     let score = |r: &Refinement| {
@@ -229,5 +227,20 @@ mod tests {
         assert_eq!(copies[0].into.as_deref(), Some("h2"));
         assert_eq!(copies[0].term, "sqrt(abs(h1))");
         assert!(copies[0].coefficient.abs() < f64::MIN_POSITIVE);
+    }
+
+    /// The conserved variant replaces routed candidates in place (indices of a starting
+    /// set stay valid) and keeps their starting coefficients; the rest are unchanged.
+    #[test]
+    fn conserved_variant_replaces_in_place() {
+        let tanks = model(&[-0.06, 0.0, 0.06, -0.08], 2);
+        let cands = vec![cand("h2", "sqrt(abs(h2))"), cand("h1", "sqrt(abs(h1))")];
+        let transfers = transfer_candidates(&tanks, &cands);
+        let conserved = conserved_variant(&cands, &transfers);
+        assert_eq!(conserved.len(), 2);
+        assert_eq!(conserved[0], cands[0]);
+        assert_eq!(conserved[1].into.as_deref(), Some("h2"));
+        assert_eq!(conserved[1].term, "sqrt(abs(h1))");
+        assert!((conserved[1].coefficient - 0.1).abs() < 1e-15);
     }
 }

@@ -1,37 +1,40 @@
 //! The free-run search on plants whose truth is known.
 
 use super::*;
-use plants::{Recipe, SimulationRequest, simulate_system};
+use plants::{Recipe, SimulatedData, SimulationRequest, simulate_system};
 
-/// The truth of the cubic mass–spring–damper is known (correction −0.5·x³ − 0.1·v on
-/// the velocity equation). Started from a wrong set (a linear stiffness), the search
-/// must drop it and end with exactly the cubic spring and the damper, with calibrated
-/// coefficients near the truth (noise variance 0.09 m² on 1001 samples).
-#[test]
-fn free_run_search_finds_the_true_terms_from_a_wrong_start() {
-    let sim = simulate_system(&SimulationRequest {
-        system: "msd_cubic".into(),
+/// A training record of `system` (seed `seed`, default noise).
+fn record(system: &str, seed: u64) -> SimulatedData {
+    simulate_system(&SimulationRequest {
+        system: system.into(),
         recipe: Recipe::Train,
-        seed: 9,
+        seed,
         ..Default::default()
     })
-    .unwrap();
-    let base = TermModel::new(sim.assumed.model.clone(), vec![]).unwrap();
-    let cand = |effect: &str, term: &str| RefineCandidate {
+    .unwrap()
+}
+
+/// A candidate of the equation `state` with no starting coefficient.
+fn candidate(effect: &str, state: &str, term: String) -> RefineCandidate {
+    RefineCandidate {
         effect: effect.into(),
-        state: "v".into(),
+        state: state.into(),
         into: None,
-        term: term.into(),
+        term,
         coefficient: 0.0,
         variables: vec![],
         parameters: vec![],
-    };
-    let candidates = vec![
-        cand("linear_stiffness", "x"),
-        cand("cubic_stiffness", "x^3"),
-        cand("viscous_damping", "v"),
-        cand("quadratic_drag", "v*abs(v)"),
-    ];
+    }
+}
+
+/// The search over `candidates` from `initial` on `sim`'s record (initial state from the
+/// truth, default settings), and the kept effects' names, sorted.
+fn search(
+    sim: &SimulatedData,
+    candidates: &[RefineCandidate],
+    initial: &[usize],
+) -> (Refinement, Vec<String>) {
+    let base = TermModel::new(sim.assumed.model.clone(), vec![]).unwrap();
     let x0 = vec![
         sim.truth
             .states
@@ -42,20 +45,37 @@ fn free_run_search_finds_the_true_terms_from_a_wrong_start() {
     ];
     let r = refine_by_free_run(
         &base,
-        &candidates,
-        &[0],
+        candidates,
+        initial,
         &sim.data,
         &x0,
         &sim.assumed.noise_variance,
         &RefineConfig::default(),
     )
     .unwrap();
-    let mut names: Vec<&str> = r
+    let mut names: Vec<String> = r
         .selected
         .iter()
-        .map(|&i| candidates[i].effect.as_str())
+        .map(|&i| candidates[i].effect.clone())
         .collect();
     names.sort_unstable();
+    (r, names)
+}
+
+/// The truth of the cubic mass–spring–damper is known (correction −0.5·x³ − 0.1·v on
+/// the velocity equation). Started from a wrong set (a linear stiffness), the search
+/// must drop it and end with exactly the cubic spring and the damper, with calibrated
+/// coefficients near the truth (noise variance 0.09 m² on 1001 samples).
+#[test]
+fn free_run_search_finds_the_true_terms_from_a_wrong_start() {
+    let sim = record("msd_cubic", 9);
+    let candidates = vec![
+        candidate("linear_stiffness", "v", "x".into()),
+        candidate("cubic_stiffness", "v", "x^3".into()),
+        candidate("viscous_damping", "v", "v".into()),
+        candidate("quadratic_drag", "v", "v*abs(v)".into()),
+    ];
+    let (r, names) = search(&sim, &candidates, &[0]);
     assert_eq!(
         names,
         ["cubic_stiffness", "viscous_damping"],
@@ -88,58 +108,17 @@ fn free_run_search_finds_the_true_terms_from_a_wrong_start() {
 /// pair step can name them (truth coefficients +1 and −1 for μ = 1).
 #[test]
 fn pair_step_names_terms_that_only_work_together() {
-    let sim = simulate_system(&SimulationRequest {
-        system: "van_der_pol".into(),
-        recipe: Recipe::Train,
-        seed: 3,
-        ..Default::default()
-    })
-    .unwrap();
-    let base = TermModel::new(sim.assumed.model.clone(), vec![]).unwrap();
+    let sim = record("van_der_pol", 3);
     let state = sim.assumed.model.correction_names()[0].clone();
-    let (x, v) = (
-        sim.assumed.model.state_names()[0].clone(),
-        sim.assumed.model.state_names()[1].clone(),
-    );
-    let cand = |effect: &str, term: String| RefineCandidate {
-        effect: effect.into(),
-        state: state.clone(),
-        into: None,
-        term,
-        coefficient: 0.0,
-        variables: vec![],
-        parameters: vec![],
-    };
+    let names_of = sim.assumed.model.state_names();
+    let (x, v) = (&names_of[0], &names_of[1]);
     let candidates = vec![
-        cand("cubic_stiffness", format!("{x}^3")),
-        cand("viscous_damping", v.clone()),
-        cand("amplitude_dependent_damping", format!("{x}^2*{v}")),
-        cand("quadratic_drag", format!("{v}*abs({v})")),
+        candidate("cubic_stiffness", &state, format!("{x}^3")),
+        candidate("viscous_damping", &state, v.clone()),
+        candidate("amplitude_dependent_damping", &state, format!("{x}^2*{v}")),
+        candidate("quadratic_drag", &state, format!("{v}*abs({v})")),
     ];
-    let x0 = vec![
-        sim.truth
-            .states
-            .column(0)
-            .iter()
-            .copied()
-            .collect::<Vec<f64>>(),
-    ];
-    let r = refine_by_free_run(
-        &base,
-        &candidates,
-        &[],
-        &sim.data,
-        &x0,
-        &sim.assumed.noise_variance,
-        &RefineConfig::default(),
-    )
-    .unwrap();
-    let mut names: Vec<&str> = r
-        .selected
-        .iter()
-        .map(|&i| candidates[i].effect.as_str())
-        .collect();
-    names.sort_unstable();
+    let (r, names) = search(&sim, &candidates, &[]);
     assert_eq!(
         names,
         ["amplitude_dependent_damping", "viscous_damping"],
