@@ -6,6 +6,7 @@ pub mod catalogue;
 pub mod discover;
 pub mod error;
 pub mod floor;
+pub mod gauge;
 mod json;
 pub mod localise;
 pub mod refine;
@@ -28,6 +29,7 @@ pub use discover::{
 };
 pub use error::{DiscoveryError, Result};
 pub use floor::NoiseFloor;
+pub use gauge::{ban_touching, scale_free_states, touches};
 pub use localise::{
     Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
     WindowLength, WindowSource, localise,

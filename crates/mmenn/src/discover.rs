@@ -268,10 +268,32 @@ pub struct DiscoverSummary {
     pub gap: GapPair,
     /// Gap on the validation data.
     pub validation_gap: Option<GapPair>,
+    /// When named effects were not claimed because the data cannot tell them from
+    /// another set of terms (partial observation), the two explanations.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ambiguity: Option<Ambiguity>,
     /// The augmented model file.
     pub model: String,
     /// Every round.
     pub rounds: Vec<Round>,
+}
+
+/// Two sets of terms that both bring the free-run cost to the noise level, found when
+/// the first touches an unmeasured state whose scale the measurements leave free (see
+/// `discovery::gauge`): the search run again without the terms touching such states
+/// found the second. Neither is claimed (verdict `unexplained`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Ambiguity {
+    /// The states whose scale no measurement or known equation fixes.
+    pub free_states: Vec<String>,
+    /// The search's set (`equation: term`) and its judged free-run cost.
+    pub named: Vec<String>,
+    /// Its judged free-run cost.
+    pub named_cost: f64,
+    /// The set found without the named terms that touch `free_states`.
+    pub alternative: Vec<String>,
+    /// Its judged free-run cost.
+    pub alternative_cost: f64,
 }
 
 /// Free-run states of `model` over one record from `x0` (default integrator, inputs held
@@ -397,6 +419,57 @@ fn noise_floor(
     Ok(NoiseFloor::from_estimate(&out.estimate)?)
 }
 
+/// The search's set as `equation: term` lines (`a→b: term` for a transfer).
+fn term_labels(list: &[RefineCandidate], selected: &[usize]) -> Vec<String> {
+    selected
+        .iter()
+        .map(|&i| {
+            let c = &list[i];
+            match &c.into {
+                Some(r) => format!("{}→{r}: {}", c.state, c.term),
+                None => format!("{}: {}", c.state, c.term),
+            }
+        })
+        .collect()
+}
+
+/// When `refined` (indexing `chosen_from`) touches a state of free scale, the best set
+/// `search` finds over `candidates` without those terms (starting from the others), with
+/// both sets' judged costs; `None` when it touches none or the model has no such state.
+fn alternative_explanation(
+    spec: &ModelSpec,
+    candidates: &[RefineCandidate],
+    refined: &discovery::Refinement,
+    chosen_from: &[RefineCandidate],
+    search: impl Fn(
+        &[RefineCandidate],
+        &[usize],
+    ) -> discovery::Result<(discovery::Refinement, Vec<RefineCandidate>)>,
+) -> Result<Option<Ambiguity>> {
+    let free = discovery::scale_free_states(&spec.linear);
+    if free.is_empty() {
+        return Ok(None);
+    }
+    let (touching, keep): (Vec<RefineCandidate>, Vec<RefineCandidate>) = refined
+        .selected
+        .iter()
+        .map(|&i| chosen_from[i].clone())
+        .partition(|c| discovery::touches(c, &spec.linear, &free));
+    if touching.is_empty() {
+        return Ok(None);
+    }
+    let (list, start) = discovery::ban_touching(candidates, &touching, &keep);
+    let (alt, alt_list) = search(&list, &start)?;
+    let names = spec.linear.state_names();
+    Ok(Some(Ambiguity {
+        free_states: free.iter().map(|&j| names[j].clone()).collect(),
+        named: term_labels(chosen_from, &refined.selected),
+        named_cost: refined.cost[1],
+        alternative: term_labels(&alt_list, &alt.selected),
+        alternative_cost: alt.cost[1],
+    }))
+}
+
 /// Run the discovery workflow and write `discovery.json`, `model.discovered.toml`,
 /// `report.md` and figures into `out`.
 pub fn run_discover(
@@ -437,6 +510,7 @@ pub fn run_discover(
     let mut effects: Vec<NamedEffect> = Vec::new();
     let mut first_verdict = None;
     let mut any_rejected = false;
+    let mut ambiguity = None;
     // Free-run cost (held-out when given) of the last accepted model.
     let mut accepted_cost = f64::NAN;
     // Whether `result` is MME's estimate with the final model.
@@ -611,7 +685,7 @@ pub fn run_discover(
         // Flows the assumed model already routes between two equations are also tried as
         // transfers (one coefficient, both equations; see `discovery::transfer`), and the
         // better search is kept with the candidate list it indexes.
-        let (refined, candidates) = discovery::refine_with_transfers(
+        let (refined, chosen_from) = discovery::refine_with_transfers(
             &current,
             &candidates,
             &initial,
@@ -633,6 +707,44 @@ pub fn run_discover(
             rounds.push(round(refined.steps, vec![], refined.cost, None));
             break;
         }
+        // A set that reaches the noise level but touches a state of free scale is
+        // claimed only when the search, run again without its terms touching such states,
+        // cannot reach the noise level too.
+        let claim_now = claim_bound(&original.noise_variance, judged_measured);
+        if refined.cost[1] <= claim_now {
+            let search = |list: &[RefineCandidate], start: &[usize]| {
+                discovery::refine_with_transfers(
+                    &current,
+                    list,
+                    start,
+                    cal_data,
+                    cal_x0,
+                    &est.noise_variance,
+                    holdout,
+                    &RefineConfig::default(),
+                )
+            };
+            if let Some(found_too) =
+                alternative_explanation(&spec, &candidates, &refined, &chosen_from, search)?
+                && found_too.alternative_cost <= claim_now
+            {
+                let why = format!(
+                    "ambiguous: {{{}}} and, without its terms touching {}, {{{}}} both reach \
+                     the noise level (judged cost {:.4} and {:.4} ≤ {claim_now:.4}); the \
+                     scale of an unmeasured state is free, so neither is claimed",
+                    found_too.named.join(", "),
+                    found_too.free_states.join(", "),
+                    found_too.alternative.join(", "),
+                    found_too.named_cost,
+                    found_too.alternative_cost,
+                );
+                rounds.push(round(refined.steps, vec![], refined.cost, Some(why)));
+                ambiguity = Some(found_too);
+                any_rejected = true;
+                break;
+            }
+        }
+        let candidates = chosen_from;
         let first_new = spec.terms.len();
         let effects_before_round = effects.len();
         let calibrated: Vec<f64> = refined.model.terms()[first_new..]
@@ -823,6 +935,7 @@ pub fn run_discover(
         effects,
         unconfirmed,
         claim_bound: claim,
+        ambiguity,
         gap: GapPair { before, after },
         validation_gap,
         model: "model.discovered.toml".into(),

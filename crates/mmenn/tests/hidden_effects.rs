@@ -6,7 +6,8 @@
 //!
 //! Also the two-tank plant, whose assumed model has linear outflows where the truth has
 //! orifice (`√h`) outflows: the named terms must be the orifice laws and the exact
-//! cancellation of the assumed linear outflows.
+//! cancellation of the assumed linear outflows — and, with only the lower level
+//! measured, no name at all (the upper level's scale is free and several term sets fit).
 
 use mmenn::discover::{DiscoverOptions, DiscoverSummary, run_discover};
 use mmenn::plants::{Recipe, SimulationRequest};
@@ -16,10 +17,53 @@ const LOW: f64 = 1e-4;
 const HIGH: f64 = 6.25e-4;
 
 fn run(label: &str, params: &[(&str, f64)], noise: f64) -> DiscoverSummary {
-    run_system("oscillator", None, label, params, noise, 5)
+    run_system("oscillator", None, label, params, noise, 5, &[])
 }
 
-/// Simulate training (seed `seed`) and test (seed `seed + 1`) records and discover.
+/// Remove the `hidden` output channels from a simulated record's data and model (the
+/// measured-states list and the per-channel noise variances, all `noise`).
+fn hide_outputs(data: &std::path::Path, model: &std::path::Path, hidden: &[&str], noise: f64) {
+    let text = std::fs::read_to_string(data).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&i| !hidden.contains(&header[i]))
+        .collect();
+    let pick = |row: &str| {
+        let cells: Vec<&str> = row.split(',').collect();
+        keep.iter().map(|&i| cells[i]).collect::<Vec<_>>().join(",")
+    };
+    let mut out = pick(&header.join(","));
+    for row in lines {
+        out.push('\n');
+        out.push_str(&pick(row));
+    }
+    std::fs::write(data, out + "\n").unwrap();
+    let spec = std::fs::read_to_string(model).unwrap();
+    let mut edited = Vec::new();
+    for line in spec.lines() {
+        if let Some(list) = line.strip_prefix("measured = ") {
+            let names: Vec<&str> = list
+                .trim_matches(|c| c == '[' || c == ']')
+                .split(',')
+                .map(|n| n.trim().trim_matches('"'))
+                .filter(|n| !hidden.contains(n))
+                .collect();
+            let quoted: Vec<String> = names.iter().map(|n| format!("\"{n}\"")).collect();
+            edited.push(format!("measured = [{}]", quoted.join(", ")));
+            edited.push(format!(
+                "noise_variance = [{}]",
+                vec![format!("{noise:e}"); names.len()].join(", ")
+            ));
+        } else if !line.starts_with("noise_variance") {
+            edited.push(line.to_string());
+        }
+    }
+    std::fs::write(model, edited.join("\n") + "\n").unwrap();
+}
+
+/// Simulate training (seed `seed`) and test (seed `seed + 1`) records, hide the
+/// `hidden` outputs, and discover.
 fn run_system(
     system: &str,
     fs: Option<f64>,
@@ -27,6 +71,7 @@ fn run_system(
     params: &[(&str, f64)],
     noise: f64,
     seed: u64,
+    hidden: &[&str],
 ) -> DiscoverSummary {
     let dir = std::env::temp_dir().join(format!(
         "mmenn-hidden-{}-{label}-{noise}",
@@ -44,6 +89,10 @@ fn run_system(
     };
     let train = run_simulate(&req(Recipe::Train, seed), &dir.join("train")).unwrap();
     let test = run_simulate(&req(Recipe::Test, seed + 1), &dir.join("test")).unwrap();
+    if !hidden.is_empty() {
+        hide_outputs(&train.data, &train.model, hidden, noise);
+        hide_outputs(&test.data, &test.model, hidden, noise);
+    }
     let s = run_discover(
         std::slice::from_ref(&train.data),
         &train.model,
@@ -190,7 +239,7 @@ fn correct_model_gives_none() {
 /// search ran without a proposal).
 #[test]
 fn correct_model_with_d_hat_at_numerical_zero_gives_none() {
-    let s = run_system("oscillator", None, "zero", &[], 2.3e-5, 49);
+    let s = run_system("oscillator", None, "zero", &[], 2.3e-5, 49, &[]);
     assert_eq!(format!("{:?}", s.verdict), "None");
     assert!(s.effects.is_empty() && s.unconfirmed.is_empty());
 }
@@ -218,7 +267,7 @@ fn expect_tank_orifices(noise: f64) {
     let h1 = (beta * u0 / alpha1).powi(2);
     let h2 = (alpha1 / alpha2).powi(2) * h1;
     let (a1, a2) = (alpha1 / h1.sqrt(), alpha2 / h2.sqrt());
-    let s = run_system("two_tank", Some(2.0), "tank", &[], noise, 5);
+    let s = run_system("two_tank", Some(2.0), "tank", &[], noise, 5, &[]);
     assert_eq!(format!("{:?}", s.verdict), "Found", "{:?}", s.unconfirmed);
     // (effect, equation, transfer target, term, truth)
     let want = [
@@ -266,4 +315,23 @@ fn tank_orifice_outflow_low_noise() {
 #[test]
 fn tank_orifice_outflow_high_noise() {
     expect_tank_orifices(4e-5);
+}
+
+/// The same two tanks with only the lower level measured. The upper level's scale is
+/// then free (both tank equations are corrected), and several sets of catalogue terms
+/// simulate the lower level to the noise level: at this seed the search reaches it with
+/// a halved input gain into the upper tank, a reverse coupling and `√h2` (judged cost
+/// 1.007), and without those terms with `√h1` into the lower tank and a bias (1.040, bound
+/// 1.158). No set may be claimed; the ambiguity is reported with both explanations.
+#[test]
+fn tank_with_only_the_lower_level_measured_is_ambiguous() {
+    let s = run_system("two_tank", Some(2.0), "tank-h2", &[], 1e-5, 5, &["h1"]);
+    assert_eq!(format!("{:?}", s.verdict), "Unexplained");
+    assert!(s.effects.is_empty(), "claimed: {:?}", s.effects);
+    let a = s.ambiguity.as_ref().expect("ambiguity reported");
+    assert_eq!(a.free_states, vec!["h1".to_string()]);
+    assert_ne!(a.named, a.alternative);
+    for cost in [a.named_cost, a.alternative_cost] {
+        assert!(cost <= s.claim_bound, "{a:?} against {}", s.claim_bound);
+    }
 }

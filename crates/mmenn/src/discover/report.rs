@@ -171,6 +171,19 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
             ));
         }
     }
+    if let Some(a) = &s.ambiguity {
+        r.push_str(&format!(
+            "**Ambiguous.** The scale of {} is not fixed by any measurement or known equation, so several sets of terms can explain the measured outputs. Two sets reach the noise level (claim bound {:.4}), and neither is claimed:\n\n- the search's: {} (judged free-run cost {:.4});\n- without its terms touching {}: {} (judged free-run cost {:.4}).\n\nMeasuring {} (or fixing its equation) would decide between them.\n\n",
+            a.free_states.join(", "),
+            s.claim_bound,
+            code_list(&a.named),
+            a.named_cost,
+            a.free_states.join(", "),
+            code_list(&a.alternative),
+            a.alternative_cost,
+            a.free_states.join(", "),
+        ));
+    }
     r.push_str("\n## Gap on the estimation data (free-run simulation; d̂ from MME)\n\n");
     r.push_str(&gap_table(&s.gap));
     if let Some(v) = &s.validation_gap {
@@ -209,4 +222,16 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
     }
     r.push_str(&format!("\nThe augmented model is `{}`.\n", s.model));
     r
+}
+
+/// `a, b` as inline code: `` `a`, `b` `` (`none` when empty).
+fn code_list(items: &[String]) -> String {
+    if items.is_empty() {
+        return "none".into();
+    }
+    items
+        .iter()
+        .map(|t| format!("`{t}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
