@@ -35,7 +35,7 @@ pub use localise::{
     WindowLength, WindowSource, localise,
 };
 pub use refine::{
-    Holdout, RefineCandidate, RefineConfig, RefineStep, Refinement, refine_by_free_run,
+    Holdout, RefineCandidate, RefineConfig, RefineStep, Refinement, Search, refine_by_free_run,
     refine_with_holdout,
 };
 pub use roles::{EquationKind, Role, StateRoles};

@@ -145,15 +145,22 @@ pub struct Refinement {
     pub parameter_variance: Vec<f64>,
 }
 
-/// What every evaluation shares.
-#[derive(Clone, Copy)]
-struct Ctx<'a> {
-    base: &'a TermModel,
-    holdout: Option<Holdout<'a>>,
-    data: &'a Dataset,
-    x0: &'a [Vec<f64>],
-    noise: &'a [f64],
-    config: &'a RefineConfig,
+/// What a free-run search works on, besides its candidates: the assumed model, the
+/// records that calibrate, the records that judge, and the settings.
+#[derive(Debug, Clone, Copy)]
+pub struct Search<'a> {
+    /// The assumed model the candidate terms are added to (its own terms stay fixed).
+    pub base: &'a TermModel,
+    /// The records coefficients are calibrated on.
+    pub data: &'a Dataset,
+    /// A starting guess of each of `data`'s initial states (re-fitted).
+    pub x0: &'a [Vec<f64>],
+    /// Noise variance per model output (weights of the free-run cost).
+    pub noise_variance: &'a [f64],
+    /// Held-out records that judge every candidate set; `None`: `data` judges.
+    pub holdout: Option<Holdout<'a>>,
+    /// Settings.
+    pub config: &'a RefineConfig,
 }
 
 #[derive(Clone)]
@@ -213,7 +220,7 @@ pub(crate) fn build(
 /// Calibrate the base model plus the terms `set`; `None` when the simulation diverges or
 /// when one of the last `check_new` terms' coefficients is not distinguishable from zero.
 fn evaluate(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     candidates: &[RefineCandidate],
     set: &[usize],
     check_new: usize,
@@ -230,11 +237,11 @@ fn evaluate(
 /// Replace an evaluation's cost and residual colour by those on the held-out records:
 /// coefficients as calibrated, initial states re-fitted there. `None` when the held-out
 /// simulation diverges.
-fn holdout_score(ctx: &Ctx<'_>, h: Holdout<'_>, mut eval: Eval) -> Result<Option<Eval>> {
+fn holdout_score(ctx: &Search<'_>, h: Holdout<'_>, mut eval: Eval) -> Result<Option<Eval>> {
     let cal = CalibrationConfig {
         terms: Some(vec![]),
         initial_state: InitialState::Estimate,
-        weights: OutputWeights::NoiseVariance(ctx.noise.to_vec()),
+        weights: OutputWeights::NoiseVariance(ctx.noise_variance.to_vec()),
         ..ctx.config.calibration.clone()
     };
     let Ok(fit) = calibrate(&eval.model, h.data, h.x0, &cal) else {
@@ -250,16 +257,16 @@ fn holdout_score(ctx: &Ctx<'_>, h: Holdout<'_>, mut eval: Eval) -> Result<Option
 
 /// [`evaluate`] on the estimation records only.
 fn evaluate_on_data(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     candidates: &[RefineCandidate],
     set: &[usize],
     check_new: usize,
 ) -> Result<Option<Eval>> {
-    let Ctx {
+    let Search {
         base,
         data,
         x0,
-        noise,
+        noise_variance: noise,
         config,
         ..
     } = *ctx;
@@ -354,7 +361,7 @@ struct TrialSet<K> {
 /// Calibrate every trial (in parallel) and return the admissible one of least cost (the
 /// first in order on ties, so the result does not depend on the thread count).
 fn best_trial<K: Copy + Send + Sync>(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     trials: Vec<TrialSet<K>>,
 ) -> Result<Option<(K, Eval)>> {
     let results: Vec<Result<Option<Eval>>> = trials
@@ -448,37 +455,38 @@ pub fn refine_by_free_run(
     noise_variance: &[f64],
     config: &RefineConfig,
 ) -> Result<Refinement> {
-    refine_with_holdout(
+    let search = Search {
         base,
-        candidates,
-        initial,
         data,
         x0,
         noise_variance,
-        None,
+        holdout: None,
         config,
-    )
+    };
+    refine_with_holdout(&search, candidates, initial)
 }
 
 /// Stepwise selection of `candidates` by calibrated free-run cost, starting from
-/// `initial` (indices into `candidates`, e.g. the regression's choice). `noise_variance`
-/// is per model output; `x0` one initial state per experiment (a starting guess; it is
-/// re-fitted).
+/// `initial` (indices into `candidates`, e.g. the regression's choice), on `search`'s
+/// records (`x0` a starting guess per experiment; it is re-fitted).
 ///
-/// With `holdout`, coefficients are calibrated on `data` but every decision (and the
-/// reported costs) uses the free-run cost on the held-out records: a combination of
-/// wrong terms that mimics the missing effect on one input rarely does so on another.
-#[allow(clippy::too_many_arguments)]
+/// With `search.holdout`, coefficients are calibrated on `search.data` but every
+/// decision (and the reported costs) uses the free-run cost on the held-out records: a
+/// combination of wrong terms that mimics the missing effect on one input rarely does so
+/// on another.
 pub fn refine_with_holdout(
-    base: &TermModel,
+    search: &Search<'_>,
     candidates: &[RefineCandidate],
     initial: &[usize],
-    data: &Dataset,
-    x0: &[Vec<f64>],
-    noise_variance: &[f64],
-    holdout: Option<Holdout<'_>>,
-    config: &RefineConfig,
 ) -> Result<Refinement> {
+    let Search {
+        base,
+        data,
+        noise_variance,
+        holdout,
+        config,
+        ..
+    } = *search;
     if !(config.alpha > 0.0 && config.alpha < 1.0) {
         return Err(DiscoveryError::InvalidConfig {
             field: "alpha",
@@ -501,14 +509,7 @@ pub fn refine_with_holdout(
             reason: "at least 1 candidate per step",
         });
     }
-    let ctx = Ctx {
-        base,
-        holdout,
-        data,
-        x0,
-        noise: noise_variance,
-        config,
-    };
+    let ctx = *search;
     let m = measured_values(holdout.map_or(data, |h| h.data)) as f64;
     // Working copy: starting coefficients follow the latest calibration.
     let mut cands: Vec<RefineCandidate> = candidates.to_vec();

@@ -11,11 +11,11 @@
 //! What this module does not do: it never assumes conservation the assumed model does
 //! not already state.
 
-use sysid_core::{Dataset, Expr, LinearModel, TermModel, term_variables};
+use sysid_core::{Expr, LinearModel, term_variables};
 
 use crate::augment::measured_values;
 use crate::error::Result;
-use crate::refine::{Holdout, RefineCandidate, RefineConfig, Refinement, refine_with_holdout};
+use crate::refine::{RefineCandidate, Refinement, Search, refine_with_holdout};
 use crate::stats::chi2_quantile;
 
 /// Relative tolerance of `A[k][j] = −A[i][j]` (model files carry ~16 digits; a
@@ -122,30 +122,21 @@ pub fn conserved_variant(
 /// level the data cannot tell them apart, and the routed explanation is kept.) Returns
 /// the refinement and the candidate list its `selected` indices refer to (the search's
 /// own `candidates`, as it left them). Without routings this is one plain search.
-#[allow(clippy::too_many_arguments)]
 pub fn refine_with_transfers(
-    base: &TermModel,
+    search: &Search<'_>,
     candidates: &[RefineCandidate],
     initial: &[usize],
-    data: &Dataset,
-    x0: &[Vec<f64>],
-    noise_variance: &[f64],
-    holdout: Option<Holdout<'_>>,
-    config: &RefineConfig,
 ) -> Result<(Refinement, Vec<RefineCandidate>)> {
-    let search = |cands: &[RefineCandidate], init: &[usize]| {
-        refine_with_holdout(base, cands, init, data, x0, noise_variance, holdout, config)
-    };
-    let plain = search(candidates, initial)?;
-    let transfers = transfer_candidates(base.linear(), candidates);
+    let plain = refine_with_holdout(search, candidates, initial)?;
+    let transfers = transfer_candidates(search.base.linear(), candidates);
     if transfers.is_empty() {
         let list = plain.candidates.clone();
         return Ok((plain, list));
     }
     let conserved = conserved_variant(candidates, &transfers);
-    let routed = search(&conserved, initial)?;
-    let m = measured_values(holdout.map_or(data, |h| h.data)) as f64;
-    let price = chi2_quantile(1.0 - config.alpha, 1.0)?;
+    let routed = refine_with_holdout(search, &conserved, initial)?;
+    let m = measured_values(search.holdout.map_or(search.data, |h| h.data)) as f64;
+    let price = chi2_quantile(1.0 - search.config.alpha, 1.0)?;
     let score = |r: &Refinement| {
         let j = r.cost[1];
         if j.is_finite() {

@@ -438,13 +438,10 @@ fn term_labels(list: &[RefineCandidate], selected: &[usize]) -> Vec<String> {
 /// both sets' judged costs; `None` when it touches none or the model has no such state.
 fn alternative_explanation(
     spec: &ModelSpec,
+    search: &discovery::Search<'_>,
     candidates: &[RefineCandidate],
     refined: &discovery::Refinement,
     chosen_from: &[RefineCandidate],
-    search: impl Fn(
-        &[RefineCandidate],
-        &[usize],
-    ) -> discovery::Result<(discovery::Refinement, Vec<RefineCandidate>)>,
 ) -> Result<Option<Ambiguity>> {
     let free = discovery::scale_free_states(&spec.linear);
     if free.is_empty() {
@@ -459,7 +456,7 @@ fn alternative_explanation(
         return Ok(None);
     }
     let (list, start) = discovery::ban_touching(candidates, &touching, &keep);
-    let (alt, alt_list) = search(&list, &start)?;
+    let (alt, alt_list) = discovery::refine_with_transfers(search, &list, &start)?;
     let names = spec.linear.state_names();
     Ok(Some(Ambiguity {
         free_states: free.iter().map(|&j| names[j].clone()).collect(),
@@ -685,16 +682,17 @@ pub fn run_discover(
         // Flows the assumed model already routes between two equations are also tried as
         // transfers (one coefficient, both equations; see `discovery::transfer`), and the
         // better search is kept with the candidate list it indexes.
-        let (refined, chosen_from) = discovery::refine_with_transfers(
-            &current,
-            &candidates,
-            &initial,
-            cal_data,
-            cal_x0,
-            &est.noise_variance,
+        let refine_config = RefineConfig::default();
+        let search = discovery::Search {
+            base: &current,
+            data: cal_data,
+            x0: cal_x0,
+            noise_variance: &est.noise_variance,
             holdout,
-            &RefineConfig::default(),
-        )?;
+            config: &refine_config,
+        };
+        let (refined, chosen_from) =
+            discovery::refine_with_transfers(&search, &candidates, &initial)?;
         // The held-out half chose the terms; their coefficients (and intervals) come
         // from the whole estimation records.
         let refined = match &split {
@@ -711,38 +709,25 @@ pub fn run_discover(
         // claimed only when the search, run again without its terms touching such states,
         // cannot reach the noise level too.
         let claim_now = claim_bound(&original.noise_variance, judged_measured);
-        if refined.cost[1] <= claim_now {
-            let search = |list: &[RefineCandidate], start: &[usize]| {
-                discovery::refine_with_transfers(
-                    &current,
-                    list,
-                    start,
-                    cal_data,
-                    cal_x0,
-                    &est.noise_variance,
-                    holdout,
-                    &RefineConfig::default(),
-                )
-            };
-            if let Some(found_too) =
-                alternative_explanation(&spec, &candidates, &refined, &chosen_from, search)?
-                && found_too.alternative_cost <= claim_now
-            {
-                let why = format!(
-                    "ambiguous: {{{}}} and, without its terms touching {}, {{{}}} both reach \
-                     the noise level (judged cost {:.4} and {:.4} ≤ {claim_now:.4}); the \
-                     scale of an unmeasured state is free, so neither is claimed",
-                    found_too.named.join(", "),
-                    found_too.free_states.join(", "),
-                    found_too.alternative.join(", "),
-                    found_too.named_cost,
-                    found_too.alternative_cost,
-                );
-                rounds.push(round(refined.steps, vec![], refined.cost, Some(why)));
-                ambiguity = Some(found_too);
-                any_rejected = true;
-                break;
-            }
+        if refined.cost[1] <= claim_now
+            && let Some(found_too) =
+                alternative_explanation(&spec, &search, &candidates, &refined, &chosen_from)?
+            && found_too.alternative_cost <= claim_now
+        {
+            let why = format!(
+                "ambiguous: {{{}}} and, without its terms touching {}, {{{}}} both reach \
+                 the noise level (judged cost {:.4} and {:.4} ≤ {claim_now:.4}); the \
+                 scale of an unmeasured state is free, so neither is claimed",
+                found_too.named.join(", "),
+                found_too.free_states.join(", "),
+                found_too.alternative.join(", "),
+                found_too.named_cost,
+                found_too.alternative_cost,
+            );
+            rounds.push(round(refined.steps, vec![], refined.cost, Some(why)));
+            ambiguity = Some(found_too);
+            any_rejected = true;
+            break;
         }
         let candidates = chosen_from;
         let first_new = spec.terms.len();

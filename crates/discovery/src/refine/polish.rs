@@ -17,7 +17,7 @@ use crate::catalogue::Effect;
 use crate::error::Result;
 use crate::stats::chi2_quantile;
 
-use super::{Ctx, Eval, RefineCandidate, RefineConfig, RefineStep, evaluate, evaluate_on_data};
+use super::{Eval, RefineCandidate, RefineConfig, RefineStep, Search, evaluate, evaluate_on_data};
 
 /// The parameters of a model effect that shape its term (indices into
 /// [`Effect::parameters`]); the smoothing `eps` of a Stribeck term stays with its
@@ -72,7 +72,7 @@ fn with_parameter(cand: &RefineCandidate, q: usize, value: f64) -> Option<Refine
 /// judges) and the step to record, or `None` when no value lowers the
 /// estimation-record cost significantly.
 pub(super) fn polish(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     cands: &[RefineCandidate],
     set: &[usize],
     pos: usize,
@@ -87,7 +87,7 @@ pub(super) fn polish(
         return Ok(None);
     }
     let config = one_stage(ctx.config);
-    let trial_ctx = Ctx {
+    let trial_ctx = Search {
         config: &config,
         x0: &current.x0,
         ..*ctx
@@ -171,7 +171,7 @@ pub(super) const POLISH_GATE: f64 = 3.0;
 /// ones it may lose a little to noise).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn polish_set(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     cands: &mut [RefineCandidate],
     set: &[usize],
     current: &mut Eval,
@@ -212,7 +212,7 @@ pub(super) fn polish_set(
 /// gain and a saturation (or dead zone) at the same threshold as the other law alone,
 /// unless that fits significantly worse (`M·ΔJ` above `threshold`).
 pub(super) fn simplify_input_pair(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     cands: &mut [RefineCandidate],
     set: &mut Vec<usize>,
     current: &mut Eval,
@@ -278,7 +278,7 @@ const PROFILE_STEP: f64 = 0.05;
 /// not convex there contributes nothing (it was not moved from the library's value, or
 /// the data cannot tell).
 pub(super) fn parameter_variance(
-    ctx: &Ctx<'_>,
+    ctx: &Search<'_>,
     cands: &[RefineCandidate],
     set: &[usize],
     current: &Eval,
@@ -287,7 +287,7 @@ pub(super) fn parameter_variance(
     let first_new = ctx.base.terms().len();
     let measured = measured_values(ctx.data);
     let config = one_stage(ctx.config);
-    let trial_ctx = Ctx {
+    let trial_ctx = Search {
         config: &config,
         x0: &current.x0,
         ..*ctx
