@@ -4,9 +4,11 @@ network, data and initial weights as `cargo run --release -p nn --example lm_vs_
 and the time each optimiser needs to reach the same training MSE.
 
 Usage: python3 crates/nn/benches/scipy_lm.py OUT_DIR [--reuse-scipy]
-(OUT_DIR written by the example). scipy's evaluation logs are saved in OUT_DIR/scipy.json;
-with --reuse-scipy they are read from there instead of rerunning scipy (for iterating on
-the Rust side; the initial weights must match, which is checked).
+(OUT_DIR written by the example). scipy's evaluation logs are saved in OUT_DIR/scipy.json,
+keyed by N, H and the initial-weight seed; with --reuse-scipy they are read from there
+instead of rerunning scipy (for iterating on the Rust side; the initial weights must match,
+which is checked). With several seeds per (N, H) the script also prints, per cell, the
+median over seeds of the end-to-end ratio, and how many cells reach 5x.
 
 The network is nn's 3-H-1 tanh MLP acting on the scaled data written by the example, with
 nn's flat weight layout: per hidden unit [w1 w2 w3 b], then [v1 .. vH c]. Residuals are
@@ -120,7 +122,8 @@ def main():
             d = np.loadtxt(os.path.join(out, f"data_N{n}.csv"), delimiter=",", skiprows=1)
             data[n] = (np.ascontiguousarray(d[:, :3]), np.ascontiguousarray(d[:, 3]))
         s, t = data[n]
-        key = f"{n}/{h}"
+        seed = case.get("seed", 11)
+        key = f"{n}/{h}/{seed}"
         if key in cache and cache[key]["w0"] == case["w0"]:
             sp_mse, sp_time, sp_jev, njev = (cache[key][k] for k in ("mse", "time", "jev", "njev"))
         else:
@@ -145,11 +148,11 @@ def main():
         sp_iters = None if is_hit is None else sp_jev[is_hit]
         it_r = 1e3 * r_time[-1] / (len(r_time) - 1)
         it_s = 1e3 * sp_time[-1] / max(njev, 1)
-        rows.append((n, h, tr, tw, ts, min(r_mse), min(sp_mse), target, ir_hit, sp_iters,
-                     it_r, it_s))
-        print(f"N {n:>5} H {h:>2}: rust {tr:.4f} s CPU, {tw:.4f} s wall, scipy {ts:.4f} s, "
-              f"ratio {ts / tr:.1f}, MSE rust {min(r_mse):.3e} scipy {min(sp_mse):.3e} "
-              f"target {target:.3e}, per iteration {it_r:.2f} / {it_s:.2f} ms; to target: "
+        rows.append((n, h, seed, tr, tw, ts, min(r_mse), min(sp_mse), target, ir_hit,
+                     sp_iters, it_r, it_s))
+        print(f"N {n:>5} H {h:>2} seed {seed}: rust {tr:.4f} s CPU, {tw:.4f} s wall, "
+              f"scipy {ts:.4f} s, ratio {ts / tr:.1f}, MSE rust {min(r_mse):.3e} "
+              f"scipy {min(sp_mse):.3e} target {target:.3e}, per iteration {it_r:.2f} / {it_s:.2f} ms; to target: "
               f"rust {ir_hit} epochs, scipy {sp_iters} Jacobians ({is_hit} residuals)",
               file=sys.stderr)
     json.dump(cache, open(cache_path, "w"))
@@ -158,15 +161,41 @@ def main():
     print(f"Rust: {damping} damping, {threads} thread(s); Rust time columns are process CPU "
           "time (all threads) and wall-clock time; scipy's is its thread's CPU time.")
     print()
-    print("| N | H | Rust CPU to target (s) | Rust wall to target (s) | scipy to target (s) "
-          "| scipy / Rust CPU | scipy / Rust wall | best MSE Rust | best MSE scipy "
-          "| target MSE | Rust epochs to target | scipy Jacobians to target "
+    print("| N | H | seed | Rust CPU to target (s) | Rust wall to target (s) "
+          "| scipy to target (s) | scipy / Rust CPU | scipy / Rust wall | best MSE Rust "
+          "| best MSE scipy | target MSE | Rust epochs to target | scipy Jacobians to target "
           "| Rust CPU ms/epoch | scipy ms/iteration | per-iteration ratio |")
-    print("|" + "---:|" * 15)
-    for n, h, tr, tw, ts, mr, ms, tg, er, es, ir, isp in rows:
-        print(f"| {n} | {h} | {tr:.4f} | {tw:.4f} | {ts:.4f} | {ts / tr:.1f} | {ts / tw:.1f} "
-              f"| {mr:.3e} | {ms:.3e} | {tg:.3e} | {er} | {es} | {ir:.2f} | {isp:.2f} "
-              f"| {isp / ir:.1f} |")
+    print("|" + "---:|" * 16)
+    for n, h, seed, tr, tw, ts, mr, ms, tg, er, es, ir, isp in rows:
+        print(f"| {n} | {h} | {seed} | {tr:.4f} | {tw:.4f} | {ts:.4f} | {ts / tr:.1f} "
+              f"| {ts / tw:.1f} | {mr:.3e} | {ms:.3e} | {tg:.3e} | {er} | {es} | {ir:.2f} "
+              f"| {isp:.2f} | {isp / ir:.1f} |")
+
+    summary(rows)
+
+
+def summary(rows):
+    """Per (N, H): the median over seeds of scipy / Rust (CPU), and the count of cells
+    whose median reaches 5x."""
+    cells = {}
+    for n, h, seed, tr, _tw, ts, mr, ms, *_ in rows:
+        cells.setdefault((n, h), []).append((ts / tr, mr, ms, seed))
+    print()
+    print("| N | H | scipy / Rust per seed | median | best MSE Rust per seed "
+          "| best MSE scipy per seed |")
+    print("|---:|---:|---|---:|---|---|")
+    medians = []
+    for (n, h), v in cells.items():
+        ratios = [r for r, *_ in v]
+        med = float(np.median(ratios))
+        medians.append(med)
+        print(f"| {n} | {h} | {' / '.join(f'{r:.1f}' for r in ratios)} | {med:.1f} "
+              f"| {' / '.join(f'{m:.2e}' for _, m, _, _ in v)} "
+              f"| {' / '.join(f'{m:.2e}' for _, _, m, _ in v)} |")
+    print()
+    print(f"cells: {len(medians)}; median ratio >= 5 in {sum(m >= 5 for m in medians)}; "
+          f"median of medians {float(np.median(medians)):.1f}; "
+          f"range {min(medians):.1f}-{max(medians):.1f}")
 
 
 if __name__ == "__main__":

@@ -1,15 +1,19 @@
 //! Head-to-head with MINPACK's Levenberg–Marquardt (scipy), Rust side: for N = 2,000 and
-//! 20,000 samples of the `lm_grid` bench data (3 inputs, 1 output) and H = 1…10 hidden units,
-//! write the scaled data and the initial weights for `benches/scipy_lm.py`, train with
-//! [`train_lm`] from those weights, and record the training MSE and the elapsed time after
-//! every epoch (best of `REPEATS` runs per epoch). Two clocks: the process's CPU time (all
-//! threads; other processes on a shared machine do not inflate it, and the Python side
-//! measures the same for single-threaded scipy) and wall-clock time.
+//! 20,000 samples of the `lm_grid` bench data (3 inputs, 1 output), H = 1…10 hidden units
+//! and one or more initial-weight seeds, write the scaled data and the initial weights for
+//! `benches/scipy_lm.py`, train with [`train_lm`] from those weights, and record the
+//! training MSE and the elapsed time after every epoch (best of `REPEATS` runs per epoch).
+//! Two clocks: the process's CPU time (all threads; other processes on a shared machine do
+//! not inflate it, and the Python side measures the same for single-threaded scipy) and
+//! wall-clock time.
 //!
 //! Run: `cargo run --release -p nn --example lm_vs_scipy -- OUT_DIR [N [H]] [--threads K]
-//! [--damping trainlm|nielsen|nielsen-marquardt]`, then `python3 crates/nn/benches/scipy_lm.py OUT_DIR` (see the
-//! crate README). `--threads` sizes rayon's pool (default 1); `--damping` picks
-//! [`nn::Damping`] (default `trainlm`).
+//! [--damping NAME] [--seeds S1,S2,…] [--mu-decrease F] [--mu-increase F]`, then
+//! `python3 crates/nn/benches/scipy_lm.py OUT_DIR` (see the crate README). `--threads`
+//! sizes rayon's pool (default 1); `--damping` picks [`nn::Damping`] by its snake_case name
+//! (default `trainlm`); `--seeds` lists the seeds of [`Mlp::for_data`]'s initial weights
+//! (default 11, the single start of the first comparison); `--mu-decrease` and
+//! `--mu-increase` set [`LmConfig`]'s factors.
 
 #![allow(clippy::print_stderr)]
 
@@ -63,12 +67,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     std::fs::create_dir_all(&out)?;
     let threads: usize = flag("--threads").map_or(Ok(1), |v| v.parse())?;
-    let damping = match flag("--damping").as_deref() {
-        None | Some("trainlm") => Damping::Trainlm,
-        Some("nielsen") => Damping::Nielsen,
-        Some("nielsen-marquardt") => Damping::NielsenMarquardt,
-        Some(other) => return Err(format!("unknown damping {other}").into()),
+    // The schedule's serde name (snake_case; `-` accepted for `_`).
+    let damping: Damping = match flag("--damping") {
+        None => Damping::Trainlm,
+        Some(name) => serde_json::from_str(&format!("\"{}\"", name.replace('-', "_")))
+            .map_err(|_| format!("unknown damping {name}"))?,
     };
+    let defaults = LmConfig::default();
+    let mu_decrease: f64 = flag("--mu-decrease").map_or(Ok(defaults.mu_decrease), |v| v.parse())?;
+    let mu_increase: f64 = flag("--mu-increase").map_or(Ok(defaults.mu_increase), |v| v.parse())?;
+    let seeds: Vec<u64> = flag("--seeds").map_or(Ok(vec![11]), |v| {
+        v.split(',').map(str::parse).collect::<Result<_, _>>()
+    })?;
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build_global()?;
@@ -90,11 +100,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             continue;
         }
         let (x, t) = data(n);
-        for h in 1..=10usize {
+        for (h, &seed) in (1..=10usize).flat_map(|h| seeds.iter().map(move |s| (h, s))) {
             if only_h.is_some_and(|v| v != h) {
                 continue;
             }
-            let net = Mlp::for_data(&x, &t, &[h], 11)?;
+            let net = Mlp::for_data(&x, &t, &[h], seed)?;
             if !out.join(format!("data_N{n}.csv")).exists() {
                 // Scaled data: the weights act on these (Mlp::for_data's mapminmax scalers).
                 let (si, so) = (net.input_scaler(), net.output_scaler());
@@ -113,6 +123,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 max_epochs: MAX_EPOCHS,
                 validation: ValidationSplit::None,
                 damping,
+                mu_decrease,
+                mu_increase,
                 ..LmConfig::default()
             };
             let mut best_times: Vec<f64> = Vec::new();
@@ -141,7 +153,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 termination = format!("{:?}", report.termination);
             }
             cases.push(format!(
-                "{{\"n\":{n},\"h\":{h},\"rho\":{:e},\"w0\":{},\"rust_mse\":{},\"rust_time\":{},\"rust_wall\":{},\"rust_stop\":\"{termination}\"}}",
+                "{{\"n\":{n},\"h\":{h},\"seed\":{seed},\"rho\":{:e},\"w0\":{},\"rust_mse\":{},\"rust_time\":{},\"rust_wall\":{},\"rust_stop\":\"{termination}\"}}",
                 net.output_scaler().half_range()[0],
                 list(net.weights()),
                 list(&history),
@@ -149,7 +161,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 list(&best_walls),
             ));
             eprintln!(
-                "N {n} H {h}: {} epochs, MSE {:.4e}, {:.4} s",
+                "N {n} H {h} seed {seed}: {} epochs, MSE {:.4e}, {:.4} s",
                 history.len() - 1,
                 history.last().copied().unwrap_or(f64::NAN),
                 best_times.last().copied().unwrap_or(f64::NAN)
@@ -159,7 +171,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::write(
         out.join("rust.json"),
         format!(
-            "{{\"max_epochs\":{MAX_EPOCHS},\"threads\":{threads},\"damping\":\"{damping:?}\",\"cases\":[\n{}\n]}}\n",
+            "{{\"max_epochs\":{MAX_EPOCHS},\"threads\":{threads},\"damping\":\"{damping:?}\",\"mu_decrease\":{mu_decrease:e},\"mu_increase\":{mu_increase:e},\"seeds\":{seeds:?},\"cases\":[\n{}\n]}}\n",
             cases.join(",\n")
         ),
     )?;

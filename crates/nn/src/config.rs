@@ -64,6 +64,39 @@ pub enum Damping {
     /// μ is relative to each weight's curvature. Measured on tanh networks it often lands
     /// in a different minimum and approaches an exact fit slowly (see the crate README).
     NielsenMarquardt,
+    /// Transtrum & Sethna's "delayed gratification": solve `(JᵀJ + μI) δ = Jᵀe`; after an
+    /// accepted step μ ← μ/3, after a rejected one μ ← 2μ, so μ rises slowly and falls
+    /// fast but less than `trainlm`'s tenfold (Transtrum, Machta & Sethna, PRE 83, 036701,
+    /// 2011; Transtrum & Sethna, arXiv:1201.5885, 2012). [`LmConfig::mu_decrease`] and
+    /// [`LmConfig::mu_increase`] are not used.
+    DelayedGratification,
+    /// [`Damping::Nielsen`] with `trainlm`'s largest decrease: solve `(JᵀJ + μI) δ = Jᵀe`;
+    /// an accepted step with gain ratio ϱ sets μ ← μ·max([`LmConfig::mu_decrease`],
+    /// 1 − (2ϱ − 1)³) and ν ← 2, a rejected one μ ← μ·ν, ν ← 2ν. Where the linear model
+    /// predicts the decrease well (ϱ → 1) μ falls tenfold as in `trainlm` instead of
+    /// Nielsen's threefold; a poorly predicted step keeps μ about where it is.
+    /// [`LmConfig::mu_increase`] is not used.
+    GainRatio,
+    /// Two phases: [`Damping::Trainlm`]'s schedule for the first 10 accepted steps (the
+    /// early steps, which decide the minimum, are as aggressive as `trainlm`'s), then
+    /// [`Damping::GainRatio`]'s for the rest, which approaches the minimum in fewer
+    /// iterations than `trainlm`'s alternation of accepted and rejected steps. Measured
+    /// against `trainlm` from the same starts it ends in the same or a lower minimum in 59
+    /// of 60 benchmark runs and reaches teachers' exact fits as often, in about half the
+    /// time (see the crate README).
+    TrainlmThenGainRatio,
+}
+
+impl Damping {
+    /// Every schedule, `trainlm` first.
+    pub const ALL: [Damping; 6] = [
+        Damping::Trainlm,
+        Damping::Nielsen,
+        Damping::NielsenMarquardt,
+        Damping::GainRatio,
+        Damping::DelayedGratification,
+        Damping::TrainlmThenGainRatio,
+    ];
 }
 
 /// Levenberg–Marquardt settings. Defaults follow MATLAB's `trainlm` where it has one.
@@ -81,11 +114,12 @@ pub struct LmConfig {
     /// Initial damping μ (for [`Damping::NielsenMarquardt`] relative to `diag(JᵀJ)`).
     /// Default 1e-3.
     pub mu_initial: f64,
-    /// Factor applied to μ after an accepted step, in (0, 1) ([`Damping::Trainlm`] only).
-    /// Default 0.1.
+    /// Factor applied to μ after an accepted step, in (0, 1) ([`Damping::Trainlm`]; the
+    /// largest decrease of [`Damping::GainRatio`]; both phases of
+    /// [`Damping::TrainlmThenGainRatio`]). Default 0.1.
     pub mu_decrease: f64,
-    /// Factor applied to μ after a rejected step, > 1 ([`Damping::Trainlm`] only).
-    /// Default 10.
+    /// Factor applied to μ after a rejected step, > 1 ([`Damping::Trainlm`], and the first
+    /// phase of [`Damping::TrainlmThenGainRatio`]). Default 10.
     pub mu_increase: f64,
     /// Stop when μ would exceed this. Default 1e10.
     pub mu_max: f64,
@@ -212,9 +246,19 @@ mod tests {
         assert_eq!(c.max_epochs, 7);
         let c: LmConfig = serde_json::from_str(r#"{"damping": "nielsen_marquardt"}"#).unwrap();
         assert_eq!(c.damping, Damping::NielsenMarquardt);
-        assert_eq!(
-            serde_json::to_string(&Damping::Nielsen).unwrap(),
-            r#""nielsen""#
-        );
+        let names = [
+            "trainlm",
+            "nielsen",
+            "nielsen_marquardt",
+            "gain_ratio",
+            "delayed_gratification",
+            "trainlm_then_gain_ratio",
+        ];
+        for (damping, name) in Damping::ALL.iter().zip(names) {
+            assert_eq!(
+                serde_json::to_string(damping).unwrap(),
+                format!("\"{name}\"")
+            );
+        }
     }
 }

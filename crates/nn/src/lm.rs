@@ -12,16 +12,14 @@ use serde::{Deserialize, Serialize};
 
 mod kernel;
 mod normal;
+mod schedule;
 
 use normal::{Cutoff, Linearisation, Part, Use};
+use schedule::Schedule;
 
 use crate::config::{Damping, ErrorSpace, LmConfig, ValidationSplit};
 use crate::error::{NnError, Result};
 use crate::mlp::{Mlp, Workspace, check_training_data};
-
-/// μ never drops below this: far below any useful damping, it only stops μ from
-/// underflowing after long runs of accepted steps.
-const MU_FLOOR: f64 = 1e-20;
 
 /// Why training stopped. Not converging is a reason, not an error.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -227,11 +225,10 @@ pub fn train_lm(
         2.0 * rhs.norm() / m_train
     };
     let mut gradient_norm = gradient(&lin.jte, &w, &mut rhs);
-    // Gain-ratio schedules: the scaling D (identity, or for NielsenMarquardt the running
-    // maximum of diag(JᵀJ) with zeros starting at 1, as MINPACK) and the factor ν applied
-    // to μ after a rejected step.
+    // The scaling D (identity, or for NielsenMarquardt the running maximum of diag(JᵀJ)
+    // with zeros starting at 1, as MINPACK) and μ's schedule.
     let mut scale = DVector::from_element(nw, 1.0);
-    let mut nu = 2.0;
+    let mut schedule = Schedule::new(config);
     let marquardt = config.damping == Damping::NielsenMarquardt;
     if marquardt {
         for (d, &jj) in scale.iter_mut().zip(lin.jtj.diagonal().iter()) {
@@ -256,16 +253,13 @@ pub fn train_lm(
         let mut accepted = None;
         while mu <= config.mu_max {
             let mut a = lin.jtj.clone();
-            match config.damping {
-                Damping::Trainlm => {
-                    for i in 0..nw {
-                        a[(i, i)] += decay + mu;
-                    }
+            if marquardt {
+                for i in 0..nw {
+                    a[(i, i)] += decay + mu * scale[i];
                 }
-                Damping::Nielsen | Damping::NielsenMarquardt => {
-                    for i in 0..nw {
-                        a[(i, i)] += decay + mu * scale[i];
-                    }
+            } else {
+                for i in 0..nw {
+                    a[(i, i)] += decay + mu;
                 }
             }
             if let Some(chol) = Cholesky::new(a) {
@@ -283,35 +277,26 @@ pub fn train_lm(
                         .sse(&train, net, &rho, Some(&mut kept), Some(cutoff))
                         .map(|sse| sse + cutoff.offset);
                     if let Some(trial_obj) = trial_obj.filter(|&o| o < objective) {
-                        mu = match config.damping {
-                            Damping::Trainlm => mu * config.mu_decrease,
-                            Damping::Nielsen | Damping::NielsenMarquardt => {
-                                // Decrease predicted by the linear model,
-                                // L(0) − L(δ) = δᵀ(Jᵀe − c·w) + μ·δᵀDδ (> 0).
-                                let predicted = delta.dot(&rhs)
-                                    + mu * delta
-                                        .iter()
-                                        .zip(scale.iter())
-                                        .map(|(d, s)| d * d * s)
-                                        .sum::<f64>();
-                                let gain = (objective - trial_obj) / predicted;
-                                nu = 2.0;
-                                mu * (1.0 - (2.0 * gain - 1.0).powi(3)).max(1.0 / 3.0)
-                            }
-                        }
-                        .max(MU_FLOOR);
+                        let gain = if schedule.uses_gain() {
+                            // Decrease predicted by the linear model,
+                            // L(0) − L(δ) = δᵀ(Jᵀe − c·w) + μ·δᵀDδ (> 0).
+                            let predicted = delta.dot(&rhs)
+                                + mu * delta
+                                    .iter()
+                                    .zip(scale.iter())
+                                    .map(|(d, s)| d * d * s)
+                                    .sum::<f64>();
+                            (objective - trial_obj) / predicted
+                        } else {
+                            f64::NAN
+                        };
+                        mu = schedule.accepted(mu, gain);
                         accepted = Some((trial, trial_obj));
                         break;
                     }
                 }
             }
-            match config.damping {
-                Damping::Trainlm => mu *= config.mu_increase,
-                Damping::Nielsen | Damping::NielsenMarquardt => {
-                    mu *= nu;
-                    nu *= 2.0;
-                }
-            }
+            mu = schedule.rejected(mu);
         }
         let Some((trial, trial_obj)) = accepted else {
             net.weights_mut().copy_from_slice(w.as_slice());

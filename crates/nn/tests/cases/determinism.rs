@@ -17,14 +17,26 @@ fn bits(w: &[f64]) -> Vec<u64> {
 fn same_seed_same_weights() {
     let x = uniform_inputs(2, 120, -1.0, 1.0, 3);
     let t = DMatrix::from_fn(1, 120, |_, k| x[(0, k)].sin() + x[(1, k)] * x[(1, k)]);
+    for damping in [
+        Damping::Trainlm,
+        Damping::GainRatio,
+        Damping::DelayedGratification,
+        Damping::TrainlmThenGainRatio,
+    ] {
+        same_seed_same_weights_with(&x, &t, damping);
+    }
+}
+
+fn same_seed_same_weights_with(x: &DMatrix<f64>, t: &DMatrix<f64>, damping: Damping) {
     let config = LmConfig {
         max_epochs: 30,
+        damping,
         ..LmConfig::default()
     };
     let run = |seed| {
-        let mut net = Mlp::for_data(&x, &t, &[4], seed).unwrap();
+        let mut net = Mlp::for_data(x, t, &[4], seed).unwrap();
         let init = bits(net.weights());
-        let report = train_lm(&mut net, &x, &t, &config, None).unwrap();
+        let report = train_lm(&mut net, x, t, &config, None).unwrap();
         (init, bits(net.weights()), report)
     };
     let (a, b) = (run(5), run(5));
@@ -46,11 +58,7 @@ fn training_on_many_chunks_is_identical_for_one_and_two_threads() {
         x[(0, k)].sin() * (0.5 * x[(1, k)]).cos() + 0.3 * x[(2, k)].tanh()
     });
     for hidden in [vec![6], vec![4, 3]] {
-        for damping in [
-            Damping::Trainlm,
-            Damping::Nielsen,
-            Damping::NielsenMarquardt,
-        ] {
+        for damping in Damping::ALL {
             let config = LmConfig {
                 max_epochs: 25,
                 damping,

@@ -6,6 +6,9 @@ use nn::{
     Architecture, Damping, ErrorSpace, LmConfig, Mlp, Scaler, StopReason, ValidationSplit, train_lm,
 };
 
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+
 use crate::common::{grid, mse, uniform_inputs};
 
 fn no_validation(max_epochs: usize) -> LmConfig {
@@ -20,15 +23,26 @@ fn no_validation(max_epochs: usize) -> LmConfig {
 fn teacher_student_error_goes_to_zero() {
     // Targets come from a 2-5-1 teacher, so a 2-5-1 student can fit them exactly: the
     // global minimum of the MSE is 0. LM converges locally, so (as in the thesis's
-    // practice) several initialisations are tried and the best must reach ~0.
+    // practice) several initialisations are tried and the best must reach ~0. The
+    // default schedule, and the two-phase one that starts as it does.
+    for damping in [Damping::Trainlm, Damping::TrainlmThenGainRatio] {
+        teacher_student_with(damping);
+    }
+}
+
+fn teacher_student_with(damping: Damping) {
     let teacher = Mlp::new(&Architecture::single(2, 5, 1), 11).unwrap();
     let x = uniform_inputs(2, 300, -1.5, 1.5, 1);
     let t = teacher.predict(&x).unwrap();
     let var_t = variance(&t);
+    let config = LmConfig {
+        damping,
+        ..no_validation(400)
+    };
     let best = (0..4)
         .map(|seed| {
             let mut student = Mlp::for_data(&x, &t, &[5], 100 + seed).unwrap();
-            let report = train_lm(&mut student, &x, &t, &no_validation(400), None).unwrap();
+            let report = train_lm(&mut student, &x, &t, &config, None).unwrap();
             // The report's MSE is the one of the returned weights.
             let direct = mse(&student.predict(&x).unwrap(), &t);
             assert!((report.train_mse - direct).abs() <= 1e-12 * var_t + 1e-12 * direct);
@@ -39,7 +53,7 @@ fn teacher_student_error_goes_to_zero() {
     // exact fit is limited only by round-off and the gradient stop, far below this.
     assert!(
         best < 1e-10 * var_t,
-        "best student MSE {best:e}, target variance {var_t:e}"
+        "{damping:?}: best student MSE {best:e}, target variance {var_t:e}"
     );
 }
 
@@ -67,11 +81,7 @@ fn every_damping_schedule_reaches_the_teacher_from_nearby() {
             w + 0.1 * sign * (1.0 + (i % 3) as f64) / 3.0
         })
         .collect();
-    for damping in [
-        Damping::Trainlm,
-        Damping::Nielsen,
-        Damping::NielsenMarquardt,
-    ] {
+    for damping in Damping::ALL {
         let mut student = teacher.clone();
         student.set_weights(&start).unwrap();
         assert!(mse(&student.predict(&x).unwrap(), &t) > 1e-2 * var_t);
@@ -88,6 +98,81 @@ fn every_damping_schedule_reaches_the_teacher_from_nearby() {
         );
         // Every accepted step lowered the objective.
         assert!(report.train_history.windows(2).all(|w| w[1] < w[0]));
+    }
+}
+
+#[test]
+fn new_schedules_reach_the_teacher_from_seeded_nearby_starts() {
+    // Local convergence from several starts: a 3-4-1 teacher's weights moved by
+    // independent uniform ±0.15 perturbations (five seeds) must all reach the exact fit
+    // (MSE below 1e-10 of the target variance, as above) with the gain-ratio,
+    // delayed-gratification and two-phase schedules, and with trainlm for reference.
+    let teacher = Mlp::new(&Architecture::single(3, 4, 1), 11).unwrap();
+    let x = uniform_inputs(3, 500, -1.5, 1.5, 1);
+    let t = teacher.predict(&x).unwrap();
+    let var_t = variance(&t);
+    for seed in 0..5 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let start: Vec<f64> = teacher
+            .weights()
+            .iter()
+            .map(|w| w + rng.random_range(-0.15..0.15))
+            .collect();
+        for damping in [
+            Damping::Trainlm,
+            Damping::GainRatio,
+            Damping::DelayedGratification,
+            Damping::TrainlmThenGainRatio,
+        ] {
+            let mut student = teacher.clone();
+            student.set_weights(&start).unwrap();
+            let config = LmConfig {
+                damping,
+                ..no_validation(300)
+            };
+            let report = train_lm(&mut student, &x, &t, &config, None).unwrap();
+            let direct = mse(&student.predict(&x).unwrap(), &t);
+            assert!(
+                direct < 1e-10 * var_t,
+                "seed {seed}, {damping:?}: MSE {direct:e}, variance {var_t:e}, {:?}",
+                report.termination
+            );
+        }
+    }
+}
+
+#[test]
+fn new_schedules_reach_the_teacher_from_random_starts() {
+    // From Nguyen–Widrow starts (seeds 100…107) the best of eight students must fit a
+    // 3-4-1 teacher exactly (below 1e-10 of the target variance). The gain-ratio
+    // schedules reach this exact minimum less often than trainlm (measured on 50 starts,
+    // `teacher_starts` example: trainlm 21, GainRatio 10, DelayedGratification 15,
+    // TrainlmThenGainRatio 20; the others stop near 1e-3 of the variance), hence the best
+    // of eight rather than of four as for trainlm above.
+    let teacher = Mlp::new(&Architecture::single(3, 4, 1), 11).unwrap();
+    let x = uniform_inputs(3, 500, -1.5, 1.5, 1);
+    let t = teacher.predict(&x).unwrap();
+    let var_t = variance(&t);
+    for damping in [
+        Damping::GainRatio,
+        Damping::DelayedGratification,
+        Damping::TrainlmThenGainRatio,
+    ] {
+        let best = (100..108)
+            .map(|seed| {
+                let mut student = Mlp::for_data(&x, &t, &[4], seed).unwrap();
+                let config = LmConfig {
+                    damping,
+                    ..no_validation(400)
+                };
+                train_lm(&mut student, &x, &t, &config, None).unwrap();
+                mse(&student.predict(&x).unwrap(), &t)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            best < 1e-10 * var_t,
+            "{damping:?}: best student MSE {best:e}, target variance {var_t:e}"
+        );
     }
 }
 
@@ -119,16 +204,12 @@ fn affine_network_with_decay_is_ridge_regression() {
     let t = DMatrix::from_fn(1, 50, |_, k| {
         1.5 * x[(0, k)] - 0.7 * x[(1, k)] + 0.3 + 0.1 * (k as f64).sin()
     });
-    // Both damping schedules (Nielsen's gain ratio uses the decay term in its predicted
+    // Every damping schedule (the gain-ratio ones use the decay term in their predicted
     // decrease).
-    for (lambda, damping) in [0.0, 0.5].into_iter().flat_map(|l| {
-        [
-            Damping::Trainlm,
-            Damping::Nielsen,
-            Damping::NielsenMarquardt,
-        ]
-        .map(|d| (l, d))
-    }) {
+    for (lambda, damping) in [0.0, 0.5]
+        .into_iter()
+        .flat_map(|l| Damping::ALL.map(|d| (l, d)))
+    {
         let arch = Architecture {
             inputs: 2,
             hidden: vec![],
