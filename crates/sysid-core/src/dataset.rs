@@ -8,6 +8,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{CoreError, Result};
+use crate::integrate::InterSample;
 
 /// Relative tolerance on the sample step when checking that a time vector is uniform.
 ///
@@ -49,6 +50,7 @@ pub struct Experiment {
     dt: f64,
     inputs: DMatrix<f64>,
     outputs: DMatrix<f64>,
+    intersample: InterSample,
 }
 
 impl Experiment {
@@ -81,6 +83,7 @@ impl Experiment {
             dt,
             inputs,
             outputs,
+            intersample: InterSample::Zoh,
         };
         let names_u: Vec<String> = (0..exp.n_inputs()).map(|i| format!("u{i}")).collect();
         let names_y: Vec<String> = (0..exp.n_outputs()).map(|i| format!("y{i}")).collect();
@@ -124,6 +127,18 @@ impl Experiment {
             }
         }
         Ok(())
+    }
+
+    /// The same record with its inputs behaving between samples as `hold` says (free-run
+    /// simulation follows it; the default is [`InterSample::Zoh`]).
+    pub fn with_intersample(mut self, hold: InterSample) -> Self {
+        self.intersample = hold;
+        self
+    }
+
+    /// How the inputs behave between samples.
+    pub fn intersample(&self) -> InterSample {
+        self.intersample
     }
 
     /// Number of samples.
@@ -202,6 +217,7 @@ impl Experiment {
             dt: self.dt,
             inputs: self.inputs.columns(start, end - start).into_owned(),
             outputs: self.outputs.columns(start, end - start).into_owned(),
+            intersample: self.intersample,
         })
     }
 }
@@ -364,6 +380,15 @@ impl Dataset {
             len: self.experiments.len(),
         })?;
         Ok(self.with_experiments(vec![exp.window(start, end)?]))
+    }
+
+    /// The same data with every experiment's inputs behaving between samples as `hold`
+    /// says (see [`Experiment::with_intersample`]).
+    pub fn with_intersample(mut self, hold: InterSample) -> Self {
+        for e in &mut self.experiments {
+            e.intersample = hold;
+        }
+        self
     }
 
     fn with_experiments(&self, experiments: Vec<Experiment>) -> Self {

@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::dataset::Experiment;
 use crate::dynamics::Dynamics;
 use crate::error::{CoreError, Result};
-use crate::integrate::{Integrator, simulate};
+use crate::integrate::{Integrator, simulate_with};
 
 /// Settings of [`fit_initial_state`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,7 +43,16 @@ fn residuals<D: Dynamics + ?Sized>(
 ) -> Result<DVector<f64>> {
     let len = opt.window.min(exp.len());
     let u = exp.inputs().columns(0, len).into_owned();
-    let xs = simulate(f, x0, exp.t0(), exp.dt(), &u, &opt.integrator, opt.blow_up)?;
+    let xs = simulate_with(
+        f,
+        x0,
+        exp.t0(),
+        exp.dt(),
+        &u,
+        exp.intersample(),
+        &opt.integrator,
+        opt.blow_up,
+    )?;
     let ys = c * xs;
     let p = c.nrows();
     let mut r = Vec::with_capacity(p * len);
@@ -137,6 +146,7 @@ pub fn fit_initial_state<D: Dynamics + ?Sized>(
 mod tests {
     use super::*;
     use crate::LinearModel;
+    use crate::integrate::simulate;
 
     #[test]
     fn recovers_the_unmeasured_velocity_of_an_oscillator() {

@@ -21,7 +21,7 @@ pub use estimate::{ExperimentEstimate, IterationRecord, MmeEstimate, SolveReport
 pub use expr::{Expr, ExprError, Func};
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};
-pub use integrate::{DpOptions, Integrator, simulate};
+pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with};
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh};
 pub use metrics::{ChannelMetrics, channel_metrics};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};
