@@ -33,7 +33,7 @@ use nalgebra::{DMatrix, DVector};
 use sysid_core::integrate::DEFAULT_BLOW_UP;
 use sysid_core::{
     Dataset, Dynamics, Experiment, Integrator, IterationRecord, LinearModel, Term, TermModel,
-    TermSpec, Termination, simulate,
+    TermSpec, Termination, simulate_with,
 };
 
 use crate::discover::FoundEffect;
@@ -199,12 +199,13 @@ fn simulate_window<D: Dynamics + ?Sized>(
     blow_up: f64,
 ) -> sysid_core::Result<DMatrix<f64>> {
     let inputs = experiment.inputs().columns(0, len).into_owned();
-    let x = simulate(
+    let x = simulate_with(
         f,
         x0,
         experiment.t0(),
         experiment.dt(),
         &inputs,
+        experiment.intersample(),
         integrator,
         blow_up,
     )?;

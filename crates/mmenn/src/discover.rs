@@ -296,19 +296,20 @@ pub struct Ambiguity {
     pub alternative_cost: f64,
 }
 
-/// Free-run states of `model` over one record from `x0` (default integrator, inputs held
-/// between samples).
+/// Free-run states of `model` over one record from `x0` (default integrator, inputs
+/// between samples as the record says).
 fn free_run_states(
     model: &TermModel,
     x0: &[f64],
     exp: &Experiment,
 ) -> sysid_core::Result<DMatrix<f64>> {
-    sysid_core::simulate(
+    sysid_core::simulate_with(
         model,
         x0,
         exp.t0(),
         exp.dt(),
         exp.inputs(),
+        exp.intersample(),
         &sysid_core::Integrator::default(),
         sysid_core::integrate::DEFAULT_BLOW_UP,
     )
@@ -345,12 +346,13 @@ fn free_run_gap(
     };
     let x0 = fit_initial_state(model, c, exp, guess, &fit)
         .map_err(core("fitting the free-run initial state"))?;
-    let xs = sysid_core::simulate(
+    let xs = sysid_core::simulate_with(
         model,
         &x0,
         exp.t0(),
         exp.dt(),
         exp.inputs(),
+        exp.intersample(),
         &fit.integrator,
         fit.blow_up,
     )
@@ -384,6 +386,9 @@ fn d_rms(est: &sysid_core::MmeEstimate) -> BTreeMap<String, f64> {
 
 /// Noise floor of `d̂`: simulate the assumed model itself (free-run from MME's `x̂(t0)`),
 /// add measurement noise of the estimated variance, and run MME at the same `W` and `R`.
+/// The inputs are held between samples here whatever the record's `intersample`: MME's
+/// discretisation holds them, and the floor is what MME sees when only noise separates
+/// model and data (a hold mismatch is part of the disagreement, not of the floor).
 fn noise_floor(
     spec: &ModelSpec,
     data: &Dataset,
@@ -395,7 +400,8 @@ fn noise_floor(
     let mut experiments = Vec::new();
     for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
         let x0: Vec<f64> = e.states.column(0).iter().copied().collect();
-        let xs = free_run_states(&model, &x0, exp)
+        let held = exp.clone().with_intersample(sysid_core::InterSample::Zoh);
+        let xs = free_run_states(&model, &x0, &held)
             .map_err(core("simulating the assumed model for the noise floor"))?;
         let noise =
             plants::noise::gaussian_noise(&est.noise_variance, exp.len(), opts.seed, i as u64)?;
@@ -478,6 +484,9 @@ pub fn run_discover(
 ) -> Result<DiscoverSummary> {
     let original = read_model(model_path)?;
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &original)?;
+    // Free-run simulations treat the inputs between samples as the model file says.
+    let data = data.with_intersample(original.intersample);
+    let val = val.map(|v| v.with_intersample(original.intersample));
     ensure_dir(out)?;
 
     let first = estimate_spec(&original, &data, &mme_config(&original, &opts.estimate))?;

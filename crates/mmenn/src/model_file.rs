@@ -1,14 +1,16 @@
 //! The TOML model file of SPEC §5. Its keys are a contract (extend, never rename):
 //! `states`, `inputs`, `A`, `B`, `measured` or `C` + `outputs`, `corrected`,
-//! `noise_variance` (list or `"auto"`), `units`, and `[[terms]]` (`state`, `effect`,
-//! `term`, `coefficient`, and for a transfer between two equations `into`).
+//! `noise_variance` (list or `"auto"`), `units`, `intersample` (`"zoh"`, the default,
+//! or `"foh"`: how the inputs behave between samples in `mmenn discover`'s free-run
+//! simulations), and `[[terms]]` (`state`, `effect`, `term`, `coefficient`, and for a
+//! transfer between two equations `into`).
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use sysid_core::{LinearModel, ModelNames, TermModel, TermSpec};
+use sysid_core::{InterSample, LinearModel, ModelNames, TermModel, TermSpec};
 
 use crate::atomic::write_atomic;
 use crate::error::{MmennError, ModelProblem, Result};
@@ -67,6 +69,12 @@ pub struct ModelSpec {
     pub units: BTreeMap<String, String>,
     /// Named nonlinear terms.
     pub terms: Vec<TermEntry>,
+    /// How the inputs behave between samples in free-run simulation (`discover`).
+    pub intersample: InterSample,
+}
+
+fn is_zoh(hold: &InterSample) -> bool {
+    *hold == InterSample::Zoh
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -97,6 +105,8 @@ struct ModelToml {
     noise_variance: NoiseToml,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     units: BTreeMap<String, String>,
+    #[serde(default, skip_serializing_if = "is_zoh")]
+    intersample: InterSample,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
 }
@@ -263,6 +273,7 @@ fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
         noise_variance,
         units: raw.units,
         terms: raw.terms,
+        intersample: raw.intersample,
     };
     spec.term_model()?;
     Ok(spec)
@@ -370,6 +381,7 @@ pub fn format_model(spec: &ModelSpec) -> Result<String> {
             NoiseVariance::Given(v) => NoiseToml::Values(v.clone()),
         },
         units: spec.units.clone(),
+        intersample: spec.intersample,
         terms: spec.terms.clone(),
     };
     toml::to_string(&raw).map_err(|e| MmennError::Model {
@@ -442,6 +454,26 @@ coefficient = -0.3
             (dx[0] - 1.3).abs() < 1e-15 && (dx[1] + 0.3).abs() < 1e-15,
             "{dx:?}"
         );
+    }
+
+    /// `intersample` defaults to the hold, survives a round trip when set, is not written
+    /// when it is the default, and an unknown value is a syntax error naming it.
+    #[test]
+    fn intersample_key() {
+        let spec = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+        assert_eq!(spec.intersample, InterSample::Zoh);
+        assert!(!format_model(&spec).unwrap().contains("intersample"));
+        let text = SPEC_EXAMPLE.replace("noise_variance", "intersample = \"foh\"\nnoise_variance");
+        let spec = parse_model(Path::new("m.toml"), &text).unwrap();
+        assert_eq!(spec.intersample, InterSample::Foh);
+        let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+        assert_eq!(spec, again);
+        let bad =
+            SPEC_EXAMPLE.replace("noise_variance", "intersample = \"spline\"\nnoise_variance");
+        match problem(&bad) {
+            ModelProblem::Syntax { message } => assert!(message.contains("spline"), "{message}"),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

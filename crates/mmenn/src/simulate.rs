@@ -29,6 +29,8 @@ pub fn assumed_model_spec(sim: &SimulatedData) -> ModelSpec {
         noise_variance: NoiseVariance::Given(sim.assumed.noise_variance.clone()),
         units: sim.assumed.units.clone(),
         terms: Vec::new(),
+        // The plants hold their inputs between samples.
+        intersample: sysid_core::InterSample::Zoh,
     }
 }
 

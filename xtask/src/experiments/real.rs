@@ -512,6 +512,8 @@ fn run_benchmark(
             noise_variance: s.noise.clone(),
             units,
             terms: Vec::new(),
+            // The output-error fit above held the inputs between samples.
+            intersample: mmenn::sysid_core::InterSample::Zoh,
         },
     )?;
     let (max_hidden, inits) = match ctx.mode {

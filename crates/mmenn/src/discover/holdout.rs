@@ -96,6 +96,7 @@ pub(super) fn split_records(
                 exp.inputs().columns(from, len).into_owned(),
                 exp.outputs().columns(from, len).into_owned(),
             )
+            .map(|part| part.with_intersample(exp.intersample()))
             .map_err(core("splitting an estimation record"))
         };
         cal.push(part(0, k)?);
