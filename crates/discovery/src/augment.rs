@@ -13,8 +13,12 @@
 //! # Solver
 //!
 //! Levenberg–Marquardt (Marquardt's diagonal scaling, `μ` divided by 3 on success and
-//! multiplied by 4 on failure) on the residuals `√(w_c/M)·(y − ŷ)`, with central-difference
-//! Jacobians (step `1e-5·max(|θ_j|, 0.01)`), started from the regression coefficients.
+//! multiplied by 4 on failure) on the residuals `√(w_c/M)·(y − ŷ)`, started from the
+//! regression coefficients. Jacobians come from forward sensitivities integrated with the
+//! state (the exact derivative of the RK4 simulation, module `sensitivity`); finite
+//! differences (step `1e-5·max(|θ_j|, 0.01)`, forward inside the solver, central for the
+//! standard errors) stand in for the adaptive integrator, for a term whose derivative does
+//! not build, and from the first non-finite sensitivity on.
 //! A trial step whose simulation diverges counts as a failed step. A stage stops when an
 //! accepted step lowers `J` by less than `tolerance·J`, when `μ` exceeds `1e12` (no
 //! descent left), or after `max_iterations` accepted-or-rejected iterations.
@@ -38,6 +42,8 @@ use sysid_core::{
 
 use crate::discover::FoundEffect;
 use crate::error::{DiscoveryError, Result};
+
+pub(crate) mod sensitivity;
 
 /// Add named effects to `model` as `[[terms]]`: each effect's integrable form
 /// (`model_effect`, `model_term`) with its coefficient, on its state's equation.
@@ -228,6 +234,8 @@ struct Problem<'a> {
     /// Measured values within the horizon.
     valid: usize,
     evaluations: usize,
+    /// Term derivatives for sensitivity Jacobians; `None` = finite differences.
+    partials: Option<sensitivity::Partials>,
 }
 
 impl Problem<'_> {
@@ -518,7 +526,9 @@ pub fn calibrate(
         lengths: data.experiments().iter().map(|e| e.len()).collect(),
         valid,
         evaluations: 0,
+        partials: None,
     };
+    problem.partials = sensitivity_partials(&problem);
     problem.set_horizon(1.0);
     let r_full = problem
         .residuals(&theta)
@@ -648,11 +658,49 @@ fn lm_stage(
     Ok((theta, termination))
 }
 
+/// Term derivatives for sensitivity Jacobians, or `None` where finite differences must
+/// do: the adaptive integrator, a repeated calibrated term, a derivative that does not
+/// build.
+fn sensitivity_partials(problem: &Problem<'_>) -> Option<sensitivity::Partials> {
+    if !matches!(problem.integrator, Integrator::Rk4 { .. }) {
+        return None;
+    }
+    let mut seen = vec![false; problem.terms.len()];
+    for &k in &problem.free {
+        if std::mem::replace(&mut seen[k], true) {
+            return None;
+        }
+    }
+    sensitivity::Partials::new(problem.linear.n_states(), problem.terms)
+}
+
+/// Jacobian of the residuals at `theta` (`at` = the residuals there, when known): by
+/// forward sensitivities when the problem has them, else (or once a sensitivity turns
+/// non-finite, for the rest of the calibration) by [`jacobian_fd`]. A diverging
+/// simulation is an error naming the experiment.
+fn jacobian(
+    problem: &mut Problem<'_>,
+    theta: &[f64],
+    at: Option<&DVector<f64>>,
+) -> Result<DMatrix<f64>> {
+    if let (Some(partials), Integrator::Rk4 { substeps }) = (&problem.partials, problem.integrator)
+    {
+        let outcome = sensitivity::jacobian(problem, partials, theta, substeps)
+            .map_err(|(experiment, source)| DiscoveryError::Simulation { experiment, source })?;
+        problem.evaluations += 1;
+        match outcome {
+            sensitivity::Outcome::Jacobian(j) => return Ok(j),
+            sensitivity::Outcome::NonFinite => problem.partials = None,
+        }
+    }
+    jacobian_fd(problem, theta, at)
+}
+
 /// Finite-difference Jacobian of the residuals: forward differences from the residual
 /// `at` (inside the solver, where a step direction needs no more), central differences
-/// when `at` is `None` (for the standard errors). A diverging perturbed simulation is an
-/// error naming the experiment.
-fn jacobian(
+/// when `at` is `None`. A diverging perturbed simulation is an error naming the
+/// experiment.
+fn jacobian_fd(
     problem: &mut Problem<'_>,
     theta: &[f64],
     at: Option<&DVector<f64>>,

@@ -15,9 +15,13 @@
 //! well but can misjudge a term whose right coefficient changes the trajectory a lot, so
 //! the search calibrates the few best-ranked candidates fully and decides on those.
 //!
-//! Sensitivities are central differences of whole free-run simulations, with steps
-//! scaled so that the term moves its equation's right-hand side by about 1e-4 of its RMS
-//! along the current trajectory.
+//! Sensitivities are forward sensitivities integrated with the current free run (the
+//! exact derivative of its RK4 map, see `augment::sensitivity`): one pass gives every
+//! parameter's and every candidate's column. Where they are unavailable (adaptive
+//! integrator, a term whose derivative does not build, a non-finite sensitivity) they
+//! are central differences of whole free-run simulations, with steps scaled so that the
+//! term moves its equation's right-hand side by about 1e-4 of its RMS along the current
+//! trajectory.
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{Dataset, Dynamics, Integrator, Term, TermModel};
@@ -25,6 +29,9 @@ use sysid_core::{Dataset, Dynamics, Integrator, Term, TermModel};
 use crate::augment::{measured_values, simulate_outputs};
 use crate::error::{DiscoveryError, Result};
 use crate::refine::RefineCandidate;
+
+mod columns;
+use columns::{Columns, difference_columns, forward_columns};
 
 /// Relative size of the finite-difference perturbations.
 const REL_STEP: f64 = 1e-4;
@@ -186,104 +193,80 @@ impl Screen {
             }))
         };
 
-        // Current parameters' sensitivities: free coefficients, then every x₀ entry.
-        let mut term_columns = Vec::with_capacity(free_terms.len());
-        for &k in free_terms {
-            let t = &model.terms()[k];
-            let h = REL_STEP
-                * t.coefficient
-                    .abs()
-                    .max(rhs_rms[t.state] / basis_rms(t).max(1e-300));
-            if !(h.is_finite() && h > 0.0) {
-                term_columns.push(None);
+        // Steps of the finite differences; a term whose step is degenerate (zero along
+        // the trajectory with a zero coefficient, or not finite) gets no column either way.
+        let term_steps: Vec<Option<f64>> = free_terms
+            .iter()
+            .map(|&k| {
+                let t = &model.terms()[k];
+                let h = REL_STEP
+                    * t.coefficient
+                        .abs()
+                        .max(rhs_rms[t.state] / basis_rms(t).max(1e-300));
+                (h.is_finite() && h > 0.0).then_some(h)
+            })
+            .collect();
+        let mut probes: Vec<Option<(Term, f64)>> = Vec::with_capacity(candidates.len());
+        for (i, cand) in candidates.iter().enumerate() {
+            if exclude.contains(&i) {
+                probes.push(None);
                 continue;
             }
-            let plus = with_coefficient(model, k, t.coefficient + h)?;
-            let minus = with_coefficient(model, k, t.coefficient - h)?;
-            term_columns.push(
-                match (
-                    stacked_outputs(&plus, c, data, x0, &scale, integrator),
-                    stacked_outputs(&minus, c, data, x0, &scale, integrator),
-                ) {
-                    (Some(a), Some(b)) => Some(((a - b) / (2.0 * h), t.coefficient)),
-                    _ => None,
-                },
-            );
+            let probe = with_candidate(model, cand, 1.0)?;
+            let Some(term) = probe.terms().last() else {
+                probes.push(None);
+                continue;
+            };
+            let phi = basis_rms(term);
+            let h = REL_STEP * rhs_rms[term.state].max(1e-12) / phi;
+            probes.push((phi > 0.0 && h.is_finite()).then(|| (term.clone(), h)));
         }
-        let mut x0_columns: Vec<DVector<f64>> = Vec::new();
-        let mut offset = 0;
-        for (e, (exp, x0e)) in data.experiments().iter().zip(x0).enumerate() {
-            let len: usize = exp.outputs().iter().filter(|v| !v.is_nan()).count();
-            for j in 0..n {
-                let h = REL_STEP * x0e[j].abs().max(1e-3 * state_scale(&trajectories[e].0, j));
-                let mut xp = x0e.clone();
-                xp[j] += h;
-                let mut xm = x0e.clone();
-                xm[j] -= h;
-                let (Ok(a), Ok(b)) = (
-                    simulate_outputs(model, c, &xp, exp, integrator),
-                    simulate_outputs(model, c, &xm, exp, integrator),
-                ) else {
-                    continue;
-                };
-                let mut pa = Vec::with_capacity(len);
-                let mut pb = Vec::with_capacity(len);
-                push_measured(&mut pa, exp.outputs(), &a, &scale);
-                push_measured(&mut pb, exp.outputs(), &b, &scale);
-                let mut col = DVector::zeros(y0.len());
-                for i in 0..len {
-                    col[offset + i] = (pa[i] - pb[i]) / (2.0 * h);
-                }
-                if col.iter().all(|v| v.is_finite()) {
-                    x0_columns.push(col);
-                }
-            }
-            offset += len;
-        }
-        let columns: Vec<DVector<f64>> = term_columns
+
+        let columns = match forward_columns(
+            model,
+            free_terms,
+            &term_steps,
+            &probes,
+            x0,
+            data,
+            &scale,
+            integrator,
+        ) {
+            Some(columns) => columns,
+            None => difference_columns(
+                model,
+                free_terms,
+                &term_steps,
+                candidates,
+                &probes,
+                x0,
+                data,
+                &scale,
+                integrator,
+                &trajectories,
+            )?,
+        };
+        let Columns {
+            terms: term_columns,
+            x0: x0_columns,
+            candidates: raw,
+        } = columns;
+        let term_columns: Vec<Option<(DVector<f64>, f64)>> = term_columns
+            .into_iter()
+            .zip(free_terms)
+            .map(|(col, &k)| col.map(|c| (c, model.terms()[k].coefficient)))
+            .collect();
+        let current: Vec<DVector<f64>> = term_columns
             .iter()
             .flatten()
             .map(|(col, _)| col.clone())
             .chain(x0_columns.iter().cloned())
             .collect();
-        let basis = orthonormal_basis(&columns, y0.len());
-
-        let mut projected = Vec::with_capacity(candidates.len());
-        let mut raw = Vec::with_capacity(candidates.len());
-        for (i, cand) in candidates.iter().enumerate() {
-            if exclude.contains(&i) {
-                projected.push(None);
-                raw.push(None);
-                continue;
-            }
-            let probe = with_candidate(model, cand, 1.0)?;
-            let Some(term) = probe.terms().last() else {
-                projected.push(None);
-                continue;
-            };
-            let phi = basis_rms(term);
-            let h = REL_STEP * rhs_rms[term.state].max(1e-12) / phi;
-            if !(phi > 0.0 && h.is_finite()) {
-                projected.push(None);
-                raw.push(None);
-                continue;
-            }
-            let plus = with_candidate(model, cand, h)?;
-            let minus = with_candidate(model, cand, -h)?;
-            let s = match (
-                stacked_outputs(&plus, c, data, x0, &scale, integrator),
-                stacked_outputs(&minus, c, data, x0, &scale, integrator),
-            ) {
-                (Some(a), Some(b)) => (a - b) / (2.0 * h),
-                _ => {
-                    projected.push(None);
-                    raw.push(None);
-                    continue;
-                }
-            };
-            projected.push(Some(project_off(&basis, s.clone())));
-            raw.push(Some(s));
-        }
+        let basis = orthonormal_basis(&current, y0.len());
+        let projected = raw
+            .iter()
+            .map(|s| s.as_ref().map(|s| project_off(&basis, s.clone())))
+            .collect();
         Ok(Self {
             residual,
             projected,

@@ -1,0 +1,399 @@
+//! Forward sensitivities: the Jacobian of the free-run residuals for
+//! [`calibrate`](super::calibrate) (and the screen's output sensitivities) by integrating
+//! `S = ∂x/∂θ` with the state instead of re-simulating once or twice per parameter.
+//!
+//! For `ẋ = F(x, u; θ) = A x + B u + Σ_k c_k φ_k(x, u) (e_{s_k} − e_{r_k})` (the second
+//! unit vector only for a transfer into `r_k`), the sensitivities obey the variational
+//! equation `Ṡ = F_x S + F_θ` with `F_x = A + Σ_k c_k (e_{s_k} − e_{r_k}) ∇_x φ_kᵀ`, the
+//! column of `F_θ` for coefficient `c_k` equal to `φ_k (e_{s_k} − e_{r_k})`, and zero
+//! columns for initial states; `S(0)` has the unit columns of the initial-state
+//! parameters and zeros elsewhere (Hairer, Nørsett & Wanner, *Solving ODEs I*, §I.14).
+//!
+//! `x` and `S` are advanced together by the same RK4 steps and sub-steps as the state
+//! simulation, every stage's `F_x` taken at that stage's state. The result is then the
+//! exact derivative of the discrete RK4 map ("internal differentiation", Bock 1981), not
+//! an approximation of the continuous sensitivity, so it matches central differences of
+//! the simulated residuals to their truncation error. The state part repeats the
+//! arithmetic of [`Trial`](super::Trial) and `rk4_step` operation for operation, so the
+//! trajectory is the very one the residuals were computed on.
+//!
+//! `∂φ_k/∂x_v` are symbolic derivatives ([`Expr::derivative`]) built once per calibration
+//! for the states each term reads; inputs need none. Only RK4 is handled here: the
+//! caller falls back to finite differences for the adaptive integrator, for a term whose
+//! derivative does not build, and when a sensitivity turns non-finite.
+
+// Index loops over small state and parameter blocks read like the equations.
+#![allow(clippy::needless_range_loop)]
+
+use nalgebra::DMatrix;
+use sysid_core::{CoreError, Dynamics, Experiment, Expr, InterSample, LinearModel, Term};
+
+use super::Problem;
+
+/// `∂φ/∂x_v` of one term, folded when constant.
+#[derive(Debug, Clone)]
+enum Partial {
+    Constant(f64),
+    Expression(Expr),
+}
+
+impl Partial {
+    fn eval(&self, x: &[f64], u: &[f64]) -> f64 {
+        match self {
+            Partial::Constant(c) => *c,
+            Partial::Expression(e) => e.eval_parts(x, u),
+        }
+    }
+}
+
+/// State derivatives of every term, built once per calibration.
+#[derive(Debug, Clone)]
+pub(crate) struct Partials {
+    /// Per term: `(v, ∂φ/∂x_v)` for each state `v` the term reads (zero ones dropped).
+    terms: Vec<Vec<(usize, Partial)>>,
+}
+
+impl Partials {
+    /// Derivatives of the terms over `n` states; `None` when one does not build.
+    pub(crate) fn new(n: usize, terms: &[Term]) -> Option<Self> {
+        let mut all = Vec::with_capacity(terms.len());
+        for term in terms {
+            let mut list = Vec::new();
+            for v in term.expr.variables_used().into_iter().filter(|&v| v < n) {
+                let d = term.expr.derivative(v).ok()?;
+                match d.constant() {
+                    Some(0.0) => {}
+                    Some(c) => list.push((v, Partial::Constant(c))),
+                    None => list.push((v, Partial::Expression(d))),
+                }
+            }
+            all.push(list);
+        }
+        Some(Self { terms: all })
+    }
+}
+
+/// What a sensitivity pass gives.
+pub(super) enum Outcome {
+    /// The residual Jacobian.
+    Jacobian(DMatrix<f64>),
+    /// A sensitivity became non-finite (e.g. `sqrt` at 0): use finite differences.
+    NonFinite,
+}
+
+/// What drives one coefficient column of `F_θ`: a term of the model (its value is
+/// already computed for the right-hand side) or a term outside it (a screened candidate
+/// at coefficient 0, which adds nothing to `F` or `F_x`).
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Forcing<'a> {
+    /// Term `k` of the model.
+    Model(usize),
+    /// A term not in the model.
+    Extra(&'a Term),
+}
+
+/// Forward-sensitivity integration of one model over records: `S` has `q` columns, the
+/// coefficient columns `forcing` and, when `x0_block` is set, `n` initial-state columns
+/// from that column on.
+pub(crate) struct Propagator<'a> {
+    /// Linear part.
+    pub(crate) linear: &'a LinearModel,
+    /// Terms of the model.
+    pub(crate) terms: &'a [Term],
+    /// Their coefficients (may differ from the terms' own).
+    pub(crate) coefficients: &'a [f64],
+    /// Their state derivatives.
+    pub(crate) partials: &'a Partials,
+    /// `(column, forcing)` of every coefficient column.
+    pub(crate) forcing: Vec<(usize, Forcing<'a>)>,
+    /// First column of the initial-state block, if the initial state is a parameter.
+    pub(crate) x0_block: Option<usize>,
+    /// Columns of `S`.
+    pub(crate) q: usize,
+    /// RK4 sub-steps per sample interval.
+    pub(crate) substeps: usize,
+    /// States beyond this magnitude count as a diverged simulation.
+    pub(crate) blow_up: f64,
+}
+
+impl Propagator<'_> {
+    /// `dx = F(x, u)` exactly as `Trial::rhs` computes it, and `ds = F_x S + F_θ`;
+    /// `phi` receives the term values.
+    #[allow(clippy::too_many_arguments)]
+    fn eval(
+        &self,
+        t: f64,
+        x: &[f64],
+        s: &[f64],
+        u: &[f64],
+        dx: &mut [f64],
+        ds: &mut [f64],
+        phi: &mut [f64],
+    ) {
+        let q = self.q;
+        let n = x.len();
+        self.linear.rhs(t, x, u, dx);
+        let a = self.linear.a();
+        for i in 0..n {
+            let row = &mut ds[i * q..(i + 1) * q];
+            row.fill(0.0);
+            for l in 0..n {
+                let ail = a[(i, l)];
+                if ail != 0.0 {
+                    for (d, sv) in row.iter_mut().zip(&s[l * q..(l + 1) * q]) {
+                        *d += ail * sv;
+                    }
+                }
+            }
+        }
+        for (k, (term, c)) in self.terms.iter().zip(self.coefficients).enumerate() {
+            phi[k] = term.expr.eval_parts(x, u);
+            let v = c * phi[k];
+            dx[term.state] += v;
+            if let Some(r) = term.into {
+                dx[r] -= v;
+            }
+            for (var, partial) in &self.partials.terms[k] {
+                let g = c * partial.eval(x, u);
+                if g == 0.0 {
+                    continue;
+                }
+                let src = &s[var * q..(var + 1) * q];
+                for (d, sv) in ds[term.state * q..(term.state + 1) * q].iter_mut().zip(src) {
+                    *d += g * sv;
+                }
+                if let Some(r) = term.into {
+                    for (d, sv) in ds[r * q..(r + 1) * q].iter_mut().zip(src) {
+                        *d -= g * sv;
+                    }
+                }
+            }
+        }
+        for &(j, forcing) in &self.forcing {
+            let (term, value) = match forcing {
+                Forcing::Model(k) => (&self.terms[k], phi[k]),
+                Forcing::Extra(term) => (term, term.expr.eval_parts(x, u)),
+            };
+            ds[term.state * q + j] += value;
+            if let Some(r) = term.into {
+                ds[r * q + j] -= value;
+            }
+        }
+    }
+
+    /// Simulate the first `len` samples of `exp` from `x0` with the sensitivities, calling
+    /// `at_sample(k, x, S)` at every sample (`S` row-major, `n × q`). Errors with
+    /// [`CoreError::Diverged`] as `simulate` does.
+    pub(crate) fn run(
+        &self,
+        exp: &Experiment,
+        x0: &[f64],
+        len: usize,
+        mut at_sample: impl FnMut(usize, &[f64], &[f64]),
+    ) -> Result<(), CoreError> {
+        let n = self.linear.n_states();
+        let m = self.linear.n_inputs();
+        let q = self.q;
+        let mut work = Work::new(n, q, self.terms.len());
+        work.x.copy_from_slice(x0);
+        if let Some(first) = self.x0_block {
+            for i in 0..n {
+                work.s[i * q + first + i] = 1.0;
+            }
+        }
+        let substeps = self.substeps.max(1);
+        let inputs = exp.inputs().as_slice();
+        let foh = exp.intersample() == InterSample::Foh;
+        // Stage inputs (start, middle, end of a sub-step) of a first-order hold, computed
+        // as `sysid_core::integrate` does so that the trajectory is the simulated one.
+        let mut stage_u = [vec![0.0; m], vec![0.0; m], vec![0.0; m]];
+        for k in 0..len.min(exp.len()) {
+            if k > 0 {
+                let u = &inputs[(k - 1) * m..k * m];
+                let ta = exp.t0() + (k - 1) as f64 * exp.dt();
+                let tb = exp.t0() + k as f64 * exp.dt();
+                let h = (tb - ta) / substeps as f64;
+                for j in 0..substeps {
+                    let t = ta + j as f64 * h;
+                    if foh && k < exp.len() {
+                        let ub = &inputs[k * m..(k + 1) * m];
+                        for (buf, ts) in stage_u.iter_mut().zip([t, t + 0.5 * h, t + h]) {
+                            let frac = (ts - ta) / (tb - ta);
+                            for ((b, a), z) in buf.iter_mut().zip(u).zip(ub) {
+                                *b = a + frac * (z - a);
+                            }
+                        }
+                        let [u0, um, u1] = &stage_u;
+                        work.rk4_step(self, t, h, [u0, um, u1]);
+                    } else {
+                        work.rk4_step(self, t, h, [u, u, u]);
+                    }
+                }
+                if let Some((state, value)) = work
+                    .x
+                    .iter()
+                    .enumerate()
+                    .find(|(_, v)| !v.is_finite() || v.abs() > self.blow_up)
+                {
+                    return Err(CoreError::Diverged {
+                        t: tb,
+                        state,
+                        value: *value,
+                    });
+                }
+            }
+            at_sample(k, &work.x, &work.s);
+        }
+        Ok(())
+    }
+}
+
+impl Propagator<'_> {
+    /// [`Propagator::run`] reduced to weighted output sensitivities: at every measured
+    /// (non-NaN) value of the first `len` samples of `exp`, in row order (sample, then
+    /// channel), calls `put(row, j, w_ch·(C S)[ch, j])` for every column `j`, with `row`
+    /// counted from 0. Returns the number of rows.
+    pub(crate) fn run_outputs(
+        &self,
+        exp: &Experiment,
+        x0: &[f64],
+        len: usize,
+        c: &DMatrix<f64>,
+        weights: &[f64],
+        mut put: impl FnMut(usize, usize, f64),
+    ) -> Result<usize, CoreError> {
+        let (n, q) = (self.linear.n_states(), self.q);
+        let y = exp.outputs();
+        let mut row = 0;
+        self.run(exp, x0, len, |k, _, s| {
+            for (ch, &w) in weights.iter().enumerate() {
+                if y[(ch, k)].is_nan() {
+                    continue;
+                }
+                for j in 0..q {
+                    let mut cs = 0.0;
+                    for i in 0..n {
+                        cs += c[(ch, i)] * s[i * q + j];
+                    }
+                    put(row, j, w * cs);
+                }
+                row += 1;
+            }
+        })?;
+        Ok(row)
+    }
+}
+
+/// Buffers of one sensitivity pass (allocated once, reused over every step).
+struct Work {
+    x: Vec<f64>,
+    tmp: Vec<f64>,
+    k: [Vec<f64>; 4],
+    s: Vec<f64>,
+    stmp: Vec<f64>,
+    ks: [Vec<f64>; 4],
+    phi: Vec<f64>,
+}
+
+impl Work {
+    fn new(n: usize, q: usize, n_terms: usize) -> Self {
+        Self {
+            x: vec![0.0; n],
+            tmp: vec![0.0; n],
+            k: std::array::from_fn(|_| vec![0.0; n]),
+            s: vec![0.0; n * q],
+            stmp: vec![0.0; n * q],
+            ks: std::array::from_fn(|_| vec![0.0; n * q]),
+            phi: vec![0.0; n_terms],
+        }
+    }
+
+    /// One RK4 step of size `h` for `x` and `S` together (same arithmetic for `x` as
+    /// `sysid_core::integrate::rk4_step`).
+    /// `u`: the input at the step's start, middle and end (all one for a held input).
+    fn rk4_step(&mut self, f: &Propagator<'_>, t: f64, h: f64, u: [&[f64]; 3]) {
+        let [k1, k2, k3, k4] = &mut self.k;
+        let [s1, s2, s3, s4] = &mut self.ks;
+        let (x, tmp, s, stmp) = (&mut self.x, &mut self.tmp, &mut self.s, &mut self.stmp);
+        let phi = &mut self.phi;
+        f.eval(t, x, s, u[0], k1, s1, phi);
+        advance(tmp, x, 0.5 * h, k1, stmp, s, s1);
+        f.eval(t + 0.5 * h, tmp, stmp, u[1], k2, s2, phi);
+        advance(tmp, x, 0.5 * h, k2, stmp, s, s2);
+        f.eval(t + 0.5 * h, tmp, stmp, u[1], k3, s3, phi);
+        advance(tmp, x, h, k3, stmp, s, s3);
+        f.eval(t + h, tmp, stmp, u[2], k4, s4, phi);
+        for i in 0..x.len() {
+            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        for i in 0..s.len() {
+            s[i] += h / 6.0 * (s1[i] + 2.0 * s2[i] + 2.0 * s3[i] + s4[i]);
+        }
+    }
+}
+
+/// Stage point `tmp = x + a·k`, `stmp = s + a·ks`.
+fn advance(tmp: &mut [f64], x: &[f64], a: f64, k: &[f64], stmp: &mut [f64], s: &[f64], ks: &[f64]) {
+    for i in 0..tmp.len() {
+        tmp[i] = x[i] + a * k[i];
+    }
+    for i in 0..stmp.len() {
+        stmp[i] = s[i] + a * ks[i];
+    }
+}
+
+/// The residual Jacobian at `theta` by forward sensitivities, in the row order and with
+/// the weighting of `Problem::residuals` (`∂r/∂θ = −√(w_c/M)·C S` at every measured
+/// sample within the horizon). `substeps` is the RK4 sub-step count. A diverging
+/// simulation is an error naming the experiment, as in `residuals`.
+pub(super) fn jacobian(
+    problem: &Problem<'_>,
+    partials: &Partials,
+    theta: &[f64],
+    substeps: usize,
+) -> Result<Outcome, (usize, CoreError)> {
+    let (coefficients, x0) = problem.unpack(theta);
+    let n = problem.linear.n_states();
+    let nf = problem.free.len();
+    let propagator = Propagator {
+        linear: problem.linear,
+        terms: problem.terms,
+        coefficients: &coefficients,
+        partials,
+        forcing: problem
+            .free
+            .iter()
+            .enumerate()
+            .map(|(j, &k)| (j, Forcing::Model(k)))
+            .collect(),
+        x0_block: problem.estimate_x0.then_some(nf),
+        q: nf + if problem.estimate_x0 { n } else { 0 },
+        substeps,
+        blow_up: problem.blow_up,
+    };
+    let c = problem.linear.c();
+    let scale = 1.0 / (problem.valid as f64).sqrt();
+    let row_scale: Vec<f64> = problem.weights.iter().map(|w| -scale * w.sqrt()).collect();
+    let mut jac = DMatrix::zeros(problem.valid, theta.len());
+    let mut row = 0;
+    for (e, exp) in problem.data.experiments().iter().enumerate() {
+        // Global column of local column j: this experiment's initial state sits at
+        // `nf + e·n` in θ.
+        let column = |j: usize| if j < nf { j } else { nf + e * n + (j - nf) };
+        let first = row;
+        row += propagator
+            .run_outputs(exp, &x0[e], problem.lengths[e], c, &row_scale, |r, j, v| {
+                jac[(first + r, column(j))] = v;
+            })
+            .map_err(|err| (e, err))?;
+    }
+    debug_assert_eq!(row, problem.valid, "rows must match the residuals");
+    if jac.iter().all(|v| v.is_finite()) {
+        Ok(Outcome::Jacobian(jac))
+    } else {
+        Ok(Outcome::NonFinite)
+    }
+}
+
+#[cfg(test)]
+mod tests;
