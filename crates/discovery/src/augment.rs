@@ -740,21 +740,13 @@ fn jacobian_fd(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sysid_core::{Channel, Experiment, ModelNames};
+    use sysid_core::{Channel, Experiment};
 
     /// ẋ = −a·x + u with the term −b·x³ hidden: data simulated with b = 0.5 (no noise);
     /// calibration from b = 0.2 recovers 0.5 (noise-free, so to solver precision).
     #[test]
     fn recovers_a_cubic_coefficient_without_noise() {
-        let names = ModelNames {
-            states: vec!["x".into()],
-            inputs: vec!["u".into()],
-            outputs: vec!["x".into()],
-            corrections: vec!["x".into()],
-        };
-        let one = |v: f64| DMatrix::from_element(1, 1, v);
-        let linear = LinearModel::with_names(one(-0.3), one(1.0), one(1.0), one(1.0), names)
-            .unwrap_or_else(|e| panic!("{e}"));
+        let linear = crate::test_support::scalar_model(-0.3, 1.0);
         let truth = TermModel::from_specs(linear.clone(), [("x", "cubic_stiffness", "x^3", -0.5)])
             .unwrap_or_else(|e| panic!("{e}"));
         let len = 301;

@@ -15,6 +15,8 @@ pub mod samples;
 mod screen;
 pub mod select;
 pub mod stats;
+#[cfg(test)]
+mod test_support;
 pub mod transfer;
 
 pub use augment::{

@@ -157,16 +157,9 @@ fn pair_step_names_terms_that_only_work_together() {
 fn shaped_term_interval_matches_the_monte_carlo_spread() {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
-    use sysid_core::{Channel, Experiment, LinearModel, ModelNames};
+    use sysid_core::{Channel, Experiment};
 
-    let names = ModelNames {
-        states: vec!["x".into()],
-        inputs: vec!["u".into()],
-        outputs: vec!["x".into()],
-        corrections: vec!["x".into()],
-    };
-    let one = |v: f64| DMatrix::from_element(1, 1, v);
-    let linear = LinearModel::with_names(one(-1.0), one(0.0), one(1.0), one(1.0), names).unwrap();
+    let linear = crate::test_support::scalar_model(-1.0, 0.0);
     let law = |limit: f64| crate::Effect::InputSaturation.template(&["u"], &[limit]);
     let truth = TermModel::from_specs(
         linear.clone(),

@@ -303,6 +303,17 @@ impl Linearisation {
         }
     }
 
+    /// The problem over `part` at `net`'s weights and the row width kept per sample.
+    fn problem<'a>(&self, part: &'a Part, net: &'a Mlp, rho: &'a [f64]) -> (Problem<'a>, usize) {
+        let problem = Problem {
+            kernel: self.kernel,
+            part,
+            net,
+            rho,
+        };
+        (problem, self.kernel.keep_width(net))
+    }
+
     /// SSE of `part` at `net`'s weights; with `keep` (length [`Linearisation::keep_len`])
     /// also keeps the activations, so that [`Linearisation::build`] at the same weights
     /// can skip the forward pass.
@@ -322,14 +333,7 @@ impl Linearisation {
         mut keep: Option<&mut [f64]>,
         cutoff: Option<Cutoff>,
     ) -> Option<f64> {
-        let kernel = self.kernel;
-        let problem = Problem {
-            kernel,
-            part,
-            net,
-            rho,
-        };
-        let width = kernel.keep_width(net);
+        let (problem, width) = self.problem(part, net, rho);
         let n_chunks = self.slots.len();
         let threads = rayon::current_num_threads();
         let group = match cutoff {
@@ -372,14 +376,7 @@ impl Linearisation {
         rho: &[f64],
         kept: Option<&[f64]>,
     ) -> f64 {
-        let kernel = self.kernel;
-        let problem = Problem {
-            kernel,
-            part,
-            net,
-            rho,
-        };
-        let width = kernel.keep_width(net);
+        let (problem, width) = self.problem(part, net, rho);
         self.for_each_chunk(0..self.slots.len(), None, width, |range, slot, _| {
             let kept = kept.map(|k| &k[range.start * width..range.end * width]);
             chunk_normal_equations(problem, range, slot, kept);

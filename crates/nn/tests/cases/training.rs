@@ -31,10 +31,7 @@ fn teacher_student_error_goes_to_zero() {
 }
 
 fn teacher_student_with(damping: Damping) {
-    let teacher = Mlp::new(&Architecture::single(2, 5, 1), 11).unwrap();
-    let x = uniform_inputs(2, 300, -1.5, 1.5, 1);
-    let t = teacher.predict(&x).unwrap();
-    let var_t = variance(&t);
+    let (_, x, t, var_t) = teacher_data(2, 5, 300);
     let config = LmConfig {
         damping,
         ..no_validation(400)
@@ -62,16 +59,27 @@ fn variance(t: &DMatrix<f64>) -> f64 {
     t.map(|v| (v - mean).powi(2)).mean()
 }
 
+/// A single-output teacher network (`inputs`-`hidden`-1, seed 11), `samples` inputs
+/// uniform on ±1.5 (seed 1), its outputs as targets, and their variance.
+fn teacher_data(
+    inputs: usize,
+    hidden: usize,
+    samples: usize,
+) -> (Mlp, DMatrix<f64>, DMatrix<f64>, f64) {
+    let teacher = Mlp::new(&Architecture::single(inputs, hidden, 1), 11).unwrap();
+    let x = uniform_inputs(inputs, samples, -1.5, 1.5, 1);
+    let t = teacher.predict(&x).unwrap();
+    let var_t = variance(&t);
+    (teacher, x, t, var_t)
+}
+
 #[test]
 fn every_damping_schedule_reaches_the_teacher_from_nearby() {
     // Local convergence of each μ schedule to an exact zero-residual minimum: the student
     // starts at the 2-5-1 teacher's weights moved by up to ±0.1 (MSE ≈ 2 % of the target
     // variance) and must reach ~0 (below 1e-10 of the variance, as above). From random
     // starts the gain-ratio schedules settle in other minima of this problem.
-    let teacher = Mlp::new(&Architecture::single(2, 5, 1), 11).unwrap();
-    let x = uniform_inputs(2, 300, -1.5, 1.5, 1);
-    let t = teacher.predict(&x).unwrap();
-    let var_t = variance(&t);
+    let (teacher, x, t, var_t) = teacher_data(2, 5, 300);
     let start: Vec<f64> = teacher
         .weights()
         .iter()
@@ -107,10 +115,7 @@ fn new_schedules_reach_the_teacher_from_seeded_nearby_starts() {
     // independent uniform ±0.15 perturbations (five seeds) must all reach the exact fit
     // (MSE below 1e-10 of the target variance, as above) with the gain-ratio,
     // delayed-gratification and two-phase schedules, and with trainlm for reference.
-    let teacher = Mlp::new(&Architecture::single(3, 4, 1), 11).unwrap();
-    let x = uniform_inputs(3, 500, -1.5, 1.5, 1);
-    let t = teacher.predict(&x).unwrap();
-    let var_t = variance(&t);
+    let (teacher, x, t, var_t) = teacher_data(3, 4, 500);
     for seed in 0..5 {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let start: Vec<f64> = teacher
@@ -149,10 +154,7 @@ fn new_schedules_reach_the_teacher_from_random_starts() {
     // `teacher_starts` example: trainlm 21, GainRatio 10, DelayedGratification 15,
     // TrainlmThenGainRatio 20; the others stop near 1e-3 of the variance), hence the best
     // of eight rather than of four as for trainlm above.
-    let teacher = Mlp::new(&Architecture::single(3, 4, 1), 11).unwrap();
-    let x = uniform_inputs(3, 500, -1.5, 1.5, 1);
-    let t = teacher.predict(&x).unwrap();
-    let var_t = variance(&t);
+    let (_, x, t, var_t) = teacher_data(3, 4, 500);
     for damping in [
         Damping::GainRatio,
         Damping::DelayedGratification,
