@@ -27,8 +27,8 @@ pub fn estimate(model: &LinearModel, data: &Dataset, config: &MmeConfig) -> Resu
 /// MME estimate of a linear assumed model, with the residual-variance-versus-`W` curve of
 /// the automatic search and the noise-variance report.
 ///
-/// Steps: validate the configuration and bind channels; discretise (exact ZOH, once per
-/// sample period); estimate `R` if asked ([`crate::noise`]); find `W` if asked
+/// Steps: validate the configuration and bind channels; discretise (exact, once per
+/// sample period, with the ramp term for first-order-hold experiments); estimate `R` if asked ([`crate::noise`]); find `W` if asked
 /// ([`crate::tune_w`]); run the exact sweep (private module `sweep`) at the final `(W, R)`.
 /// `report.termination` is `Exact` for a fixed `W`, otherwise the `W` search's ending.
 pub fn estimate_with_report(

@@ -28,7 +28,11 @@ impl<'a> LinearRun<'a> {
     /// Bind and discretise (validates channels and sub-steps).
     pub fn new(model: &'a LinearModel, data: &'a Dataset, substeps: Option<usize>) -> Result<Self> {
         let binding = bind(model.input_names(), model.output_names(), data)?;
-        let periods: Vec<f64> = data.experiments().iter().map(|e| e.dt()).collect();
+        let periods: Vec<(f64, sysid_core::InterSample)> = data
+            .experiments()
+            .iter()
+            .map(|e| (e.dt(), e.intersample()))
+            .collect();
         let discrete = discretize_all(model, &periods, substeps)?;
         let (n, q) = (model.n_states(), model.n_corrections());
         let states = data
@@ -103,6 +107,7 @@ impl Solve for LinearRun<'_> {
                 bd: &disc.bd,
                 inputs: exp.inputs(),
                 in_map: &self.binding.inputs,
+                ramp: disc.ramp.as_ref(),
             };
             let out = sweep(
                 &pr,

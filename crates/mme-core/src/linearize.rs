@@ -1,5 +1,6 @@
 //! The discrete map of the nonlinear assumed model over one sub-step — one classical RK4
-//! step of `ẋ = f(t, x, u) + E d` with `u` and `d` held — and its Jacobians
+//! step of `ẋ = f(t, x, u) + E d` with `d` held and `u` held or, for first-order-hold
+//! inputs, interpolated at each stage time ([`StageInput`]) — and its Jacobians
 //! `Φ = ∂x⁺/∂x`, `Γ = ∂x⁺/∂d`, chained exactly through the four stages.
 //!
 //! With `k_i = g(ξ_i)`, `ξ_1 = x`, `ξ_2 = x + ½h k_1`, `ξ_3 = x + ½h k_2`,
@@ -11,10 +12,49 @@
 use nalgebra::DMatrix;
 use sysid_core::Dynamics;
 
+/// The input over one sub-step.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum StageInput<'u> {
+    /// Held at `u` for every stage (zero-order hold).
+    Held(&'u [f64]),
+    /// Linear between two samples (first-order hold): at a stage `c·h` into the step,
+    /// `u = ua + (from + c·per)·(ub − ua)`, where `from` is the fraction of the sample
+    /// interval at the step's start and `per = h/dt` the fraction one step spans (so the
+    /// stage times are `t, t + h/2, t + h`, as in `sysid_core`'s RK4).
+    Ramp {
+        /// Input at the interval's first sample.
+        ua: &'u [f64],
+        /// Input at the interval's last sample.
+        ub: &'u [f64],
+        /// Interval fraction at the step's start.
+        from: f64,
+        /// Interval fraction per step.
+        per: f64,
+    },
+}
+
+impl StageInput<'_> {
+    /// The input at stage offset `c` (fraction of the step), computed into `buf` if needed.
+    fn at<'a>(&'a self, c: f64, buf: &'a mut [f64]) -> &'a [f64] {
+        match *self {
+            StageInput::Held(u) => u,
+            StageInput::Ramp { ua, ub, from, per } => {
+                let f = from + c * per;
+                for ((b, a), z) in buf.iter_mut().zip(ua).zip(ub) {
+                    *b = a + f * (z - a);
+                }
+                &buf[..ua.len()]
+            }
+        }
+    }
+}
+
 /// Buffers for one step (no allocation per step).
 pub(crate) struct Rk4 {
     n: usize,
     q: usize,
+    /// Interpolated input (first-order hold).
+    u: Vec<f64>,
     ed: Vec<f64>,
     k: [Vec<f64>; 4],
     xi: Vec<f64>,
@@ -35,6 +75,7 @@ impl Rk4 {
         Self {
             n,
             q,
+            u: vec![0.0; m],
             ed: vec![0.0; n],
             k: std::array::from_fn(|_| vec![0.0; n]),
             xi: vec![0.0; n],
@@ -64,11 +105,11 @@ impl Rk4 {
         }
     }
 
-    fn stages<F: Dynamics + ?Sized>(&mut self, f: &F, t: f64, h: f64, x: &[f64], u: &[f64]) {
+    fn stages<F: Dynamics + ?Sized>(&mut self, f: &F, t: f64, h: f64, x: &[f64], u: &StageInput) {
         for (s, &cs) in STAGE_C.iter().enumerate() {
             self.stage_point(s, cs * h, x);
             let ks = &mut self.k[s];
-            f.rhs(t + cs * h, &self.xi, u, ks);
+            f.rhs(t + cs * h, &self.xi, u.at(cs, &mut self.u), ks);
             ks.iter_mut().zip(&self.ed).for_each(|(k, e)| *k += e);
         }
     }
@@ -82,7 +123,7 @@ impl Rk4 {
         t: f64,
         h: f64,
         x: &mut [f64],
-        u: &[f64],
+        u: &StageInput,
         d: &[f64],
     ) {
         self.set_correction(e, d);
@@ -102,7 +143,7 @@ impl Rk4 {
         t: f64,
         h: f64,
         x: &[f64],
-        u: &[f64],
+        u: &StageInput,
         d: &[f64],
         x_next: &mut [f64],
         phi: &mut [f64],
@@ -113,12 +154,13 @@ impl Rk4 {
         for (s, &cs) in STAGE_C.iter().enumerate() {
             self.stage_point(s, cs * h, x);
             let ts = t + cs * h;
-            f.rhs(ts, &self.xi, u, &mut self.k[s]);
+            let us = u.at(cs, &mut self.u);
+            f.rhs(ts, &self.xi, us, &mut self.k[s]);
             self.k[s]
                 .iter_mut()
                 .zip(&self.ed)
                 .for_each(|(k, e)| *k += e);
-            f.jacobians(ts, &self.xi, u, &mut self.a, &mut self.b);
+            f.jacobians(ts, &self.xi, us, &mut self.a, &mut self.b);
             if s == 0 {
                 self.dk_dx[0].copy_from(&self.a);
                 self.dk_dd[0].copy_from(e);
@@ -194,45 +236,102 @@ mod tests {
     fn chained_jacobians_match_central_differences() {
         let e = DMatrix::from_row_slice(2, 2, &[0.3, 0.0, 1.0, 0.5]);
         let mut rk = Rk4::new(2, 1, 2);
-        let (t, h, u) = (0.4, 0.05, [0.7]);
+        let (t, h) = (0.4, 0.05);
+        let (ua, ub) = ([0.7], [-1.9]);
+        let held = StageInput::Held(&ua);
+        let ramp = StageInput::Ramp {
+            ua: &ua,
+            ub: &ub,
+            from: 0.25,
+            per: 0.25,
+        };
         let x = [0.9, -1.2];
         let d = [0.2, -0.4];
-        let (mut xn, mut phi, mut gam) = ([0.0; 2], [0.0; 4], [0.0; 4]);
-        rk.step_jacobians(&Pendulum, &e, t, h, &x, &u, &d, &mut xn, &mut phi, &mut gam);
-        let mut plain = x;
-        rk.step(&Pendulum, &e, t, h, &mut plain, &u, &d);
-        // Same arithmetic in both paths: equal to round-off.
-        assert!(plain.iter().zip(&xn).all(|(a, b)| (a - b).abs() <= 1e-14));
-        // Central differences: error ~ε^(2/3) relative for this smooth map.
-        let eps = 1e-6;
-        for c in 0..2 {
-            let (mut xp, mut xm) = (x, x);
-            xp[c] += eps;
-            xm[c] -= eps;
-            rk.step(&Pendulum, &e, t, h, &mut xp, &u, &d);
-            rk.step(&Pendulum, &e, t, h, &mut xm, &u, &d);
-            for r in 0..2 {
-                let fd = (xp[r] - xm[r]) / (2.0 * eps);
-                assert!(
-                    (fd - phi[c * 2 + r]).abs() < 1e-8,
-                    "Φ[{r},{c}] {fd} vs {}",
-                    phi[c * 2 + r]
-                );
-            }
-            let (mut dp, mut dm) = (d, d);
-            dp[c] += eps;
-            dm[c] -= eps;
-            let (mut xp, mut xm) = (x, x);
-            rk.step(&Pendulum, &e, t, h, &mut xp, &u, &dp);
-            rk.step(&Pendulum, &e, t, h, &mut xm, &u, &dm);
-            for r in 0..2 {
-                let fd = (xp[r] - xm[r]) / (2.0 * eps);
-                assert!(
-                    (fd - gam[c * 2 + r]).abs() < 1e-8,
-                    "Γ[{r},{c}] {fd} vs {}",
-                    gam[c * 2 + r]
-                );
+        for u in [held, ramp] {
+            let (mut xn, mut phi, mut gam) = ([0.0; 2], [0.0; 4], [0.0; 4]);
+            rk.step_jacobians(&Pendulum, &e, t, h, &x, &u, &d, &mut xn, &mut phi, &mut gam);
+            let mut plain = x;
+            rk.step(&Pendulum, &e, t, h, &mut plain, &u, &d);
+            // Same arithmetic in both paths: equal to round-off.
+            assert!(plain.iter().zip(&xn).all(|(a, b)| (a - b).abs() <= 1e-14));
+            // Central differences: error ~ε^(2/3) relative for this smooth map.
+            let eps = 1e-6;
+            for c in 0..2 {
+                let (mut xp, mut xm) = (x, x);
+                xp[c] += eps;
+                xm[c] -= eps;
+                rk.step(&Pendulum, &e, t, h, &mut xp, &u, &d);
+                rk.step(&Pendulum, &e, t, h, &mut xm, &u, &d);
+                for r in 0..2 {
+                    let fd = (xp[r] - xm[r]) / (2.0 * eps);
+                    assert!(
+                        (fd - phi[c * 2 + r]).abs() < 1e-8,
+                        "Φ[{r},{c}] {fd} vs {}",
+                        phi[c * 2 + r]
+                    );
+                }
+                let (mut dp, mut dm) = (d, d);
+                dp[c] += eps;
+                dm[c] -= eps;
+                let (mut xp, mut xm) = (x, x);
+                rk.step(&Pendulum, &e, t, h, &mut xp, &u, &dp);
+                rk.step(&Pendulum, &e, t, h, &mut xm, &u, &dm);
+                for r in 0..2 {
+                    let fd = (xp[r] - xm[r]) / (2.0 * eps);
+                    assert!(
+                        (fd - gam[c * 2 + r]).abs() < 1e-8,
+                        "Γ[{r},{c}] {fd} vs {}",
+                        gam[c * 2 + r]
+                    );
+                }
             }
         }
+    }
+
+    /// With `d = 0`, `s` steps with [`StageInput::Ramp`] over one sample interval are
+    /// `sysid_core`'s first-order-hold RK4 with `s` sub-steps: the same stage times and
+    /// inputs, so equal to round-off (a few ulps of the O(1) state).
+    #[test]
+    fn ramp_steps_match_sysid_core_first_order_hold() {
+        let e = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+        let mut rk = Rk4::new(2, 1, 1);
+        let (ta, dt, s) = (0.3, 0.2, 4);
+        let (ua, ub) = ([1.5], [-2.5]);
+        let x0 = [0.9, -1.2];
+        let mut ours = x0;
+        let h = dt / s as f64;
+        for i in 0..s {
+            let u = StageInput::Ramp {
+                ua: &ua,
+                ub: &ub,
+                from: i as f64 / s as f64,
+                per: 1.0 / s as f64,
+            };
+            rk.step(&Pendulum, &e, ta + i as f64 * h, h, &mut ours, &u, &[0.0]);
+        }
+        let mut theirs = x0;
+        let mut ws = sysid_core::integrate::Workspace::new(2);
+        sysid_core::integrate::integrate_sample(
+            &Pendulum,
+            ta,
+            ta + dt,
+            &mut theirs,
+            &ua,
+            &ub,
+            sysid_core::InterSample::Foh,
+            &sysid_core::Integrator::Rk4 { substeps: s },
+            &mut ws,
+        )
+        .unwrap();
+        for (a, b) in ours.iter().zip(&theirs) {
+            assert!((a - b).abs() < 1e-13, "{a} vs {b}");
+        }
+        // The held input differs visibly (ub − ua = −4 over 0.2 s).
+        let mut held = x0;
+        for i in 0..s {
+            let u = StageInput::Held(&ua);
+            rk.step(&Pendulum, &e, ta + i as f64 * h, h, &mut held, &u, &[0.0]);
+        }
+        assert!((held[1] - theirs[1]).abs() > 0.1);
     }
 }

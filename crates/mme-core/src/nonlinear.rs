@@ -1,7 +1,9 @@
 //! MME with a nonlinear assumed model `ẋ = f(t, x, u) + E d`, `y = C x`: iterated
 //! linearisation (Gauss–Newton, in the closed-loop iLQR form).
 //!
-//! Each iteration linearises the RK4 sub-step map `x_{j+1} = F(x_j, u_k, d_j)` about the
+//! Each iteration linearises the RK4 sub-step map `x_{j+1} = F(x_j, u, d_j)` (inputs
+//! held at `u_k`, or for [`InterSample::Foh`] records linear between `u_k` and `u_{k+1}`
+//! at each RK4 stage time, as `sysid_core::simulate_with` integrates them) about the
 //! current trajectory (`Φ_j`, `Γ_j` from the private module `linearize`, affine offset
 //! `c_j = F(x̄_j, d̄_j) − Φ_j x̄_j − Γ_j d̄_j`), solves the time-varying linear–quadratic
 //! problem exactly with the sweep, and rolls the *nonlinear* map out with the sweep's
@@ -18,8 +20,8 @@
 
 use nalgebra::DMatrix;
 use sysid_core::{
-    Dataset, Dynamics, ExperimentEstimate, IterationRecord, MmeEstimate, ModelNames, SolveReport,
-    Termination,
+    Dataset, Dynamics, ExperimentEstimate, InterSample, IterationRecord, MmeEstimate, ModelNames,
+    SolveReport, Termination,
 };
 
 use crate::binding::{Binding, bind};
@@ -29,7 +31,7 @@ use crate::discretize::{default_substeps, substeps_for};
 use crate::error::{MmeError, Result};
 use crate::estimate::{Phases, assemble, resolve_noise};
 use crate::evaluate::{Solve, Summary};
-use crate::linearize::Rk4;
+use crate::linearize::{Rk4, StageInput};
 use crate::result::MmeOutput;
 use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains, sweep};
 use crate::tune_w::tune;
@@ -182,6 +184,27 @@ struct Grid {
     h: f64,
     t0: f64,
     steps: usize,
+    /// How the inputs behave between samples.
+    hold: InterSample,
+}
+
+impl Grid {
+    /// The input over sub-step `j` given the samples `ua = u_k`, `ub = u_{k+1}` of its
+    /// interval `k = j / s` (`ub` is read only for a first-order hold).
+    fn stage_input<'u>(&self, j: usize, ua: &'u [f64], ub: &'u [f64]) -> StageInput<'u> {
+        match self.hold {
+            InterSample::Zoh => StageInput::Held(ua),
+            InterSample::Foh => {
+                let s = self.substeps as f64;
+                StageInput::Ramp {
+                    ua,
+                    ub,
+                    from: (j % self.substeps) as f64 / s,
+                    per: 1.0 / s,
+                }
+            }
+        }
+    }
 }
 
 /// A trajectory: states at every sub-step (`n × (steps+1)`) and pieces (`q × steps`).
@@ -264,6 +287,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 h: exp.dt() / s as f64,
                 t0: exp.t0(),
                 steps,
+                hold: exp.intersample(),
             });
             let traj = match &config.initial_state {
                 InitialState::FromData => run.data_trajectory(e),
@@ -283,6 +307,18 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             run.trajs.push(traj);
         }
         Ok(run)
+    }
+
+    /// The samples `(u_k, u_{k+1})` around sub-step `j` of experiment `e`; the second is
+    /// empty for held inputs (never read).
+    fn interval_inputs(&self, e: usize, j: usize) -> (Vec<f64>, Vec<f64>) {
+        let g = &self.grids[e];
+        let k = j / g.substeps;
+        let next = match g.hold {
+            InterSample::Zoh => Vec::new(),
+            InterSample::Foh => self.input(e, k + 1),
+        };
+        (self.input(e, k), next)
     }
 
     fn input(&self, e: usize, k: usize) -> Vec<f64> {
@@ -360,7 +396,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         let zero = vec![0.0; q];
         let mut cur = x0.to_vec();
         for j in 0..g.steps {
-            let u = self.input(e, j / g.substeps);
+            let (ua, ub) = self.interval_inputs(e, j);
             let t = g.t0 + j as f64 * g.h;
             self.rk.step(
                 &self.model.dynamics,
@@ -368,7 +404,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 t,
                 g.h,
                 &mut cur,
-                &u,
+                &g.stage_input(j, &ua, &ub),
                 &zero,
             );
             if let Some(state) = cur
@@ -436,7 +472,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         let mut offset = vec![0.0; g.steps * n];
         let mut xn = vec![0.0; n];
         for j in 0..g.steps {
-            let u = self.input(e, j / g.substeps);
+            let (ua, ub) = self.interval_inputs(e, j);
             let t = g.t0 + j as f64 * g.h;
             let x = &traj.x[j * n..(j + 1) * n];
             let d = &traj.d[j * q..(j + 1) * q];
@@ -450,7 +486,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 t,
                 g.h,
                 x,
-                &u,
+                &g.stage_input(j, &ua, &ub),
                 d,
                 &mut xn,
                 ph,
@@ -550,7 +586,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 let fb: f64 = (0..n).map(|c| fg[c * q + a] * dev[c]).sum();
                 d[j * q + a] = base - fb;
             }
-            let u = self.input(e, j / g.substeps);
+            let (ua, ub) = self.interval_inputs(e, j);
             let time = g.t0 + j as f64 * g.h;
             self.rk.step(
                 &self.model.dynamics,
@@ -558,7 +594,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 time,
                 g.h,
                 &mut xc,
-                &u,
+                &g.stage_input(j, &ua, &ub),
                 &d[j * q..(j + 1) * q],
             );
             if xc

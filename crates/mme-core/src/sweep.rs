@@ -81,7 +81,9 @@ impl Problem<'_> {
 /// Where the step matrices come from.
 #[derive(Debug, Clone, Copy)]
 pub(crate) enum StepModel<'a> {
-    /// Time-invariant `Φ = Ad`, `Γ = Ed`, offset `c_j = Bd u_k` (input held per sample).
+    /// Time-invariant `Φ = Ad`, `Γ = Ed`; offset `c_j = Bd u_k` with the input held per
+    /// sample, or, with a ramp gain `Γ₂` (first-order hold), `c_j = Bd u(t_j) +
+    /// Γ₂ (u(t_j + h) − u(t_j))` with `u` linear between samples.
     Lti {
         /// `Ad`, `n × n`.
         ad: &'a DMatrix<f64>,
@@ -93,6 +95,9 @@ pub(crate) enum StepModel<'a> {
         inputs: &'a DMatrix<f64>,
         /// Model input `l` is dataset input row `in_map[l]`.
         in_map: &'a [usize],
+        /// `Γ₂`, `n × m`, when the inputs are interpolated linearly between samples
+        /// (`None`: held).
+        ramp: Option<&'a DMatrix<f64>>,
     },
     /// Time-varying: column-major `Φ_j` (`n²` each), `Γ_j` (`n·q` each), `c_j` (`n` each).
     Tv {
@@ -169,6 +174,7 @@ pub(crate) fn sweep(
                     bd,
                     inputs,
                     in_map,
+                    ramp,
                 } => {
                     let src = LtiSteps {
                         phi: ad.as_slice(),
@@ -176,6 +182,7 @@ pub(crate) fn sweep(
                         bd,
                         inputs,
                         in_map,
+                        ramp: *ramp,
                         s: pr.substeps,
                         d: $d,
                         qd: $q,
@@ -242,6 +249,7 @@ struct LtiSteps<'a, D, Q> {
     bd: &'a DMatrix<f64>,
     inputs: &'a DMatrix<f64>,
     in_map: &'a [usize],
+    ramp: Option<&'a DMatrix<f64>>,
     s: usize,
     d: D,
     qd: Q,
@@ -261,10 +269,26 @@ impl<D: Dim, Q: Dim> Steps<D, Q> for LtiSteps<'_, D, Q> {
     fn offset(&self, j: usize, out: &mut [f64]) {
         let k = j / self.s;
         out.iter_mut().for_each(|o| *o = 0.0);
+        let Some(ramp) = self.ramp else {
+            for (l, &row) in self.in_map.iter().enumerate() {
+                let u = self.inputs[(row, k)];
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o += self.bd[(i, l)] * u;
+                }
+            }
+            return;
+        };
+        // First-order hold: sub-step `i` of interval `k` spans the fractions
+        // `[i/s, (i+1)/s]` of the ramp from `u_k` to `u_{k+1}` (`k + 1 < N` because
+        // `j < (N−1)s`).
+        let i = j - k * self.s;
+        let (f0, f1) = (i as f64 / self.s as f64, (i + 1) as f64 / self.s as f64);
         for (l, &row) in self.in_map.iter().enumerate() {
-            let u = self.inputs[(row, k)];
-            for (i, o) in out.iter_mut().enumerate() {
-                *o += self.bd[(i, l)] * u;
+            let (ua, ub) = (self.inputs[(row, k)], self.inputs[(row, k + 1)]);
+            let u0 = ua + f0 * (ub - ua);
+            let du = (f1 - f0) * (ub - ua);
+            for (r, o) in out.iter_mut().enumerate() {
+                *o += self.bd[(r, l)] * u0 + ramp[(r, l)] * du;
             }
         }
     }
@@ -432,6 +456,7 @@ mod tests {
             bd: &z.bd,
             inputs: &u,
             in_map: &[0],
+            ramp: None,
         };
         let mut states = vec![0.0; 2 * len];
         let mut corr = vec![0.0; (len - 1) * s];

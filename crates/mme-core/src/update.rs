@@ -13,7 +13,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-use sysid_core::{Dataset, LinearModel, MmeEstimate};
+use sysid_core::{Dataset, InterSample, LinearModel, MmeEstimate};
 
 use crate::binding::bind;
 use crate::error::{MmeError, Result};
@@ -23,7 +23,8 @@ use crate::error::{MmeError, Result};
 #[serde(rename_all = "snake_case")]
 pub enum RegressionPoints {
     /// Every correction piece against the state at the piece's midpoint (linear
-    /// interpolation between samples) and the held input: no half-piece lag.
+    /// interpolation between samples) and the input there (held, or interpolated for
+    /// records with [`sysid_core::InterSample::Foh`]): no half-piece lag.
     #[default]
     PieceMidpoints,
     /// The piece starting at each sample (all but the last) against `x̂` and `u` there.
@@ -155,7 +156,14 @@ pub fn update_model(
                 xrows.push(a + frac * (b - a));
             }
             for &row in &binding.inputs {
-                xrows.push(exp.inputs()[(row, k)]);
+                let ua = exp.inputs()[(row, k)];
+                xrows.push(match exp.intersample() {
+                    InterSample::Zoh => ua,
+                    InterSample::Foh => {
+                        let ub = exp.inputs()[(row, (k + 1).min(exp.len() - 1))];
+                        ua + frac * (ub - ua)
+                    }
+                });
             }
             if intercept {
                 xrows.push(1.0);

@@ -385,10 +385,8 @@ fn d_rms(est: &sysid_core::MmeEstimate) -> BTreeMap<String, f64> {
 }
 
 /// Noise floor of `d̂`: simulate the assumed model itself (free-run from MME's `x̂(t0)`),
-/// add measurement noise of the estimated variance, and run MME at the same `W` and `R`.
-/// The inputs are held between samples here whatever the record's `intersample`: MME's
-/// discretisation holds them, and the floor is what MME sees when only noise separates
-/// model and data (a hold mismatch is part of the disagreement, not of the floor).
+/// add measurement noise of the estimated variance, and run MME at the same `W` and `R`
+/// (inputs between samples as the record says, for the simulation and for MME).
 fn noise_floor(
     spec: &ModelSpec,
     data: &Dataset,
@@ -400,15 +398,15 @@ fn noise_floor(
     let mut experiments = Vec::new();
     for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
         let x0: Vec<f64> = e.states.column(0).iter().copied().collect();
-        let held = exp.clone().with_intersample(sysid_core::InterSample::Zoh);
-        let xs = free_run_states(&model, &x0, &held)
+        let xs = free_run_states(&model, &x0, exp)
             .map_err(core("simulating the assumed model for the noise floor"))?;
         let noise =
             plants::noise::gaussian_noise(&est.noise_variance, exp.len(), opts.seed, i as u64)?;
         let y = c * xs + noise;
         experiments.push(
             Experiment::new(exp.t0(), exp.dt(), exp.inputs().clone(), y)
-                .map_err(core("noise-floor data"))?,
+                .map_err(core("noise-floor data"))?
+                .with_intersample(exp.intersample()),
         );
     }
     let names = |v: Vec<String>| v.into_iter().map(Channel::new).collect::<Vec<_>>();
@@ -837,14 +835,8 @@ pub fn run_discover(
         };
         let (ms_before, ms_after) = (ms(&result.estimate), ms(&new_result.estimate));
         let mut rejection = None;
-        // MME's discretisation holds the inputs between samples: with a first-order hold
-        // its d̂ also carries the hold mismatch of whatever model it is given (terms
-        // calibrated for interpolated inputs fit held ones worse), so there d̂ is
-        // reported but does not judge; the held-out free-run search and the validation
-        // records do.
-        let judged_by_d = original.intersample == sysid_core::InterSample::Zoh;
         let shrank = ms_after <= (1.0 - opts.min_d_drop) * ms_before;
-        if judged_by_d && !shrank {
+        if !shrank {
             rejection = Some(format!(
                 "d̂ did not shrink: mean square / floor² {ms_before:.4e} → {ms_after:.4e}"
             ));

@@ -287,12 +287,14 @@ pub fn run_estimate(
     let mut phases = BTreeMap::new();
     let clock = Instant::now();
     let spec = read_model(model_path)?;
+    // MME follows the model file's inputs-between-samples setting.
     let data = read_dataset(
         data_paths,
         spec.linear.input_names(),
         spec.linear.output_names(),
         &spec.units,
-    )?;
+    )?
+    .with_intersample(spec.intersample);
     phases.insert("read".to_string(), clock.elapsed().as_secs_f64());
 
     let clock = Instant::now();

@@ -1,8 +1,8 @@
 //! The TOML model file of SPEC §5. Its keys are a contract (extend, never rename):
 //! `states`, `inputs`, `A`, `B`, `measured` or `C` + `outputs`, `corrected`,
 //! `noise_variance` (list or `"auto"`), `units`, `intersample` (`"zoh"`, the default,
-//! or `"foh"`: how the inputs behave between samples in `mmenn discover`'s free-run
-//! simulations), and `[[terms]]` (`state`, `effect`, `term`, `coefficient`, and for a
+//! or `"foh"`: how the inputs behave between samples in MME and in free-run simulation,
+//! for `mmenn estimate` and `mmenn discover`), and `[[terms]]` (`state`, `effect`, `term`, `coefficient`, and for a
 //! transfer between two equations `into`).
 
 use std::collections::BTreeMap;
@@ -69,7 +69,8 @@ pub struct ModelSpec {
     pub units: BTreeMap<String, String>,
     /// Named nonlinear terms.
     pub terms: Vec<TermEntry>,
-    /// How the inputs behave between samples in free-run simulation (`discover`).
+    /// How the inputs behave between samples (`estimate`, `discover`; `fit` and
+    /// `predict` hold them).
     pub intersample: InterSample,
 }
 

@@ -130,3 +130,18 @@ pub fn msd_assumed() -> LinearModel {
 pub fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
     m.row(i).iter().copied().collect()
 }
+
+/// A record whose inputs are linear between samples: MME told so (`d_foh`, d̂ RMS)
+/// leaves d̂ below 1e-6 of the `forcing` RMS, and told the inputs are held (`d_zoh`)
+/// needs a correction at least 1e4 times larger and above a tenth of the forcing.
+pub fn assert_hold_margins(d_foh: f64, d_zoh: f64, forcing: f64) {
+    assert!(
+        d_foh < 1e-6 * forcing,
+        "Foh d̂ RMS {d_foh} vs forcing {forcing}"
+    );
+    assert!(d_zoh > 1e4 * d_foh, "Zoh d̂ RMS {d_zoh} vs Foh {d_foh}");
+    assert!(
+        d_zoh > 0.1 * forcing,
+        "Zoh d̂ RMS {d_zoh} vs forcing {forcing}"
+    );
+}

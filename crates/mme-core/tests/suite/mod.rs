@@ -5,6 +5,7 @@ pub mod common;
 mod auto_w;
 mod brute;
 mod errors;
+mod intersample;
 mod limits;
 mod msd;
 mod noise;
