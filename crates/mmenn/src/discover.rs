@@ -870,7 +870,21 @@ pub fn run_discover(
             any_rejected = true;
             break;
         }
-        accepted_cost = refined.cost[1];
+        // With R estimated, the round's cost is relative to MME's R with the model before
+        // the round, which a far-off model inflates (MME puts unexplained dynamics into
+        // the residual); MME with the augmented model estimates R again, and the claim
+        // is judged against the smaller estimate, channel by channel (never the larger).
+        let inflation = match original.noise_variance {
+            NoiseVariance::Auto => est
+                .noise_variance
+                .iter()
+                .zip(&new_result.estimate.noise_variance)
+                .map(|(before, after)| before / after)
+                .filter(|r| r.is_finite())
+                .fold(1.0, f64::max),
+            NoiseVariance::Given(_) => 1.0,
+        };
+        accepted_cost = refined.cost[1] * inflation;
         spec = augmented;
         result = new_result;
     }

@@ -208,6 +208,89 @@ pub(super) fn polish_set(
     Ok(())
 }
 
+/// Two terms of one shaped law — same effect with shaping parameters, same equation,
+/// transfer target and variables, different parameters — are usually one law at a
+/// parameter between them (two dead zones at 0.28 and 0.22 with coefficients −1.3 and
+/// +0.34 stand in for one at 0.3 with −0.96). Try that: keep the term with the larger
+/// coefficient, give it the sum, calibrate its parameter again, and take the merged set
+/// unless it fits significantly worse (`M·ΔJ·N_eff/N` above `threshold`). Repeats while a
+/// merge is taken.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn merge_same_law(
+    ctx: &Search<'_>,
+    cands: &mut [RefineCandidate],
+    set: &mut Vec<usize>,
+    current: &mut Eval,
+    steps: &mut Vec<RefineStep>,
+    m: f64,
+    threshold: f64,
+) -> Result<()> {
+    let first_new = ctx.base.terms().len();
+    loop {
+        let coefficient = |eval: &Eval, p: usize| {
+            eval.model
+                .terms()
+                .get(first_new + p)
+                .map_or(0.0, |t| t.coefficient)
+        };
+        let same_law = |a: &RefineCandidate, b: &RefineCandidate| {
+            a.effect == b.effect
+                && a.state == b.state
+                && a.into == b.into
+                && a.variables == b.variables
+                && a.term != b.term
+                && Effect::from_name(&a.effect).is_some_and(|e| !shaping_parameters(e).is_empty())
+        };
+        let pair = (0..set.len())
+            .flat_map(|a| (a + 1..set.len()).map(move |b| (a, b)))
+            .find(|&(a, b)| same_law(&cands[set[a]], &cands[set[b]]));
+        let Some((a, b)) = pair else {
+            return Ok(());
+        };
+        let (ca, cb) = (coefficient(current, a), coefficient(current, b));
+        let (keep, drop) = if ca.abs() >= cb.abs() { (a, b) } else { (b, a) };
+        let mut trial_cands = cands.to_vec();
+        for (p, &k) in set.iter().enumerate() {
+            trial_cands[k].coefficient = coefficient(current, p);
+        }
+        trial_cands[set[keep]].coefficient = ca + cb;
+        let trial: Vec<usize> = set
+            .iter()
+            .enumerate()
+            .filter(|&(p, _)| p != drop)
+            .map(|(_, &i)| i)
+            .collect();
+        let Some(mut merged) = evaluate(ctx, &trial_cands, &trial, 0)? else {
+            return Ok(());
+        };
+        let pos = trial.iter().position(|&i| i == set[keep]).unwrap_or(0);
+        if let Some((cand, eval, _)) = polish(ctx, &trial_cands, &trial, pos, &merged)?
+            && eval.cost < merged.cost
+        {
+            trial_cands[trial[pos]] = cand;
+            merged = eval;
+        }
+        let statistic = m * (merged.cost - current.cost) * current.neff_ratio;
+        if statistic >= threshold {
+            return Ok(());
+        }
+        steps.push(RefineStep {
+            action: "merge".into(),
+            effect: cands[set[keep]].effect.clone(),
+            term: format!(
+                "{} + {} → {}",
+                cands[set[keep]].term, cands[set[drop]].term, trial_cands[trial[pos]].term
+            ),
+            cost: [current.cost, merged.cost],
+            statistic,
+            threshold,
+        });
+        cands.clone_from_slice(&trial_cands);
+        *set = trial;
+        *current = merged;
+    }
+}
+
 /// The identity move at the end of the search (see [`input_identity`]): rewrite an input
 /// gain and a saturation (or dead zone) at the same threshold as the other law alone,
 /// unless that fits significantly worse (`M·ΔJ` above `threshold`).
