@@ -141,6 +141,38 @@ fn pair_step_names_terms_that_only_work_together() {
     }
 }
 
+/// The input-saturation law's term at `limit` (the input's excess over it).
+fn excess_law(limit: f64) -> String {
+    crate::Effect::InputSaturation.template(&["u"], &[limit])
+}
+
+/// Assumed `ẋ = −x`; truth `ẋ = −x + 2·e(u)` with `e` the input's excess over 0.3:
+/// the assumed model, the input (two tones, 400 samples at 0.05 s) and the truth's
+/// noise-free output from `x(0) = 0`.
+fn excess_record() -> (sysid_core::LinearModel, DMatrix<f64>, DMatrix<f64>, f64) {
+    let linear = crate::test_support::scalar_model(-1.0, 0.0);
+    let truth = TermModel::from_specs(
+        linear.clone(),
+        [("x", "input_saturation", excess_law(0.3).as_str(), 2.0)],
+    )
+    .unwrap();
+    let (len, dt) = (400, 0.05);
+    let u = DMatrix::from_fn(1, len, |_, k| {
+        let t = k as f64 * dt;
+        0.6 * (0.9 * t).sin() + 0.4 * (2.3 * t + 1.0).sin()
+    });
+    let blank = sysid_core::Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, len)).unwrap();
+    let clean = crate::augment::simulate_outputs(
+        &truth,
+        linear.c(),
+        &[0.0],
+        &blank,
+        &RefineConfig::default().calibration.integrator,
+    )
+    .unwrap();
+    (linear, u, clean, dt)
+}
+
 /// The interval of a coefficient whose term has a fitted shape parameter, checked by
 /// Monte Carlo. Truth `ẋ = −x + 2·e(u)` with `e` the input's excess over 0.3 (the
 /// `input_saturation` law at limit 0.3); assumed `ẋ = −x`, the only candidate that law
@@ -159,27 +191,8 @@ fn shaped_term_interval_matches_the_monte_carlo_spread() {
     use rand_distr::{Distribution, Normal};
     use sysid_core::{Channel, Experiment};
 
-    let linear = crate::test_support::scalar_model(-1.0, 0.0);
-    let law = |limit: f64| crate::Effect::InputSaturation.template(&["u"], &[limit]);
-    let truth = TermModel::from_specs(
-        linear.clone(),
-        [("x", "input_saturation", law(0.3).as_str(), 2.0)],
-    )
-    .unwrap();
-    let (len, dt) = (400, 0.05);
-    let u = DMatrix::from_fn(1, len, |_, k| {
-        let t = k as f64 * dt;
-        0.6 * (0.9 * t).sin() + 0.4 * (2.3 * t + 1.0).sin()
-    });
-    let blank = Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, len)).unwrap();
-    let clean = crate::augment::simulate_outputs(
-        &truth,
-        linear.c(),
-        &[0.0],
-        &blank,
-        &RefineConfig::default().calibration.integrator,
-    )
-    .unwrap();
+    let (linear, u, clean, dt) = excess_record();
+    let law = excess_law;
     let sigma = 0.02;
     let base = TermModel::new(linear, vec![]).unwrap();
     let mut cand = candidate("input_saturation", "x", law(0.25));
@@ -233,4 +246,62 @@ fn shaped_term_interval_matches_the_monte_carlo_spread() {
         (mean - 2.0).abs() < 3.0 * spread / n.sqrt() + 0.01,
         "mean {mean}"
     );
+}
+
+/// The merge move on one law named twice: truth `ẋ = −x + 2·e(u)` (the input's excess
+/// over 0.3), noise-free; the set holds the same law at limits 0.25 and 0.36, both
+/// calibrated. The move must replace them by one term of that law at the truth's limit
+/// and coefficient (measured: 0.2997 and 2.000 — noise-free, so the golden-section
+/// tolerance on the limit; asserted 3 %), recording a `merge`.
+#[test]
+fn merge_makes_one_term_of_one_law_named_twice() {
+    use sysid_core::{Channel, Experiment};
+    let (linear, u, y, dt) = excess_record();
+    let law = excess_law;
+    let config = RefineConfig::default();
+    let data = Dataset::new(
+        vec![Channel::new("u")],
+        vec![Channel::new("x")],
+        vec![Experiment::new(0.0, dt, u, y).unwrap()],
+    )
+    .unwrap();
+    let cand = |limit: f64| {
+        let mut k = candidate("input_saturation", "x", law(limit));
+        k.variables = vec!["u".into()];
+        k.parameters = vec![limit];
+        k.coefficient = 1.0;
+        k
+    };
+    let base = TermModel::new(linear, vec![]).unwrap();
+    let x0 = [vec![0.0]];
+    let search = Search {
+        base: &base,
+        data: &data,
+        x0: &x0,
+        noise_variance: &[1e-4],
+        holdout: None,
+        config: &config,
+    };
+    let mut cands = vec![cand(0.25), cand(0.36)];
+    let mut set = vec![0, 1];
+    let mut current = evaluate(&search, &cands, &set, 0).unwrap().unwrap();
+    let mut steps = Vec::new();
+    let m = measured_values(&data) as f64;
+    let threshold = chi2_quantile(0.99, 1.0).unwrap();
+    polish::merge_same_law(
+        &search,
+        &mut cands,
+        &mut set,
+        &mut current,
+        &mut steps,
+        m,
+        threshold,
+    )
+    .unwrap();
+    assert_eq!(set.len(), 1, "steps: {steps:#?}");
+    assert!(steps.iter().any(|s| s.action == "merge"));
+    let kept = &cands[set[0]];
+    assert!((kept.parameters[0] - 0.3).abs() < 0.03 * 0.3, "{kept:?}");
+    let c = current.model.terms()[0].coefficient;
+    assert!((c - 2.0).abs() < 0.03 * 2.0, "coefficient {c}");
 }
