@@ -780,20 +780,11 @@ pub fn refine_with_holdout(
     }
     // Terms that entered while the set was far from the data get their parameters now.
     polish_now(&mut cands, &set, &mut current, &mut steps, &mut polished)?;
-    // Two terms of one shaped law at different parameters: one term at a calibrated
-    // parameter, unless that fits significantly worse.
-    polish::merge_same_law(
-        &ctx,
-        &mut cands,
-        &mut set,
-        &mut current,
-        &mut steps,
-        m,
-        threshold,
-    )?;
-    // An input gain beside a saturation (or dead zone) at the same threshold is the other
-    // law alone: one term fewer, kept unless it fits significantly worse.
-    polish::simplify_input_pair(
+    // Fewer terms for the same law: two terms of one shaped law at different parameters
+    // become one, and an input gain beside a saturation (or dead zone) at the same
+    // threshold becomes the other law alone — each kept unless it fits significantly
+    // worse.
+    polish::simplify(
         &ctx,
         &mut cands,
         &mut set,

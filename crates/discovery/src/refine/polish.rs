@@ -208,6 +208,21 @@ pub(super) fn polish_set(
     Ok(())
 }
 
+/// The end-of-search simplifications: [`merge_same_law`], then [`simplify_input_pair`].
+#[allow(clippy::too_many_arguments)]
+pub(super) fn simplify(
+    ctx: &Search<'_>,
+    cands: &mut [RefineCandidate],
+    set: &mut Vec<usize>,
+    current: &mut Eval,
+    steps: &mut Vec<RefineStep>,
+    m: f64,
+    threshold: f64,
+) -> Result<()> {
+    merge_same_law(ctx, cands, set, current, steps, m, threshold)?;
+    simplify_input_pair(ctx, cands, set, current, steps, m, threshold)
+}
+
 /// Two terms of one shaped law — same effect with shaping parameters, same equation,
 /// transfer target and variables, different parameters — are usually one law at a
 /// parameter between them (two dead zones at 0.28 and 0.22 with coefficients −1.3 and
@@ -294,7 +309,7 @@ pub(super) fn merge_same_law(
 /// The identity move at the end of the search (see [`input_identity`]): rewrite an input
 /// gain and a saturation (or dead zone) at the same threshold as the other law alone,
 /// unless that fits significantly worse (`M·ΔJ` above `threshold`).
-pub(super) fn simplify_input_pair(
+fn simplify_input_pair(
     ctx: &Search<'_>,
     cands: &mut [RefineCandidate],
     set: &mut Vec<usize>,
