@@ -27,3 +27,12 @@ pub fn add_noise(m: &DMatrix<f64>, sigma: f64, seed: u64) -> DMatrix<f64> {
 pub fn mse(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
     (a - b).norm_squared() / a.len() as f64
 }
+
+/// Run `f` on a rayon pool of `threads` threads.
+pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}

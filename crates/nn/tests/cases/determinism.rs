@@ -7,7 +7,7 @@ use nn::{
 
 use nalgebra::DMatrix;
 
-use crate::common::{add_noise, mse, uniform_inputs};
+use crate::common::{add_noise, mse, uniform_inputs, with_threads};
 
 fn bits(w: &[f64]) -> Vec<u64> {
     w.iter().map(|v| v.to_bits()).collect()
@@ -65,11 +65,7 @@ fn training_on_many_chunks_is_identical_for_one_and_two_threads() {
                 ..LmConfig::default()
             };
             let run = |threads: usize| {
-                let pool = rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
-                    .unwrap();
-                pool.install(|| {
+                with_threads(threads, || {
                     let mut net = Mlp::for_data(&x, &t, &hidden, 8).unwrap();
                     let report = train_lm(&mut net, &x, &t, &config, None).unwrap();
                     (bits(net.weights()), report)
@@ -110,13 +106,10 @@ fn sweep_in_pool(threads: usize) -> (SweepResult, Data) {
         },
         ..SweepConfig::default()
     };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    let result = pool
-        .install(|| sizing_sweep(&xtr, &ttr, &xte, &tte, &config, None))
-        .unwrap();
+    let result = with_threads(threads, || {
+        sizing_sweep(&xtr, &ttr, &xte, &tte, &config, None)
+    })
+    .unwrap();
     (result, (xte, tte))
 }
 

@@ -3,7 +3,8 @@
 
 use nalgebra::{DMatrix, DVector};
 use nn::{
-    Architecture, Damping, ErrorSpace, LmConfig, Mlp, Scaler, StopReason, ValidationSplit, train_lm,
+    Architecture, Damping, ErrorSpace, LmConfig, Mlp, Scaler, StopReason, TrainReport,
+    ValidationSplit, train_lm,
 };
 
 use rand::rngs::ChaCha8Rng;
@@ -59,6 +60,26 @@ fn variance(t: &DMatrix<f64>) -> f64 {
     t.map(|v| (v - mean).powi(2)).mean()
 }
 
+/// Train a copy of `net` from the weights `start` with `damping` (300 epochs, no
+/// validation); the report and the training MSE reached.
+fn train_from(
+    net: &Mlp,
+    start: &[f64],
+    damping: Damping,
+    x: &DMatrix<f64>,
+    t: &DMatrix<f64>,
+) -> (TrainReport, f64) {
+    let mut student = net.clone();
+    student.set_weights(start).unwrap();
+    let config = LmConfig {
+        damping,
+        ..no_validation(300)
+    };
+    let report = train_lm(&mut student, x, t, &config, None).unwrap();
+    let direct = mse(&student.predict(x).unwrap(), t);
+    (report, direct)
+}
+
 /// A single-output teacher network (`inputs`-`hidden`-1, seed 11), `samples` inputs
 /// uniform on ±1.5 (seed 1), its outputs as targets, and their variance.
 fn teacher_data(
@@ -93,12 +114,7 @@ fn every_damping_schedule_reaches_the_teacher_from_nearby() {
         let mut student = teacher.clone();
         student.set_weights(&start).unwrap();
         assert!(mse(&student.predict(&x).unwrap(), &t) > 1e-2 * var_t);
-        let config = LmConfig {
-            damping,
-            ..no_validation(300)
-        };
-        let report = train_lm(&mut student, &x, &t, &config, None).unwrap();
-        let direct = mse(&student.predict(&x).unwrap(), &t);
+        let (report, direct) = train_from(&teacher, &start, damping, &x, &t);
         assert!(
             direct < 1e-10 * var_t,
             "{damping:?}: MSE {direct:e}, target variance {var_t:e}, {:?}",
@@ -129,14 +145,7 @@ fn new_schedules_reach_the_teacher_from_seeded_nearby_starts() {
             Damping::DelayedGratification,
             Damping::TrainlmThenGainRatio,
         ] {
-            let mut student = teacher.clone();
-            student.set_weights(&start).unwrap();
-            let config = LmConfig {
-                damping,
-                ..no_validation(300)
-            };
-            let report = train_lm(&mut student, &x, &t, &config, None).unwrap();
-            let direct = mse(&student.predict(&x).unwrap(), &t);
+            let (report, direct) = train_from(&teacher, &start, damping, &x, &t);
             assert!(
                 direct < 1e-10 * var_t,
                 "seed {seed}, {damping:?}: MSE {direct:e}, variance {var_t:e}, {:?}",

@@ -2,6 +2,7 @@
 //! method that recovers a teacher correction from its trajectories, the same bits for any
 //! thread count, and typed errors.
 
+use crate::common::with_threads;
 use nalgebra::DMatrix;
 use nn::{
     Architecture, HybridParts, Mlp, NetCorrection, NnError, ShootingRecord, TrajectoryConfig,
@@ -161,11 +162,7 @@ fn same_bits_for_any_thread_count() {
         c: lin.c(),
     };
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        with_threads(threads, || {
             let mut net = student(0.3, 9);
             let records = [ShootingRecord {
                 experiment: &exp,
