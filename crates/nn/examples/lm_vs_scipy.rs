@@ -20,7 +20,7 @@
 use std::fmt::Write as _;
 
 use nalgebra::DMatrix;
-use nn::{Damping, EpochInfo, LmConfig, Mlp, ValidationSplit, train_lm};
+use nn::{Acceleration, Damping, EpochInfo, LmConfig, Mlp, ValidationSplit, train_lm};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 
@@ -73,6 +73,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(name) => serde_json::from_str(&format!("\"{}\"", name.replace('-', "_")))
             .map_err(|_| format!("unknown damping {name}"))?,
     };
+    let acceleration: Acceleration = match flag("--acceleration") {
+        None => Acceleration::None,
+        Some(name) => serde_json::from_str(&format!("\"{name}\""))
+            .map_err(|_| format!("unknown acceleration {name}"))?,
+    };
     let defaults = LmConfig::default();
     let mu_decrease: f64 = flag("--mu-decrease").map_or(Ok(defaults.mu_decrease), |v| v.parse())?;
     let mu_increase: f64 = flag("--mu-increase").map_or(Ok(defaults.mu_increase), |v| v.parse())?;
@@ -123,6 +128,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 max_epochs: MAX_EPOCHS,
                 validation: ValidationSplit::None,
                 damping,
+                acceleration,
                 mu_decrease,
                 mu_increase,
                 ..LmConfig::default()
@@ -171,7 +177,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::write(
         out.join("rust.json"),
         format!(
-            "{{\"max_epochs\":{MAX_EPOCHS},\"threads\":{threads},\"damping\":\"{damping:?}\",\"mu_decrease\":{mu_decrease:e},\"mu_increase\":{mu_increase:e},\"seeds\":{seeds:?},\"cases\":[\n{}\n]}}\n",
+            "{{\"max_epochs\":{MAX_EPOCHS},\"threads\":{threads},\"damping\":\"{damping:?}\",\"acceleration\":\"{acceleration:?}\",\"mu_decrease\":{mu_decrease:e},\"mu_increase\":{mu_increase:e},\"seeds\":{seeds:?},\"cases\":[\n{}\n]}}\n",
             cases.join(",\n")
         ),
     )?;

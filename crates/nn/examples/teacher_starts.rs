@@ -5,12 +5,13 @@
 //! MSE is below 1e-10 of the target variance (the crate's teacher-test threshold).
 //!
 //! Run: `cargo run --release -p nn --example teacher_starts -- [SCHEDULE …]` with
-//! [`nn::Damping`]'s snake_case names (default: all six).
+//! [`nn::Damping`]'s snake_case names, each optionally followed by `+geodesic` for
+//! [`nn::Acceleration::Geodesic`] (default: all six, without acceleration).
 
 #![allow(clippy::print_stdout)]
 
 use nalgebra::DMatrix;
-use nn::{Architecture, Damping, LmConfig, Mlp, ValidationSplit, train_lm};
+use nn::{Acceleration, Architecture, Damping, LmConfig, Mlp, ValidationSplit, train_lm};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 
@@ -21,13 +22,18 @@ const EXACT: f64 = 1e-10;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut schedules = Vec::new();
-    for name in std::env::args().skip(1) {
+    for arg in std::env::args().skip(1) {
+        let (name, acceleration) = match arg.split_once('+') {
+            Some((name, "geodesic")) => (name, Acceleration::Geodesic),
+            Some(_) => return Err(format!("unknown acceleration in {arg}").into()),
+            None => (arg.as_str(), Acceleration::None),
+        };
         let damping: Damping = serde_json::from_str(&format!("\"{}\"", name.replace('-', "_")))
             .map_err(|_| format!("unknown damping {name}"))?;
-        schedules.push(damping);
+        schedules.push((damping, acceleration));
     }
     if schedules.is_empty() {
-        schedules = Damping::ALL.to_vec();
+        schedules = Damping::ALL.map(|d| (d, Acceleration::None)).to_vec();
     }
     let mut totals = vec![0; schedules.len()];
     println!(
@@ -44,11 +50,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let mean = t.mean();
             let variance = t.map(|v| (v - mean).powi(2)).mean();
             let mut cells = Vec::new();
-            for (k, &damping) in schedules.iter().enumerate() {
+            for (k, &(damping, acceleration)) in schedules.iter().enumerate() {
                 let config = LmConfig {
                     validation: ValidationSplit::None,
                     max_epochs: 400,
                     damping,
+                    acceleration,
                     ..LmConfig::default()
                 };
                 let mut exact = 0;
@@ -73,7 +80,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-fn names(schedules: &[Damping]) -> String {
-    let names: Vec<String> = schedules.iter().map(|d| format!("`{d:?}`")).collect();
+fn names(schedules: &[(Damping, Acceleration)]) -> String {
+    let names: Vec<String> = schedules
+        .iter()
+        .map(|(d, a)| match a {
+            Acceleration::None => format!("`{d:?}`"),
+            _ => format!("`{d:?}` + `{a:?}`"),
+        })
+        .collect();
     names.join(" | ")
 }

@@ -10,7 +10,7 @@ pub mod scaling;
 pub mod sweep;
 pub mod trajectory;
 
-pub use config::{Damping, ErrorSpace, LmConfig, ValidationSplit};
+pub use config::{Acceleration, Damping, ErrorSpace, LmConfig, ValidationSplit};
 pub use correction::NetCorrection;
 pub use error::{NnError, Result};
 pub use lm::{EpochInfo, StopReason, TrainReport, split_indices, train_lm};

@@ -119,3 +119,107 @@ pub(super) fn single_layer_jacobian(
         }
     }
 }
+
+/// A block of ones (the bias columns' entries).
+const ONES: [f64; super::normal::BLOCK] = [1.0; super::normal::BLOCK];
+
+/// `Σ a_k b_k` with eight running sums (lane `k mod 8`) added at the end in a fixed order:
+/// independent additions that pipeline and vectorise where one running sum would wait on
+/// each addition; the same bits every time.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut lanes = [0.0; 8];
+    let (ac, bc) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ac
+        .remainder()
+        .iter()
+        .zip(bc.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ac.zip(bc) {
+        for l in 0..8 {
+            lanes[l] += x[l] * y[l];
+        }
+    }
+    let [l0, l1, l2, l3, l4, l5, l6, l7] = lanes;
+    (((l0 + l4) + (l1 + l5)) + ((l2 + l6) + (l3 + l7))) + tail
+}
+
+/// Adds `Jᵀ r_vv` of a block of `kb` samples to `out` (one entry per weight), where
+/// `r_vv = ρ_o·∂²ŷ_o/∂w²[v, v]` is the second derivative of the residuals along the
+/// direction `v` (flat weight layout) at the weights whose activations are `acts` (layout
+/// of [`forward_block`]) and `J` the Jacobian rows of [`single_layer_jacobian`].
+///
+/// With `z_i = tanh(a_i)`, `a_i = Σ_j W_ij s_j + b_i`, `ŷ_o = Σ_i V_oi z_i + c_o` and the
+/// direction's `δa_i = Σ_j v(W_ij) s_j + v(b_i)`:
+/// `∂²ŷ_o[v, v] = Σ_i (1 − z_i²)·δa_i·(2 v(V_oi) − 2 V_oi z_i δa_i)`
+/// (from `z′ = 1 − z²`, `z″ = −2z(1 − z²)`; the output layer is linear). `scratch` holds
+/// `H + q` rows of `kb`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn block_curvature(
+    net: &Mlp,
+    v: &[f64],
+    part: &Part,
+    rho: &[f64],
+    k0: usize,
+    kb: usize,
+    acts: &[f64],
+    scratch: &mut [f64],
+    out: &mut [f64],
+) {
+    let n = net.n_inputs();
+    let h = net.hidden()[0];
+    let w = net.weights();
+    let out_offset = h * (n + 1);
+    let (da, g) = scratch[..(h + rho.len()) * kb].split_at_mut(h * kb);
+    // δa_i over the block.
+    for (d, dir) in da.chunks_exact_mut(kb).zip(v.chunks_exact(n + 1)) {
+        d.fill(dir[n]);
+        for (j, &vj) in dir[..n].iter().enumerate() {
+            for (dk, &sk) in d.iter_mut().zip(part.input(j, k0, kb)) {
+                *dk += vj * sk;
+            }
+        }
+    }
+    // g_o = ρ_o²·∂²ŷ_o[v, v] (the factor ρ_o of r_vv and the one of J's rows).
+    for (o, (go, &r)) in g.chunks_exact_mut(kb).zip(rho).enumerate() {
+        let unit = out_offset + o * (h + 1);
+        go.fill(0.0);
+        for (i, (z, d)) in acts.chunks_exact(kb).zip(da.chunks_exact(kb)).enumerate() {
+            let (vo, wo) = (2.0 * v[unit + i], 2.0 * w[unit + i]);
+            for ((gk, &zk), &dk) in go.iter_mut().zip(z).zip(d) {
+                *gk += (1.0 - zk * zk) * dk * (vo - wo * zk * dk);
+            }
+        }
+        let r2 = r * r;
+        for gk in go.iter_mut() {
+            *gk *= r2;
+        }
+        // Output weights: ∂ŷ_o/∂V_oi = z_i, ∂ŷ_o/∂c_o = 1.
+        for (i, z) in acts.chunks_exact(kb).take(h).enumerate() {
+            out[unit + i] += dot(go, z);
+        }
+        out[unit + h] += dot(go, &ONES[..kb]);
+    }
+    // Hidden weights: ∂ŷ_o/∂W_ij = V_oi (1 − z_i²) s_j, ∂ŷ_o/∂b_i = V_oi (1 − z_i²).
+    for (i, (z, back)) in acts
+        .chunks_exact(kb)
+        .zip(da.chunks_exact_mut(kb))
+        .enumerate()
+    {
+        back.fill(0.0);
+        for (o, go) in g.chunks_exact(kb).enumerate() {
+            let voi = w[out_offset + o * (h + 1) + i];
+            for (bk, &gk) in back.iter_mut().zip(go) {
+                *bk += voi * gk;
+            }
+        }
+        for (bk, &zk) in back.iter_mut().zip(z) {
+            *bk *= 1.0 - zk * zk;
+        }
+        let base = i * (n + 1);
+        for j in 0..n {
+            out[base + j] += dot(back, part.input(j, k0, kb));
+        }
+        out[base + n] += dot(back, &ONES[..kb]);
+    }
+}

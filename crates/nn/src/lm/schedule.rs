@@ -51,6 +51,12 @@ impl Schedule {
         }
     }
 
+    /// Whether steps may take geodesic acceleration now: not during the `trainlm` phase of
+    /// [`Damping::TrainlmThenGainRatio`], which takes `trainlm`'s plain steps.
+    pub(super) fn accelerates(&self) -> bool {
+        !(self.damping == Damping::TrainlmThenGainRatio && self.rule() == Damping::Trainlm)
+    }
+
     /// Whether the schedule needs the gain ratio of the next accepted step.
     pub(super) fn uses_gain(&self) -> bool {
         matches!(

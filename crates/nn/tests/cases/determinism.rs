@@ -2,7 +2,8 @@
 //! of different sizes.
 
 use nn::{
-    Damping, LmConfig, Mlp, SweepConfig, SweepResult, ValidationSplit, sizing_sweep, train_lm,
+    Acceleration, Damping, LmConfig, Mlp, SweepConfig, SweepResult, ValidationSplit, sizing_sweep,
+    train_lm,
 };
 
 use nalgebra::DMatrix;
@@ -50,18 +51,26 @@ fn same_seed_same_weights_with(x: &DMatrix<f64>, t: &DMatrix<f64>, damping: Damp
 fn training_on_many_chunks_is_identical_for_one_and_two_threads() {
     // 3,000 samples (2,550 training, 450 validation): the normal equations are summed over
     // three chunks in parallel, and rejected steps are cut off chunk group by chunk group,
-    // where a group is as many chunks as the pool has threads. Neither may change a bit,
-    // for either damping schedule, with one hidden layer (block kernel) or two
-    // (back-propagation).
+    // where a group is as many chunks as the pool has threads; with geodesic acceleration
+    // the correction's sums run over the same chunks. None of it may change a bit, for any
+    // damping schedule, with one hidden layer (block kernel) or two (back-propagation).
     let x = uniform_inputs(3, 3000, -2.0, 2.0, 41);
     let t = DMatrix::from_fn(1, 3000, |_, k| {
         x[(0, k)].sin() * (0.5 * x[(1, k)]).cos() + 0.3 * x[(2, k)].tanh()
     });
     for hidden in [vec![6], vec![4, 3]] {
-        for damping in Damping::ALL {
+        let configs = Damping::ALL
+            .into_iter()
+            .map(|d| (d, Acceleration::None))
+            .chain([
+                (Damping::Trainlm, Acceleration::Geodesic),
+                (Damping::TrainlmThenGainRatio, Acceleration::Geodesic),
+            ]);
+        for (damping, acceleration) in configs {
             let config = LmConfig {
                 max_epochs: 25,
                 damping,
+                acceleration,
                 ..LmConfig::default()
             };
             let run = |threads: usize| {
@@ -72,7 +81,7 @@ fn training_on_many_chunks_is_identical_for_one_and_two_threads() {
                 })
             };
             let (one, two) = (run(1), run(2));
-            assert_eq!(one.0, two.0, "{hidden:?} {damping:?}");
+            assert_eq!(one.0, two.0, "{hidden:?} {damping:?} {acceleration:?}");
             assert_eq!(one.1, two.1);
             assert_eq!(one.1.epochs, 25, "the comparison covers 25 epochs");
         }

@@ -3,8 +3,8 @@
 
 use nalgebra::{DMatrix, DVector};
 use nn::{
-    Architecture, Damping, ErrorSpace, LmConfig, Mlp, Scaler, StopReason, TrainReport,
-    ValidationSplit, train_lm,
+    Acceleration, Architecture, Damping, ErrorSpace, LmConfig, Mlp, Scaler, StopReason,
+    TrainReport, ValidationSplit, train_lm,
 };
 
 use rand::rngs::ChaCha8Rng;
@@ -26,15 +26,23 @@ fn teacher_student_error_goes_to_zero() {
     // global minimum of the MSE is 0. LM converges locally, so (as in the thesis's
     // practice) several initialisations are tried and the best must reach ~0. The
     // default schedule, and the two-phase one that starts as it does.
-    for damping in [Damping::Trainlm, Damping::TrainlmThenGainRatio] {
-        teacher_student_with(damping);
+    // And the two-phase one with geodesic acceleration (`trainlm` with it falls short
+    // here: best of four 2.9e-10 of the variance; exact fits from 50 starts in the
+    // `teacher_starts` example: 41 of 300 against `trainlm`'s 50 and 48 for this one).
+    for (damping, acceleration) in [
+        (Damping::Trainlm, Acceleration::None),
+        (Damping::TrainlmThenGainRatio, Acceleration::None),
+        (Damping::TrainlmThenGainRatio, Acceleration::Geodesic),
+    ] {
+        teacher_student_with(damping, acceleration);
     }
 }
 
-fn teacher_student_with(damping: Damping) {
+fn teacher_student_with(damping: Damping, acceleration: Acceleration) {
     let (_, x, t, var_t) = teacher_data(2, 5, 300);
     let config = LmConfig {
         damping,
+        acceleration,
         ..no_validation(400)
     };
     let best = (0..4)
@@ -51,7 +59,7 @@ fn teacher_student_with(damping: Damping) {
     // exact fit is limited only by round-off and the gradient stop, far below this.
     assert!(
         best < 1e-10 * var_t,
-        "{damping:?}: best student MSE {best:e}, target variance {var_t:e}"
+        "{damping:?} {acceleration:?}: best student MSE {best:e}, target variance {var_t:e}"
     );
 }
 
@@ -69,10 +77,23 @@ fn train_from(
     x: &DMatrix<f64>,
     t: &DMatrix<f64>,
 ) -> (TrainReport, f64) {
+    train_accelerated_from(net, start, damping, Acceleration::None, x, t)
+}
+
+/// [`train_from`] with a step correction.
+fn train_accelerated_from(
+    net: &Mlp,
+    start: &[f64],
+    damping: Damping,
+    acceleration: Acceleration,
+    x: &DMatrix<f64>,
+    t: &DMatrix<f64>,
+) -> (TrainReport, f64) {
     let mut student = net.clone();
     student.set_weights(start).unwrap();
     let config = LmConfig {
         damping,
+        acceleration,
         ..no_validation(300)
     };
     let report = train_lm(&mut student, x, t, &config, None).unwrap();
@@ -122,6 +143,44 @@ fn every_damping_schedule_reaches_the_teacher_from_nearby() {
         );
         // Every accepted step lowered the objective.
         assert!(report.train_history.windows(2).all(|w| w[1] < w[0]));
+    }
+}
+
+#[test]
+fn geodesic_acceleration_reaches_the_teacher_from_nearby() {
+    // The same local convergence with geodesic acceleration (for the two-phase schedule it
+    // starts after the trainlm phase, here never reached: 6 epochs). The accelerated path
+    // must differ from the plain one (the correction is applied), every accepted step must lower the objective, and the
+    // fit must be exact (below 1e-10 of the target variance). Not NielsenMarquardt: with
+    // acceleration it stops in another minimum from 3 of 10 such starts (this one
+    // included, MSE 9e-4 of the variance) where it reaches the exact fit from all 10
+    // without; the other schedules reach it from 10 of 10 either way.
+    let (teacher, x, t, var_t) = teacher_data(3, 4, 500);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let start: Vec<f64> = teacher
+        .weights()
+        .iter()
+        .map(|w| w + rng.random_range(-0.15..0.15))
+        .collect();
+    for damping in Damping::ALL
+        .into_iter()
+        .filter(|&d| d != Damping::NielsenMarquardt)
+    {
+        let (plain, _) = train_from(&teacher, &start, damping, &x, &t);
+        let (report, direct) =
+            train_accelerated_from(&teacher, &start, damping, Acceleration::Geodesic, &x, &t);
+        assert!(
+            direct < 1e-10 * var_t,
+            "{damping:?}: MSE {direct:e}, target variance {var_t:e}, {:?}",
+            report.termination
+        );
+        assert!(report.train_history.windows(2).all(|w| w[1] < w[0]));
+        if damping == Damping::TrainlmThenGainRatio && report.epochs <= 10 {
+            // Done within the trainlm phase, which takes plain steps.
+            assert_eq!(plain.train_history, report.train_history);
+        } else {
+            assert_ne!(plain.train_history, report.train_history, "{damping:?}");
+        }
     }
 }
 
