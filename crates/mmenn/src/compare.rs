@@ -88,7 +88,10 @@ fn default_free(spec: &ModelSpec) -> Vec<String> {
 }
 
 /// The hybrid model with its initial state fitted to the first samples of `data`'s
-/// first experiment (the same rule `mmenn predict` uses).
+/// first experiment (the same rule `mmenn predict` uses). The records carry the model
+/// file's `intersample`, which this fit and the hybrid model's free runs
+/// (`Model::simulate`) follow; the linear baselines still hold the inputs (their
+/// discretisation is zero-order hold) and NARX reads the samples.
 fn hybrid_for(file: &HybridFile, data: &Dataset, window: usize) -> Result<HybridModel> {
     let mut model = file.model()?;
     let spec = file.spec()?;

@@ -246,7 +246,9 @@ pub fn read_dataset(
 }
 
 /// Read the data files of a workflow with a model's channels: the estimation files and,
-/// when any are given, the validation files (`None` otherwise).
+/// when any are given, the validation files (`None` otherwise). Both follow the model
+/// file's `intersample` (inputs held or interpolated between samples), which MME and every
+/// free-run simulation of the records then use.
 pub fn read_with_validation(
     data_paths: &[PathBuf],
     val_paths: &[PathBuf],
@@ -258,16 +260,20 @@ pub fn read_with_validation(
         lin.input_names(),
         lin.output_names(),
         &spec.units,
-    )?;
+    )?
+    .with_intersample(spec.intersample);
     let val = if val_paths.is_empty() {
         None
     } else {
-        Some(read_dataset(
-            val_paths,
-            lin.input_names(),
-            lin.output_names(),
-            &spec.units,
-        )?)
+        Some(
+            read_dataset(
+                val_paths,
+                lin.input_names(),
+                lin.output_names(),
+                &spec.units,
+            )?
+            .with_intersample(spec.intersample),
+        )
     };
     Ok((data, val))
 }

@@ -481,10 +481,9 @@ pub fn run_discover(
     out: &Path,
 ) -> Result<DiscoverSummary> {
     let original = read_model(model_path)?;
+    // Free-run simulations treat the inputs between samples as the model file says (the
+    // records come back tagged with its `intersample`).
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &original)?;
-    // Free-run simulations treat the inputs between samples as the model file says.
-    let data = data.with_intersample(original.intersample);
-    let val = val.map(|v| v.with_intersample(original.intersample));
     ensure_dir(out)?;
 
     let first = estimate_spec(&original, &data, &mme_config(&original, &opts.estimate))?;

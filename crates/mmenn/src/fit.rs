@@ -1,7 +1,10 @@
 //! `mmenn fit` and `mmenn predict`: the MME/NN hybrid model (thesis ch. 4). MME gives
 //! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; by default its weights are then refined
 //! on the training trajectories (thesis §7.1; [`crate::refine`]); the plant model
-//! `ẋ = f(x, u) + E·NN(x, u)` then predicts free-run from an initial state.
+//! `ẋ = f(x, u) + E·NN(x, u)` then predicts free-run from an initial state. Every step
+//! (MME, network selection, refinement, free runs, `predict`) treats the inputs between
+//! samples as the model file's `intersample` says; `model.json` keeps the model file, so
+//! `predict` follows the setting the model was fitted with.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -26,8 +29,9 @@ use crate::refine::{refine_network, validation_run};
 /// Format tag of `model.json`.
 pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
 
-/// The hybrid model as saved in `model.json`: the assumed model (model-file TOML text),
-/// the trained network, the training initial state and the integration settings.
+/// The hybrid model as saved in `model.json`: the assumed model (model-file TOML text, with
+/// its `intersample`), the trained network, the training initial state and the integration
+/// settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct HybridFile {
     /// Always [`HYBRID_FORMAT`].
@@ -48,7 +52,8 @@ pub struct HybridFile {
 pub type HybridModel = CorrectedModel<TermModel, NetCorrection>;
 
 impl HybridFile {
-    /// The model-file part.
+    /// The model-file part (its `intersample` is how `predict` treats the inputs between
+    /// samples).
     pub fn spec(&self) -> Result<ModelSpec> {
         parse_model(Path::new("model.json:model_toml"), &self.model_toml)
     }
@@ -176,7 +181,7 @@ pub enum NetworkSelection {
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
 /// and its sum of squared output errors (observed samples of every channel, first
-/// experiment).
+/// experiment; inputs between samples as its `intersample` says).
 fn select_by_free_run(
     spec: &ModelSpec,
     networks: &[Mlp],
@@ -189,7 +194,9 @@ fn select_by_free_run(
     let mut best: Option<(usize, f64)> = None;
     for (i, net) in networks.iter().enumerate() {
         let model = hybrid_model(spec, net.clone(), x0, substeps)?;
-        let Ok(xs) = model.simulate_states(x0, exp.t0(), exp.dt(), exp.inputs()) else {
+        let Ok(xs) =
+            model.simulate_states_with(x0, exp.t0(), exp.dt(), exp.inputs(), exp.intersample())
+        else {
             continue;
         };
         let y = c * xs;
@@ -301,11 +308,11 @@ fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
     m.row(i).iter().copied().collect()
 }
 
-/// Simulate free-run over an experiment's inputs from `x0`; metrics for `channels`
-/// (name, row of the model state/output matrix) against the experiment's outputs.
-fn free_run(model: &HybridModel, exp: &Experiment, x0: &[f64]) -> Result<DMatrix<f64>> {
+/// Simulate free-run over an experiment's inputs from `x0`, the inputs between samples
+/// held or interpolated as the experiment's `intersample` says.
+pub(crate) fn free_run(model: &HybridModel, exp: &Experiment, x0: &[f64]) -> Result<DMatrix<f64>> {
     model
-        .simulate_states(x0, exp.t0(), exp.dt(), exp.inputs())
+        .simulate_states_with(x0, exp.t0(), exp.dt(), exp.inputs(), exp.intersample())
         .map_err(|source| MmennError::Core {
             context: "free-run simulation of the hybrid model",
             source,
@@ -742,7 +749,9 @@ pub fn run_predict(
         .map(|(i, n)| (n.clone(), i))
         .collect();
     let names: Vec<String> = states.iter().map(|(n, _)| n.clone()).collect();
-    let exp = table_to_experiment(&table, lin.input_names(), &names)?;
+    // Inputs between samples as the model was fitted with (the model file's `intersample`).
+    let exp =
+        table_to_experiment(&table, lin.input_names(), &names)?.with_intersample(spec.intersample);
     let sel = DMatrix::from_fn(states.len(), lin.n_states(), |r, c| {
         if states[r].1 == c { 1.0 } else { 0.0 }
     });

@@ -119,7 +119,9 @@ pub fn record_features(
         lin.input_names(),
         lin.output_names(),
         &spec.units,
-    )?;
+    )?
+    // MME follows the model file's inputs-between-samples setting.
+    .with_intersample(spec.intersample);
     let out = estimate_spec(spec, &data, &mme_config(spec, &opts.estimate))?;
     let mut parts: Vec<NamedFeatures> = Vec::new();
     if opts.features != FeatureKind::Physical {

@@ -11,7 +11,7 @@ use serde::Serialize;
 use sysid_core::{Dataset, Experiment, InitialStateFit, MmeEstimate, fit_initial_state};
 
 use crate::error::{MmennError, Result};
-use crate::fit::{FitOptions, HybridModel, hybrid_model, metrics_for};
+use crate::fit::{FitOptions, HybridModel, free_run, hybrid_model, metrics_for};
 use crate::model_file::ModelSpec;
 
 /// Whether `fit` refines the network on trajectories after training it on `d̂`.
@@ -86,7 +86,8 @@ impl RefineSummary {
     }
 }
 
-/// Shooting records: each experiment with MME's `x̂` of it.
+/// Shooting records: each experiment (with its `intersample`, which the windows follow)
+/// with MME's `x̂` of it.
 fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<ShootingRecord<'a>> {
     data.experiments()
         .iter()
@@ -148,7 +149,8 @@ pub(crate) fn refine_network(
 }
 
 /// Free-run on a validation record: the initial state fitted to its first `window`
-/// samples (from `guess`), then the states over the whole record.
+/// samples (from `guess`), then the states over the whole record (both with the inputs
+/// between samples as the record's `intersample` says).
 pub(crate) fn validation_run(
     model: &HybridModel,
     c: &DMatrix<f64>,
@@ -165,11 +167,6 @@ pub(crate) fn validation_run(
         context: "fitting the validation initial state",
         source,
     })?;
-    let xs = model
-        .simulate_states(&x0, exp.t0(), exp.dt(), exp.inputs())
-        .map_err(|source| MmennError::Core {
-            context: "free-run simulation of the hybrid model",
-            source,
-        })?;
+    let xs = free_run(model, exp, &x0)?;
     Ok((x0, xs))
 }

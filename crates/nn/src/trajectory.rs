@@ -51,7 +51,9 @@ pub struct TrajectoryConfig {
     /// Stop when an accepted step lowers the training objective by less than this
     /// fraction. Default 1e-6.
     pub min_relative_decrease: f64,
-    /// RK4 steps per sample interval (inputs held between samples). Default 4.
+    /// RK4 steps per sample interval. Inputs between samples follow each record's
+    /// [`Experiment::intersample`]: held ([`sysid_core::InterSample::Zoh`]) or linear
+    /// to the next sample ([`sysid_core::InterSample::Foh`]). Default 4.
     pub substeps: usize,
     /// States beyond this magnitude count as a diverged window. Default 1e12.
     pub blow_up: f64,
@@ -136,7 +138,9 @@ pub struct HybridParts<'a, F> {
 }
 
 /// One record to shoot over: its inputs and measured outputs (NaN = not observed), and
-/// the state estimate at every sample, from which each window starts.
+/// the state estimate at every sample, from which each window starts. Windows are
+/// simulated with the inputs between samples as the experiment's
+/// [`Experiment::intersample`] says.
 #[derive(Debug, Clone, Copy)]
 pub struct ShootingRecord<'a> {
     /// Inputs (`m × N`) and measured outputs (`p × N`).

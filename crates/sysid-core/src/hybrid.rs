@@ -1,13 +1,14 @@
 //! The completed plant model of MME/NN (thesis ch. 4): the assumed dynamics plus a
 //! correction term, `ẋ = f(x, u) + E·g(x, u)`, simulated free-run from an initial state
 //! with blow-up detection. `g` is any [`Correction`] (a trained network, a sum of named
-//! effects); `f` is any [`Dynamics`] (the assumed linear model, or a `TermModel`).
+//! effects); `f` is any [`Dynamics`] (the assumed linear model, or a `TermModel`). Inputs
+//! between samples are held or interpolated as the experiment's [`InterSample`] says.
 
 use nalgebra::DMatrix;
 
 use crate::dynamics::{Correction, Dynamics, Horizon, Model, Prediction};
 use crate::error::{CoreError, Result};
-use crate::integrate::{Integrator, simulate};
+use crate::integrate::{Integrator, InterSample, simulate, simulate_with};
 
 /// `ẋ = f(x, u) + E·g(x, u)`, `y = C x`, with a free-run initial state.
 #[derive(Debug, Clone)]
@@ -92,7 +93,8 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
         &self.correction
     }
 
-    /// Free-run states over an input sequence (`m × N`), from `x0`, `n × N`.
+    /// Free-run states over an input sequence (`m × N`), from `x0`, `n × N`, inputs held
+    /// between samples.
     pub fn simulate_states(
         &self,
         x0: &[f64],
@@ -101,6 +103,29 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
         inputs: &DMatrix<f64>,
     ) -> Result<DMatrix<f64>> {
         simulate(self, x0, t0, dt, inputs, &self.integrator, self.blow_up)
+    }
+
+    /// [`CorrectedModel::simulate_states`] with the inputs between samples as `hold`
+    /// says (interpolated linearly for [`InterSample::Foh`]; the same bits as
+    /// `simulate_states` for [`InterSample::Zoh`]).
+    pub fn simulate_states_with(
+        &self,
+        x0: &[f64],
+        t0: f64,
+        dt: f64,
+        inputs: &DMatrix<f64>,
+        hold: InterSample,
+    ) -> Result<DMatrix<f64>> {
+        simulate_with(
+            self,
+            x0,
+            t0,
+            dt,
+            inputs,
+            hold,
+            &self.integrator,
+            self.blow_up,
+        )
     }
 }
 
@@ -139,13 +164,15 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
         self.output_names.clone()
     }
 
-    /// Free-run simulation from `self.x0` over the experiment's inputs.
+    /// Free-run simulation from `self.x0` over the experiment's inputs, held or
+    /// interpolated between samples as [`crate::Experiment::intersample`] says.
     fn simulate(&self, experiment: &crate::Experiment) -> Result<Prediction> {
-        let xs = self.simulate_states(
+        let xs = self.simulate_states_with(
             &self.x0,
             experiment.t0(),
             experiment.dt(),
             experiment.inputs(),
+            experiment.intersample(),
         )?;
         Ok(Prediction {
             horizon: Horizon::FreeRun,
@@ -156,7 +183,8 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
 
     /// k-step prediction needs a state estimate at every sample, which only full-state
     /// measurement gives here: with `C = I`-like selections of every state, the state at
-    /// sample `k − steps` is taken from the measurement and simulated `steps` ahead.
+    /// sample `k − steps` is taken from the measurement and simulated `steps` ahead (inputs
+    /// between samples as the experiment's [`InterSample`] says).
     fn predict(&self, experiment: &crate::Experiment, steps: usize) -> Result<Prediction> {
         let n = self.n_states();
         let idx = full_state_selection(&self.c, n).ok_or(CoreError::InvalidArgument {
@@ -178,12 +206,14 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
                 x[state] = y[row];
             }
             for j in start..k {
-                crate::integrate::integrate_interval(
+                crate::integrate::integrate_sample(
                     self,
                     experiment.time(j),
                     experiment.time(j + 1),
                     &mut x,
                     experiment.input(j),
+                    experiment.input(j + 1),
+                    experiment.intersample(),
                     &self.integrator,
                     &mut ws,
                 )?;
@@ -295,6 +325,110 @@ mod tests {
             .fold(0.0, f64::max);
         assert!(err < 1e-12, "max error {err}");
         assert_eq!(pred.horizon, Horizon::FreeRun);
+    }
+
+    /// Correction `d = u`: the input enters only through the correction.
+    struct InputOnly;
+    impl Correction for InputOnly {
+        fn n_states(&self) -> usize {
+            1
+        }
+        fn n_inputs(&self) -> usize {
+            1
+        }
+        fn n_outputs(&self) -> usize {
+            1
+        }
+        fn eval(&self, _x: &[f64], u: &[f64], d: &mut [f64]) {
+            d[0] = u[0];
+        }
+    }
+
+    /// `ẋ = −x + E·d`, `d = u`, with the ramp `u = a + b·t` sampled every `dt`: the
+    /// closed form is `x(t) = (x₀ − p(t₀))·e^{−(t−t₀)} + p(t)`, `p(t) = a + b·t − b`.
+    /// Interpolated (first-order hold), the hybrid model must meet it to 1e-9 (RK4 with
+    /// 20 sub-steps, local error ~h⁵/120 ≈ 3e-14 per step); held, it lags the ramp by about
+    /// half a sample, a steady error near `b·dt/2`. The held path is the same bits whichever way
+    /// it is asked for, and one-step prediction from exact states follows the hold too.
+    #[test]
+    fn first_order_hold_follows_a_ramp_input() {
+        let (a, b, t0, dt, len, x0) = (0.3, 1.5, 0.2, 0.1, 81, 0.4);
+        let p = |t: f64| a + b * t - b;
+        let exact = |t: f64| (x0 - p(t0)) * (-(t - t0)).exp() + p(t);
+        let lin = LinearModel::new(
+            DMatrix::from_element(1, 1, -1.0),
+            DMatrix::zeros(1, 1),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 1.0),
+        )
+        .unwrap();
+        let mut hybrid = CorrectedModel::new(
+            lin.clone(),
+            InputOnly,
+            lin.e().clone(),
+            lin.c().clone(),
+            vec!["x".into()],
+        )
+        .unwrap();
+        hybrid.x0 = vec![x0];
+        hybrid.integrator = Integrator::Rk4 { substeps: 20 };
+        let u = DMatrix::from_fn(1, len, |_, k| a + b * (t0 + k as f64 * dt));
+        let truth = DMatrix::from_fn(1, len, |_, k| exact(t0 + k as f64 * dt));
+        let exp = crate::Experiment::new(t0, dt, u.clone(), truth.clone()).unwrap();
+        let foh = exp.clone().with_intersample(InterSample::Foh);
+
+        let sim = hybrid.simulate(&foh).unwrap().outputs;
+        let states = hybrid
+            .simulate_states_with(&[x0], t0, dt, &u, InterSample::Foh)
+            .unwrap();
+        let foh_err = (0..len)
+            .map(|k| (sim[(0, k)] - truth[(0, k)]).abs())
+            .fold(0.0, f64::max);
+        assert!(foh_err < 1e-9, "foh max error {foh_err}");
+        assert_eq!(sim, states);
+
+        let held = hybrid.simulate(&exp).unwrap().outputs;
+        // The held error obeys e_{k+1} = e^{−dt}·e_k + b·(dt − 1 + e^{−dt}) from e_0 = 0, so
+        // after 80 samples it is e_∞·(1 − e^{−8}), e_∞ = b·(dt − 1 + e^{−dt})/(1 − e^{−dt})
+        // ≈ b·dt/2 (0.0762 here; e_∞·e^{−8} ≈ 3e-5).
+        let lag = truth[(0, len - 1)] - held[(0, len - 1)];
+        let e_inf = b * (dt - 1.0 + (-dt).exp()) / (1.0 - (-dt).exp());
+        let expected = e_inf * (1.0 - (-8.0_f64).exp());
+        assert!((lag - expected).abs() < 1e-9, "zoh lag {lag} vs {expected}");
+        assert!(lag > 1e5 * foh_err);
+        let bits = |m: &DMatrix<f64>| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let zoh = hybrid
+            .simulate_states_with(&[x0], t0, dt, &u, InterSample::Zoh)
+            .unwrap();
+        let old = hybrid.simulate_states(&[x0], t0, dt, &u).unwrap();
+        assert_eq!(bits(&zoh), bits(&old));
+        assert_eq!(bits(&held), bits(&old));
+        // The held input through B instead of the correction: the same flow to rounding.
+        let via_b = LinearModel::new(
+            DMatrix::from_element(1, 1, -1.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 1.0),
+            DMatrix::from_element(1, 1, 1.0),
+        )
+        .unwrap();
+        let plain_b = simulate(&via_b, &[x0], t0, dt, &u, &hybrid.integrator, 1e12).unwrap();
+        assert!((&old - plain_b).abs().max() < 1e-13);
+
+        let one_step = hybrid.predict(&foh, 1).unwrap().outputs;
+        let held_step = hybrid.predict(&exp, 1).unwrap().outputs;
+        for k in 1..len {
+            assert!(
+                (one_step[(0, k)] - truth[(0, k)]).abs() < 1e-11,
+                "sample {k}"
+            );
+            // One held interval from the exact state misses by b·(dt − 1 + e^{−dt}) ≈ b·dt²/2.
+            let miss = truth[(0, k)] - held_step[(0, k)];
+            let expected = b * (dt - 1.0 + (-dt).exp());
+            assert!(
+                (miss - expected).abs() < 1e-9,
+                "sample {k}: {miss} vs {expected}"
+            );
+        }
     }
 
     #[test]

@@ -1,10 +1,11 @@
 //! The simulation side of trajectory refinement: shooting windows simulated free-run by
-//! RK4 with the network in the loop, their scaled residuals, the fit of a window's start
-//! state, and the forward-difference Jacobian over weights and start states.
+//! RK4 with the network in the loop (inputs held or interpolated between samples as each
+//! record's experiment says), their scaled residuals, the fit of a window's start state,
+//! and the forward-difference Jacobian over weights and start states.
 
 use nalgebra::{Cholesky, DMatrix, DVector};
 use rayon::prelude::*;
-use sysid_core::Dynamics;
+use sysid_core::{Dynamics, InterSample};
 
 use super::{HybridParts, ShootingRecord};
 use crate::mlp::{Mlp, Workspace};
@@ -37,6 +38,8 @@ pub(super) struct Buffers {
     xu: Vec<f64>,
     d: Vec<f64>,
     ws: Workspace,
+    /// Interpolated inputs at the start, middle and end of an RK4 step (first-order hold).
+    u: [Vec<f64>; 3],
 }
 
 impl Buffers {
@@ -48,12 +51,27 @@ impl Buffers {
             xu: vec![0.0; n + m],
             d: vec![0.0; q],
             ws: Workspace::new(),
+            u: std::array::from_fn(|_| vec![0.0; m]),
         }
     }
 }
 
+/// The input over one RK4 step.
+#[derive(Clone, Copy)]
+enum StepInput<'u> {
+    /// Held at the sample's value (zero-order hold): every stage reads this slice.
+    Held(&'u [f64]),
+    /// Linear from `ua` (this sample) to `ub` (the next): the step's start, middle and end
+    /// lie at fractions `s` of the sample interval.
+    Ramp {
+        ua: &'u [f64],
+        ub: &'u [f64],
+        s: [f64; 3],
+    },
+}
+
 impl<F: Dynamics> Shooter<'_, F> {
-    /// `dx = f(x, u) + E·NN([x; u])` at `x` with `u` held.
+    /// `dx = f(x, u) + E·NN([x; u])` at `x` and input `u`.
     fn rhs(&self, net: &Mlp, x: &[f64], u: &[f64], dx: &mut [f64], b: &mut BufRest<'_>) {
         self.parts.base.rhs(0.0, x, u, dx);
         let n = x.len();
@@ -87,11 +105,25 @@ impl<F: Dynamics> Shooter<'_, F> {
         let p = c.nrows();
         let exp = self.records[w.record].experiment;
         let h = exp.dt() / self.substeps as f64;
+        let steps = self.substeps as f64;
         b.x.copy_from_slice(x0);
         for (k, rk) in (w.start..w.end).zip(r.chunks_exact_mut(p)) {
-            let u = exp.input(k);
-            for _ in 0..self.substeps {
-                self.rk4(net, h, u, b);
+            let ua = exp.input(k);
+            for j in 0..self.substeps {
+                let input = match exp.intersample() {
+                    InterSample::Zoh => StepInput::Held(ua),
+                    // Windows end at most at the last sample, so `k + 1` exists.
+                    InterSample::Foh => StepInput::Ramp {
+                        ua,
+                        ub: exp.input(k + 1),
+                        s: [
+                            j as f64 / steps,
+                            (j as f64 + 0.5) / steps,
+                            (j + 1) as f64 / steps,
+                        ],
+                    },
+                };
+                self.rk4(net, h, input, b);
             }
             // NaN counts as diverged too.
             if !b.x.iter().all(|v| v.abs() <= self.blow_up) {
@@ -215,8 +247,9 @@ impl<F: Dynamics> Shooter<'_, F> {
         sse
     }
 
-    /// One classical RK4 step of size `h` on `b.x` with `u` held.
-    fn rk4(&self, net: &Mlp, h: f64, u: &[f64], b: &mut Buffers) {
+    /// One classical RK4 step of size `h` on `b.x`; stage 1 reads the input at the step's
+    /// start, stages 2 and 3 at its middle, stage 4 at its end.
+    fn rk4(&self, net: &Mlp, h: f64, input: StepInput<'_>, b: &mut Buffers) {
         let Buffers {
             x,
             tmp,
@@ -224,22 +257,35 @@ impl<F: Dynamics> Shooter<'_, F> {
             xu,
             d,
             ws,
+            u,
         } = b;
+        let (u_start, u_mid, u_end): (&[f64], &[f64], &[f64]) = match input {
+            StepInput::Held(v) => (v, v, v),
+            StepInput::Ramp { ua, ub, s } => {
+                for (buf, si) in u.iter_mut().zip(s) {
+                    for ((o, a), z) in buf.iter_mut().zip(ua).zip(ub) {
+                        *o = a + si * (z - a);
+                    }
+                }
+                let [u0, u1, u2] = u;
+                (u0.as_slice(), u1.as_slice(), u2.as_slice())
+            }
+        };
         let mut rest = BufRest { xu, d, ws };
         let [k1, k2, k3, k4] = k;
-        self.rhs(net, x, u, k1, &mut rest);
+        self.rhs(net, x, u_start, k1, &mut rest);
         for ((t, xi), ki) in tmp.iter_mut().zip(x.iter()).zip(k1.iter()) {
             *t = xi + 0.5 * h * ki;
         }
-        self.rhs(net, tmp, u, k2, &mut rest);
+        self.rhs(net, tmp, u_mid, k2, &mut rest);
         for ((t, xi), ki) in tmp.iter_mut().zip(x.iter()).zip(k2.iter()) {
             *t = xi + 0.5 * h * ki;
         }
-        self.rhs(net, tmp, u, k3, &mut rest);
+        self.rhs(net, tmp, u_mid, k3, &mut rest);
         for ((t, xi), ki) in tmp.iter_mut().zip(x.iter()).zip(k3.iter()) {
             *t = xi + h * ki;
         }
-        self.rhs(net, tmp, u, k4, &mut rest);
+        self.rhs(net, tmp, u_end, k4, &mut rest);
         for (i, xi) in x.iter_mut().enumerate() {
             *xi += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
         }
