@@ -158,7 +158,8 @@ def main():
     json.dump(cache, open(cache_path, "w"))
     threads = rust.get("threads", 1)
     damping = rust.get("damping", "Trainlm")
-    print(f"Rust: {damping} damping, {threads} thread(s); Rust time columns are process CPU "
+    acceleration = rust.get("acceleration", "None")
+    print(f"Rust: {damping} damping, {acceleration} acceleration, {threads} thread(s); Rust time columns are process CPU "
           "time (all threads) and wall-clock time; scipy's is its thread's CPU time.")
     print()
     print("| N | H | seed | Rust CPU to target (s) | Rust wall to target (s) "

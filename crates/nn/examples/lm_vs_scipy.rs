@@ -8,12 +8,14 @@
 //! wall-clock time.
 //!
 //! Run: `cargo run --release -p nn --example lm_vs_scipy -- OUT_DIR [N [H]] [--threads K]
-//! [--damping NAME] [--seeds S1,S2,…] [--mu-decrease F] [--mu-increase F]`, then
+//! [--damping NAME] [--acceleration NAME] [--seeds S1,S2,…] [--mu-decrease F]
+//! [--mu-increase F]`, then
 //! `python3 crates/nn/benches/scipy_lm.py OUT_DIR` (see the crate README). `--threads`
 //! sizes rayon's pool (default 1); `--damping` picks [`nn::Damping`] by its snake_case name
 //! (default `trainlm`); `--seeds` lists the seeds of [`Mlp::for_data`]'s initial weights
 //! (default 11, the single start of the first comparison); `--mu-decrease` and
-//! `--mu-increase` set [`LmConfig`]'s factors.
+//! `--mu-increase` set [`LmConfig`]'s factors; `--acceleration geodesic` turns on
+//! [`nn::Acceleration::Geodesic`] (default `none`).
 
 #![allow(clippy::print_stderr)]
 
