@@ -148,6 +148,10 @@ struct FitArgs {
     /// Largest network of the automatic sizing sweep.
     #[arg(long, default_value_t = 10)]
     max_hidden: usize,
+    /// How networks are trained: trainlm (MATLAB's schedule, the thesis) or accelerated
+    /// (trainlm for 10 steps, then gain ratio with geodesic acceleration).
+    #[arg(long, default_value = "trainlm")]
+    training: mmenn::fit::Training,
     /// Update the assumed model by regression on d̂ first: none or regression (thesis §4.3.3).
     #[arg(long, default_value = "none")]
     update_model: mmenn::fit::ModelUpdateChoice,
@@ -352,6 +356,7 @@ fn fit(args: FitArgs) -> Result<()> {
         selection: args.select,
         seed: args.seed,
         refine: args.refine,
+        training: args.training,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.refine_window,
             ..Default::default()
