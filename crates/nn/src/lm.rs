@@ -159,8 +159,11 @@ pub fn split_indices(n: usize, split: &ValidationSplit) -> Result<(Vec<usize>, V
 /// follows [`LmConfig::damping`] (default `trainlm`'s: μ ← μ·`mu_decrease` after an
 /// accepted step, μ ← μ·`mu_increase` after a rejected one), and a rejected step is solved
 /// again with the larger μ (a failed factorisation counts as a rejected step) until
-/// μ > `mu_max`. A trial step's error sum stops as soon as a partial sum shows it cannot
-/// lower the objective (the same decision as the full sum). Stopping is checked before
+/// μ > `mu_max`. With [`LmConfig::acceleration`] = [`crate::Acceleration::Geodesic`] the
+/// trial point is `w + δ + a/2` with the geodesic correction `a` from the same
+/// factorisation, and a step whose correction is too large counts as rejected. A trial
+/// step's error sum stops as soon as a partial sum shows it cannot lower the objective
+/// (the same decision as the full sum). Stopping is checked before
 /// each epoch in this order: goal MSE, gradient norm, validation failures, epoch budget
 /// (Hagan & Menhaj, IEEE TNN 1994; MATLAB `trainlm`).
 ///
