@@ -90,8 +90,9 @@ fn default_free(spec: &ModelSpec) -> Vec<String> {
 /// The hybrid model with its initial state fitted to the first samples of `data`'s
 /// first experiment (the same rule `mmenn predict` uses). The records carry the model
 /// file's `intersample`, which this fit and the hybrid model's free runs
-/// (`Model::simulate`) follow; the linear baselines still hold the inputs (their
-/// discretisation is zero-order hold) and NARX reads the samples.
+/// (`Model::simulate`) follow, and so do the linear baselines (the assumed model and the
+/// output-error fit are `OeModel`s, simulated and fitted with the exact discretisation of
+/// each record's hold); NARX reads the samples only.
 fn hybrid_for(file: &HybridFile, data: &Dataset, window: usize) -> Result<HybridModel> {
     let mut model = file.model()?;
     let spec = file.spec()?;

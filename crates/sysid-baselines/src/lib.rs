@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod correlation;
+mod discrete;
 pub mod error;
 pub mod evaluate;
 pub mod free_params;

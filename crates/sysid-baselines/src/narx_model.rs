@@ -14,6 +14,9 @@ use crate::regressors::{NarxOrders, fill_regressor};
 /// A NARX model `y(k) = F(y(k−1…k−na), u(k−nk…k−nk−nb+1))` with `F` an [`Mlp`]
 /// (reading the regressor's principal components when a projection is set).
 /// Deserialisation re-checks every dimension through [`NarxModel::new`].
+///
+/// A discrete-time model of the samples themselves: how the inputs moved between samples
+/// ([`Experiment::intersample`]) means nothing to it and is ignored.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "NarxModelRaw")]
 pub struct NarxModel {

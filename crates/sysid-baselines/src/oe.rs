@@ -1,17 +1,18 @@
 //! Output-error fitting of a continuous-time linear model (thesis §5.1): chosen free
 //! entries of `A(θ)` and `B(θ)`, started from a physics model, fitted by minimising the
-//! free-run simulation error over every experiment, with ±1σ from the Jacobian and a
-//! stability check.
+//! free-run simulation error over every experiment (each simulated exactly for its inputs
+//! between samples, held or linear), with ±1σ from the Jacobian and a stability check.
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use sysid_core::{Dataset, LinearModel, SolveReport};
 
+use crate::discrete::SampleStep;
 use crate::error::{BaselineError, Result, check_config};
 use crate::free_params::{FreeParameter, parse_free_parameters};
 use crate::lsq::{self, LeastSquares, Linearised, Settings, check_rank};
 use crate::oe_model::{OeModel, state_from_window};
-use crate::oe_sim::{OeProblem, X0Layout, zoh};
+use crate::oe_sim::{OeProblem, X0Layout};
 
 /// How the initial state of each experiment is treated while fitting.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
@@ -207,7 +208,10 @@ pub(crate) fn check_channels(data: &Dataset, inputs: &[String], outputs: &[Strin
 
 /// Fit the free entries of `A` and `B` (and the initial states) of `initial` to the data
 /// by minimising `Σ_experiments Σ_k Σ_channels (ŷ − y)²` over measured samples, where `ŷ`
-/// is the exact-ZOH free-run simulation.
+/// is the exact free-run simulation for each experiment's
+/// [`intersample`](sysid_core::Experiment::intersample): zero-order hold for held inputs,
+/// first-order hold (`x⁺ = Ad x + Bd u_k + Γ₂ (u_{k+1} − u_k)`) for inputs linear between
+/// samples, so a fit to `foh` records is the exact `foh` model.
 ///
 /// The data's input and output channels must be the model's (names, in order). Errors:
 /// invalid config, bad or duplicate free-parameter names, channel mismatch, a given
@@ -360,10 +364,10 @@ fn initial_parameters(
     if matches!(problem.x0, X0Layout::Estimated) {
         let n = initial.n_states();
         for exp in data.experiments() {
-            let (ad, bd) = zoh(initial.a(), initial.b(), exp.dt())?;
+            let step = SampleStep::new(initial.a(), initial.b(), exp.dt(), exp.intersample())?;
             let window = (10 * n).min(exp.len());
-            let x0 = state_from_window(initial, &ad, &bd, exp, 0, window)
-                .unwrap_or_else(|_| vec![0.0; n]);
+            let x0 =
+                state_from_window(initial, &step, exp, 0, window).unwrap_or_else(|_| vec![0.0; n]);
             theta.extend(x0);
         }
     }

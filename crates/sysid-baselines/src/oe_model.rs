@@ -1,14 +1,16 @@
 //! The fitted output-error model as a [`sysid_core::Model`]: free-run simulation from an
 //! initial state (zero, given, or estimated from the first measured samples) and k-step
-//! prediction by re-estimating the state from a window of past measurements.
+//! prediction by re-estimating the state from a window of past measurements, each with
+//! the exact discretisation of the experiment's inputs between samples (held or linear).
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use sysid_core::{Experiment, Horizon, LinearModel, Model, Prediction};
 
+use crate::discrete::SampleStep;
 use crate::error::{BaselineError, Result};
 use crate::lsq::RANK_RTOL;
-use crate::oe_sim::{simulate_states, zoh};
+use crate::oe_sim::simulate_states;
 
 /// Where a free-run simulation of an [`OeModel`] starts.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -24,7 +26,12 @@ pub enum X0Policy {
     FromData,
 }
 
-/// A continuous-time linear model `ẋ = A x + B u`, `y = C x`, simulated with exact ZOH.
+/// A continuous-time linear model `ẋ = A x + B u`, `y = C x`, simulated exactly for the
+/// inputs between samples that each experiment declares
+/// ([`Experiment::intersample`](sysid_core::Experiment::intersample)): held (zero-order
+/// hold, `x⁺ = Ad x + Bd u_k`) or linear (first-order hold,
+/// `x⁺ = Ad x + Bd u_k + Γ₂ (u_{k+1} − u_k)`). The state at a sample reads the inputs up to
+/// that sample only, so no input beyond a record's last sample is needed.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OeModel {
     /// The model (`E` is carried along but unused).
@@ -74,15 +81,20 @@ impl OeModel {
         Ok(())
     }
 
-    fn discrete(&self, dt: f64) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
-        zoh(self.model.a(), self.model.b(), dt)
+    /// The exact step over the experiment's sample period for its inputs between samples.
+    fn discrete(&self, experiment: &Experiment) -> Result<SampleStep> {
+        SampleStep::new(
+            self.model.a(),
+            self.model.b(),
+            experiment.dt(),
+            experiment.intersample(),
+        )
     }
 
     /// Outputs `p × N` from state `x0` at sample `start` (columns before `start` are NaN).
     fn run_from(
         &self,
-        ad: &DMatrix<f64>,
-        bd: &DMatrix<f64>,
+        step: &SampleStep,
         x0: &[f64],
         inputs: &DMatrix<f64>,
         start: usize,
@@ -90,7 +102,7 @@ impl OeModel {
         let len = inputs.ncols();
         let tail = inputs.columns(start, len - start).into_owned();
         let states =
-            simulate_states(ad, bd, x0, &tail).ok_or_else(|| diverged(ad, bd, x0, &tail, start))?;
+            simulate_states(step, x0, &tail).ok_or_else(|| diverged(step, x0, &tail, start))?;
         let y = self.model.c() * states;
         let mut out = DMatrix::from_element(self.model.n_outputs(), len, f64::NAN);
         out.columns_mut(start, len - start).copy_from(&y);
@@ -107,8 +119,8 @@ impl OeModel {
                 expected: self.model.n_states(),
             });
         }
-        let (ad, bd) = self.discrete(experiment.dt())?;
-        let outputs = self.run_from(&ad, &bd, x0, experiment.inputs(), 0)?;
+        let step = self.discrete(experiment)?;
+        let outputs = self.run_from(&step, x0, experiment.inputs(), 0)?;
         Ok(Prediction {
             horizon: Horizon::FreeRun,
             outputs,
@@ -125,22 +137,16 @@ impl OeModel {
         window: usize,
     ) -> Result<Vec<f64>> {
         self.check(experiment, true)?;
-        let (ad, bd) = self.discrete(experiment.dt())?;
-        state_from_window(&self.model, &ad, &bd, experiment, start, window)
+        let step = self.discrete(experiment)?;
+        state_from_window(&self.model, &step, experiment, start, window)
     }
 }
 
-fn diverged(
-    ad: &DMatrix<f64>,
-    bd: &DMatrix<f64>,
-    x0: &[f64],
-    inputs: &DMatrix<f64>,
-    start: usize,
-) -> BaselineError {
+fn diverged(step: &SampleStep, x0: &[f64], inputs: &DMatrix<f64>, start: usize) -> BaselineError {
     // Re-run to locate the sample and state that left the bound.
     let mut x = DVector::from_column_slice(x0);
     for k in 1..inputs.ncols() {
-        x = ad * &x + bd * inputs.column(k - 1);
+        x = step.advance(&x, inputs, k - 1);
         if let Some((i, v)) = x
             .iter()
             .enumerate()
@@ -161,15 +167,16 @@ fn diverged(
 }
 
 /// Least-squares `x_start` from `y_k = C Ad^(k−start) x_start + forced response`,
-/// `k = start..start+window`, over the measured samples.
+/// `k = start..start+window`, over the measured samples. The forced response follows
+/// `step` (inputs held or linear); it reads inputs `start..start+window` only.
 pub(crate) fn state_from_window(
     model: &LinearModel,
-    ad: &DMatrix<f64>,
-    bd: &DMatrix<f64>,
+    step: &SampleStep,
     experiment: &Experiment,
     start: usize,
     window: usize,
 ) -> Result<Vec<f64>> {
+    let ad = &step.ad;
     let n = model.n_states();
     let p = model.n_outputs();
     let end = start + window;
@@ -193,8 +200,12 @@ pub(crate) fn state_from_window(
                 rows.push((co.row(i).iter().copied().collect(), y - yf[i]));
             }
         }
-        phi = ad * phi;
-        forced = ad * forced + bd * DVector::from_column_slice(experiment.input(k));
+        // The state after the window's last sample is not needed (and for linear inputs
+        // would read the input after the window).
+        if k + 1 < end {
+            phi = ad * phi;
+            forced = step.advance(&forced, experiment.inputs(), k);
+        }
     }
     let unobservable = BaselineError::Unobservable {
         sample: start,
@@ -231,7 +242,7 @@ impl Model for OeModel {
     fn simulate(&self, experiment: &Experiment) -> Result<Prediction> {
         let from_data = matches!(self.initial_state, X0Policy::FromData);
         self.check(experiment, from_data)?;
-        let (ad, bd) = self.discrete(experiment.dt())?;
+        let step = self.discrete(experiment)?;
         let (x0, skip) = match &self.initial_state {
             X0Policy::Zero => (vec![0.0; self.model.n_states()], 0),
             X0Policy::Given(x0) => {
@@ -245,11 +256,11 @@ impl Model for OeModel {
                 (x0.clone(), 0)
             }
             X0Policy::FromData => (
-                state_from_window(&self.model, &ad, &bd, experiment, 0, self.observer_window)?,
+                state_from_window(&self.model, &step, experiment, 0, self.observer_window)?,
                 self.observer_window,
             ),
         };
-        let outputs = self.run_from(&ad, &bd, &x0, experiment.inputs(), 0)?;
+        let outputs = self.run_from(&step, &x0, experiment.inputs(), 0)?;
         Ok(Prediction {
             horizon: Horizon::FreeRun,
             outputs,
@@ -277,15 +288,17 @@ impl Model for OeModel {
                 available: len,
             });
         }
-        let (ad, bd) = self.discrete(experiment.dt())?;
+        let step = self.discrete(experiment)?;
         let c = self.model.c();
         let mut outputs = DMatrix::from_element(self.model.n_outputs(), len, f64::NAN);
         for t in skip..len {
             let start = t + 1 - k - w;
-            let x = state_from_window(&self.model, &ad, &bd, experiment, start, w)?;
+            let x = state_from_window(&self.model, &step, experiment, start, w)?;
             let mut x = DVector::from_column_slice(&x);
+            // The inputs up to sample t are known (only the outputs are withheld); with
+            // linear inputs the last step reads u_t.
             for j in start..t {
-                x = &ad * x + &bd * DVector::from_column_slice(experiment.input(j));
+                x = step.advance(&x, experiment.inputs(), j);
             }
             if let Some((i, v)) = x.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(BaselineError::Diverged {

@@ -1,6 +1,7 @@
 //! Integration tests of `sysid-baselines`: correlation against closed forms and simulated
-//! processes, output-error fits against known parameters, NARX on the pendulum truth,
-//! evaluation and residual analysis, and input validation.
+//! processes, output-error fits against known parameters (inputs held or linear between
+//! samples), NARX on the pendulum truth, evaluation and residual analysis, and input
+//! validation.
 
 #[path = "cases/common.rs"]
 mod common;
@@ -10,6 +11,8 @@ mod correlation;
 mod errors;
 #[path = "cases/evaluation.rs"]
 mod evaluation;
+#[path = "cases/foh.rs"]
+mod foh;
 #[path = "cases/narx.rs"]
 mod narx;
 #[path = "cases/oe.rs"]
