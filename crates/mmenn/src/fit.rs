@@ -25,6 +25,9 @@ use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
 use crate::plot::{Figure, Series};
 pub use crate::refine::{RefineChoice, RefineSummary};
 use crate::refine::{refine_network, validation_run};
+pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
+
+mod choices;
 
 /// Format tag of `model.json`.
 pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
@@ -102,53 +105,6 @@ pub fn hybrid_model(
     Ok(model)
 }
 
-/// How many hidden units the network gets.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum HiddenChoice {
-    /// The sizing sweep (thesis §3.1: 1–10 units × 10 initialisations) picks.
-    #[default]
-    Auto,
-    /// This many units (still the best of several initialisations).
-    Fixed(usize),
-}
-
-impl std::str::FromStr for HiddenChoice {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
-        if s == "auto" {
-            return Ok(Self::Auto);
-        }
-        match s.parse::<usize>() {
-            Ok(n) if n > 0 => Ok(Self::Fixed(n)),
-            _ => Err(format!("'{s}' is neither \"auto\" nor a positive integer")),
-        }
-    }
-}
-
-/// How the sweep trains its networks on `d̂`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Training {
-    /// MATLAB `trainlm`'s Levenberg–Marquardt (the thesis procedure; the default).
-    #[default]
-    Trainlm,
-    /// `trainlm` for 10 steps, then the gain-ratio schedule with geodesic acceleration
-    /// (`nn::Damping::TrainlmThenGainRatio` + `nn::Acceleration::Geodesic`), measured
-    /// against MINPACK as faster and reaching lower minima (the `nn` crate README).
-    Accelerated,
-}
-
-impl std::str::FromStr for Training {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
-        match s {
-            "trainlm" => Ok(Self::Trainlm),
-            "accelerated" => Ok(Self::Accelerated),
-            _ => Err(format!("'{s}' is neither \"trainlm\" nor \"accelerated\"")),
-        }
-    }
-}
-
 /// Options of [`run_fit`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitOptions {
@@ -179,30 +135,6 @@ pub struct FitOptions {
     pub trajectory: nn::TrajectoryConfig,
     /// How the networks are trained. Default [`Training::Trainlm`].
     pub training: Training,
-}
-
-impl std::str::FromStr for NetworkSelection {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
-        match s {
-            "d-mse" => Ok(Self::CorrectionMse),
-            "free-run" => Ok(Self::FreeRun),
-            _ => Err(format!("'{s}' is neither \"d-mse\" nor \"free-run\"")),
-        }
-    }
-}
-
-/// How `fit` picks the network among the sweep's trained networks.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum NetworkSelection {
-    /// The sweep's rule on the test MSE of `d` (thesis §3.1).
-    #[default]
-    CorrectionMse,
-    /// The network whose hybrid model has the smallest free-run output error on the
-    /// training record (what the model is for; thesis §7.1 suggests judging the network by
-    /// the state predictions). Diverging candidates are skipped.
-    FreeRun,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
@@ -246,28 +178,6 @@ fn select_by_free_run(
             value: f64::NAN,
         },
     })
-}
-
-impl std::str::FromStr for ModelUpdateChoice {
-    type Err = String;
-    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
-        match s {
-            "none" => Ok(Self::None),
-            "regression" => Ok(Self::Regression),
-            _ => Err(format!("'{s}' is neither \"none\" nor \"regression\"")),
-        }
-    }
-}
-
-/// Whether `fit` first updates the assumed model by regressing `d̂` on `[x̂, u]`
-/// (thesis §4.3.3: ignorance model → updated model), then reruns MME with it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum ModelUpdateChoice {
-    /// Use the assumed model as given.
-    #[default]
-    None,
-    /// Regression update of the corrected rows of A and B, then MME again.
-    Regression,
 }
 
 impl Default for FitOptions {

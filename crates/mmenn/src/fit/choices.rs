@@ -1,0 +1,98 @@
+//! The choices of `mmenn fit` that the command line names: the network size, how the
+//! networks are trained, how one is picked from the sweep, and whether the assumed model
+//! is updated first; each parses from its command-line spelling.
+
+use serde::Serialize;
+
+/// How many hidden units the network gets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HiddenChoice {
+    /// The sizing sweep (thesis §3.1: 1–10 units × 10 initialisations) picks.
+    #[default]
+    Auto,
+    /// This many units (still the best of several initialisations).
+    Fixed(usize),
+}
+
+impl std::str::FromStr for HiddenChoice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<usize>() {
+            Ok(n) if n > 0 => Ok(Self::Fixed(n)),
+            _ => Err(format!("'{s}' is neither \"auto\" nor a positive integer")),
+        }
+    }
+}
+
+/// How the sweep trains its networks on `d̂`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Training {
+    /// MATLAB `trainlm`'s Levenberg–Marquardt (the thesis procedure; the default).
+    #[default]
+    Trainlm,
+    /// `trainlm` for 10 steps, then the gain-ratio schedule with geodesic acceleration
+    /// (`nn::Damping::TrainlmThenGainRatio` + `nn::Acceleration::Geodesic`), measured
+    /// against MINPACK as faster and reaching lower minima (the `nn` crate README).
+    Accelerated,
+}
+
+impl std::str::FromStr for Training {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "trainlm" => Ok(Self::Trainlm),
+            "accelerated" => Ok(Self::Accelerated),
+            _ => Err(format!("'{s}' is neither \"trainlm\" nor \"accelerated\"")),
+        }
+    }
+}
+
+impl std::str::FromStr for NetworkSelection {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "d-mse" => Ok(Self::CorrectionMse),
+            "free-run" => Ok(Self::FreeRun),
+            _ => Err(format!("'{s}' is neither \"d-mse\" nor \"free-run\"")),
+        }
+    }
+}
+
+/// How `fit` picks the network among the sweep's trained networks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NetworkSelection {
+    /// The sweep's rule on the test MSE of `d` (thesis §3.1).
+    #[default]
+    CorrectionMse,
+    /// The network whose hybrid model has the smallest free-run output error on the
+    /// training record (what the model is for; thesis §7.1 suggests judging the network by
+    /// the state predictions). Diverging candidates are skipped.
+    FreeRun,
+}
+
+impl std::str::FromStr for ModelUpdateChoice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "none" => Ok(Self::None),
+            "regression" => Ok(Self::Regression),
+            _ => Err(format!("'{s}' is neither \"none\" nor \"regression\"")),
+        }
+    }
+}
+
+/// Whether `fit` first updates the assumed model by regressing `d̂` on `[x̂, u]`
+/// (thesis §4.3.3: ignorance model → updated model), then reruns MME with it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ModelUpdateChoice {
+    /// Use the assumed model as given.
+    #[default]
+    None,
+    /// Regression update of the corrected rows of A and B, then MME again.
+    Regression,
+}
