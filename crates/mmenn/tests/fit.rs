@@ -302,84 +302,25 @@ fn trajectory_refinement_removes_the_bias_of_a_shrunk_correction() {
 #[test]
 fn band_limited_input_is_fitted_and_predicted_with_the_first_order_hold() {
     use mmenn::fit::{FitSummary, HiddenChoice, PredictSummary};
-    use mmenn::model_file::{ModelSpec, NoiseVariance, write_model};
-    use mmenn::sysid_core::{
-        Integrator, InterSample, LinearModel, ModelNames, TermModel, simulate_with,
-    };
-    use nalgebra::DMatrix;
+    use mmenn::sysid_core::{InterSample, TermModel};
 
-    let names = ModelNames {
-        states: vec!["x".into(), "v".into()],
-        inputs: vec!["u".into()],
-        outputs: vec!["x".into()],
-        corrections: vec!["v".into()],
-    };
-    let linear = LinearModel::with_names(
-        DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.4]),
-        DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
-        DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
-        DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
-        names,
-    )
-    .unwrap();
+    use crate::band_limited::{oscillator, record, write_spec};
+
+    let linear = oscillator();
     let truth =
         TermModel::from_specs(linear.clone(), [("v", "cubic_stiffness", "x^3", -1.0)]).unwrap();
-    let dt = 0.25;
     let dir = scratch("foh");
     std::fs::create_dir_all(&dir).unwrap();
     // The measured record, and the noise-free states of the same run (x and v) to judge
     // `predict` against.
     let record = |name: &str, len: usize, phase: f64, seed: u64| {
-        let u = DMatrix::from_fn(1, len, |_, k| {
-            let t = k as f64 * dt;
-            [(0.7, 0.0), (1.3, 1.1), (1.9, 2.3), (2.6, 0.4)]
-                .iter()
-                .map(|(w, p)| 0.9 * (w * t + p + phase).sin())
-                .sum::<f64>()
-        });
-        let xs = simulate_with(
-            &truth,
-            &[0.0, 0.0],
-            0.0,
-            dt,
-            &u,
-            InterSample::Foh,
-            &Integrator::Rk4 { substeps: 20 },
-            1e12,
-        )
-        .unwrap();
-        let noise = mmenn::plants::noise::gaussian_noise(&[1e-4], len, seed, 0).unwrap();
-        let y: Vec<f64> = xs
-            .row(0)
-            .iter()
-            .zip(noise.iter())
-            .map(|(x, e)| x + e)
-            .collect();
-        let t: Vec<f64> = (0..len).map(|k| k as f64 * dt).collect();
-        let data = dir.join(format!("{name}.csv"));
-        let header = ["t", "u", "x"].map(String::from);
-        mmenn::data_file::write_csv(&data, &header, &[&t, u.as_slice(), &y]).unwrap();
-        let clean = dir.join(format!("{name}_truth.csv"));
-        let header = ["t", "u", "x", "v"].map(String::from);
-        let (x, v): (Vec<f64>, Vec<f64>) = (
-            xs.row(0).iter().copied().collect(),
-            xs.row(1).iter().copied().collect(),
-        );
-        mmenn::data_file::write_csv(&clean, &header, &[&t, u.as_slice(), &x, &v]).unwrap();
-        (data, clean)
+        record(&dir, &truth, name, len, phase, seed)
     };
     let (train, _) = record("train", 480, 0.0, 1);
     let (val, val_truth) = record("val", 240, 0.8, 2);
     let run = |hold: InterSample| -> (FitSummary, PredictSummary) {
         let model = dir.join(format!("model_{hold:?}.toml"));
-        let spec = ModelSpec {
-            linear: linear.clone(),
-            noise_variance: NoiseVariance::Given(vec![1e-4]),
-            units: Default::default(),
-            terms: vec![],
-            intersample: hold,
-        };
-        write_model(&model, &spec).unwrap();
+        write_spec(&model, &linear, hold);
         let out = dir.join(format!("fit_{hold:?}"));
         let opts = FitOptions {
             hidden: HiddenChoice::Fixed(3),

@@ -1,5 +1,6 @@
 //! Integration tests of the facade: every workflow end to end through files.
 
+mod band_limited;
 mod compare;
 mod discover;
 mod fit;
