@@ -53,6 +53,9 @@ struct CompareArgs {
     /// Initialisations per network size (MME/NN).
     #[arg(long, default_value_t = 10)]
     inits: usize,
+    /// How the MME/NN networks are trained: trainlm or accelerated (as `fit --training`).
+    #[arg(long, default_value = "trainlm")]
+    training: mmenn::fit::Training,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -409,6 +412,7 @@ fn compare(a: CompareArgs) -> Result<()> {
             max_hidden: a.max_hidden,
             inits: a.inits,
             seed: a.seed,
+            training: a.training,
             ..Default::default()
         },
         narx_lags: a.narx_lags,
