@@ -38,8 +38,23 @@ fn teacher() -> Mlp {
 }
 
 /// Noise-free record of the teacher hybrid model: `N` samples at 0.05 s, a two-tone input,
-/// and the true states.
+/// and the true states. More sub-steps than the refinement uses: the data are the exact
+/// flow to ~1e-10.
 fn record(n: usize) -> (Experiment, DMatrix<f64>) {
+    teacher_record(n, 0.05, 16, 0.0, InterSample::Zoh, InterSample::Zoh)
+}
+
+/// `n` samples of the teacher hybrid model at `dt` from `[0.5, 0]` with the two-tone input
+/// (second tone's phase `phase`), RK4 with `substeps`, the input `simulated` between
+/// samples; the record is tagged `tag`. Returns it with the true states.
+fn teacher_record(
+    n: usize,
+    dt: f64,
+    substeps: usize,
+    phase: f64,
+    simulated: InterSample,
+    tag: InterSample,
+) -> (Experiment, DMatrix<f64>) {
     let lin = assumed();
     let mut model = CorrectedModel::new(
         lin.clone(),
@@ -49,16 +64,19 @@ fn record(n: usize) -> (Experiment, DMatrix<f64>) {
         vec!["x".into()],
     )
     .unwrap();
-    // More sub-steps than the refinement uses: the data are the exact flow to ~1e-10.
-    model.integrator = Integrator::Rk4 { substeps: 16 };
-    let dt = 0.05;
+    model.integrator = Integrator::Rk4 { substeps };
     let u = DMatrix::from_fn(1, n, |_, k| {
         let t = k as f64 * dt;
-        1.5 * (0.7 * t).sin() + 0.8 * (1.9 * t).sin()
+        1.5 * (0.7 * t).sin() + 0.8 * (1.9 * t + phase).sin()
     });
-    let xs = model.simulate_states(&[0.5, 0.0], 0.0, dt, &u).unwrap();
+    let xs = model
+        .simulate_states_with(&[0.5, 0.0], 0.0, dt, &u, simulated)
+        .unwrap();
     let y = lin.c() * &xs;
-    (Experiment::new(0.0, dt, u, y).unwrap(), xs)
+    let exp = Experiment::new(0.0, dt, u, y)
+        .unwrap()
+        .with_intersample(tag);
+    (exp, xs)
 }
 
 /// The teacher's weights perturbed by uniform noise of half-width `spread`.
@@ -249,29 +267,7 @@ fn bad_problems_are_typed_errors() {
 /// input linear between samples (first-order hold, 64 RK4 sub-steps: the exact flow to
 /// ~1e-12), tagged `hold`.
 fn coarse_foh_record(n: usize, hold: InterSample) -> (Experiment, DMatrix<f64>) {
-    let lin = assumed();
-    let mut model = CorrectedModel::new(
-        lin.clone(),
-        NetCorrection::new(teacher(), 2).unwrap(),
-        lin.e().clone(),
-        lin.c().clone(),
-        vec!["x".into()],
-    )
-    .unwrap();
-    model.integrator = Integrator::Rk4 { substeps: 64 };
-    let dt = 0.3;
-    let u = DMatrix::from_fn(1, n, |_, k| {
-        let t = k as f64 * dt;
-        1.5 * (0.7 * t).sin() + 0.8 * (1.9 * t + 0.4).sin()
-    });
-    let xs = model
-        .simulate_states_with(&[0.5, 0.0], 0.0, dt, &u, InterSample::Foh)
-        .unwrap();
-    let y = lin.c() * &xs;
-    let exp = Experiment::new(0.0, dt, u, y)
-        .unwrap()
-        .with_intersample(hold);
-    (exp, xs)
+    teacher_record(n, 0.3, 64, 0.4, InterSample::Foh, hold)
 }
 
 /// At the teacher's weights and the true window starts, a first-order-hold record's
