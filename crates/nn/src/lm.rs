@@ -207,10 +207,9 @@ pub fn train_lm(
     // (the same bits as a build with its own forward pass), `kept` a trial's.
     let mut current = vec![0.0; lin.keep_len(net)];
     let mut kept = vec![0.0; lin.keep_len(net)];
-    let mut sse = match lin.sse(&train, net, &rho, Some(&mut current), None) {
-        Some(_) => lin.build(&train, net, &rho, Some(&current)),
-        None => lin.build(&train, net, &rho, None),
-    };
+    // Without a cutoff the sum always completes; `build` returns the same SSE.
+    let _ = lin.sse(&train, net, &rho, Some(&mut current), None);
+    let mut sse = lin.build(&train, net, &rho, Some(&current));
     let mut objective = sse + decay * w.norm_squared();
     let mut val_mse = |net: &Mlp| {
         val.as_ref()

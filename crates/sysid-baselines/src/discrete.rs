@@ -4,9 +4,10 @@
 //!
 //! - held (zero-order hold): `x⁺ = Ad x + Bd u_k`, from `exp([[A h, B h], [0, 0]])`;
 //! - linear (first-order hold): `x⁺ = Ad x + Bd u_k + Γ₂ (u_{k+1} − u_k)` with
-//!   `Γ₂ = (1/h)∫₀ʰ exp(A(h − τ)) τ dτ · B`, the top-right block of
-//!   `exp([[A h, B h, 0], [0, 0, I], [0, 0, 0]])` (the input as a state that ramps by
-//!   `Δ = u_{k+1} − u_k` over the period).
+//!   `Γ₂ = (1/h)∫₀ʰ exp(A(h − τ)) τ dτ · B` (`sysid_core::ramp_gain`); its derivative comes
+//!   from `exp([[A h, B h, 0], [0, 0, I], [0, 0, 0]])`, whose top block row is
+//!   `[Ad, Bd, Γ₂]` (the input as a state that ramps by `Δ = u_{k+1} − u_k` over the
+//!   period).
 //!
 //! A derivative is the Fréchet derivative of the block exponential `exp(M)` in the
 //! direction `E` (the unit change of the entry, times `h`), read off the upper-right block
@@ -14,7 +15,7 @@
 //! Math. 16, 1995).
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{InterSample, discretize_zoh};
+use sysid_core::{InterSample, discretize_zoh, ramp_gain};
 
 use crate::error::Result;
 use crate::free_params::{FreeParameter, StateMatrix};
@@ -78,15 +79,6 @@ fn place_ramp_block(
     }
 }
 
-/// `Γ₂ = (1/h)∫₀ʰ exp(A(h − τ)) τ dτ · B` over a step `h` (`n × m`).
-fn ramp_gain(a: &DMatrix<f64>, b: &DMatrix<f64>, h: f64) -> DMatrix<f64> {
-    let (n, m) = (a.nrows(), b.ncols());
-    let s = n + 2 * m;
-    let mut big = DMatrix::zeros(s, s);
-    place_ramp_block(&mut big, 0, a, b, h);
-    big.exp().view((0, n + m), (n, m)).into_owned()
-}
-
 /// One sample period of the exact discretisation.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct SampleStep {
@@ -112,7 +104,7 @@ impl SampleStep {
         let (ad, bd) = zoh(a, b, h)?;
         let ramp = match hold {
             InterSample::Zoh => None,
-            InterSample::Foh => Some(ramp_gain(a, b, h)),
+            InterSample::Foh => Some(ramp_gain(a, b, h)?),
         };
         Ok(Self { ad, bd, ramp })
     }

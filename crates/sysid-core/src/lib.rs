@@ -22,6 +22,6 @@ pub use expr::{Expr, ExprError, Func};
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};
 pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with};
-pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh};
+pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};
