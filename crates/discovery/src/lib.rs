@@ -8,6 +8,7 @@ pub mod error;
 pub mod floor;
 pub mod gauge;
 mod json;
+pub mod judge;
 pub mod localise;
 pub mod refine;
 pub mod roles;
@@ -32,6 +33,7 @@ pub use discover::{
 pub use error::{DiscoveryError, Result};
 pub use floor::NoiseFloor;
 pub use gauge::{ban_touching, scale_free_states, touches};
+pub use judge::{JudgeConfig, Judgement, Protocol, judge};
 pub use localise::{
     Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
     WindowLength, WindowSource, localise,

@@ -262,8 +262,20 @@ pub struct DiscoverSummary {
     /// missing physics (verdict `unexplained`).
     pub unconfirmed: Vec<NamedEffect>,
     /// The free-run cost (on the judging records, 1 = the noise level) below which named
-    /// effects are claimed ([`claim_bound`]).
+    /// effects are claimed, or the model is judged to need none: the reference quantile
+    /// of `judgement` when the bootstrap ran, else [`claim_bound`].
     pub claim_bound: f64,
+    /// The judged statistic and its reference distribution under the pipeline that
+    /// produced it (parametric bootstrap, see `discovery::judge`); `None` when no free-run
+    /// search ran or the bootstrap could not complete (`judge_note` says why).
+    pub judgement: Option<discovery::Judgement>,
+    /// Terms the free-run search kept that the judge's test showed unneeded (dropped
+    /// from the model before the claim).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub passengers: Vec<String>,
+    /// Why the bootstrap judge did not decide, when it did not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub judge_note: Option<String>,
     /// Gap on the estimation data (`before`, `after`), and on validation data when given.
     pub gap: GapPair,
     /// Gap on the validation data.
@@ -294,6 +306,39 @@ pub struct Ambiguity {
     pub alternative: Vec<String>,
     /// Its judged free-run cost.
     pub alternative_cost: f64,
+}
+
+/// What judges a round's model: the records and initial-state guesses of its free-run
+/// search, the model as calibrated on the calibration records only (before any
+/// recalibration on the whole records), the indices of the terms the round calibrated,
+/// and the noise variance of the judged cost.
+#[derive(Debug, Clone)]
+struct JudgeContext {
+    model: TermModel,
+    new_terms: Vec<usize>,
+    cal: Dataset,
+    cal_x0: Vec<Vec<f64>>,
+    hold: Option<(Dataset, Vec<Vec<f64>>)>,
+    noise_variance: Vec<f64>,
+}
+
+impl JudgeContext {
+    /// Judge its model by the protocol against the protocol's bootstrap reference.
+    fn judge(&self, seed: u64) -> discovery::Result<discovery::Judgement> {
+        let calibration = RefineConfig::default().calibration;
+        let protocol = discovery::Protocol {
+            cal: &self.cal,
+            cal_x0: &self.cal_x0,
+            hold: self.hold.as_ref().map(|(d, x)| (d, x.as_slice())),
+            noise_variance: &self.noise_variance,
+            calibration: &calibration,
+        };
+        let config = discovery::JudgeConfig {
+            seed,
+            ..discovery::JudgeConfig::default()
+        };
+        discovery::judge(&self.model, &self.new_terms, &protocol, &config)
+    }
 }
 
 /// Free-run states of `model` over one record from `x0` (default integrator, inputs
@@ -520,6 +565,11 @@ pub fn run_discover(
     let mut d_after_known = true;
     // Measured values of the records that judged the last free-run search.
     let mut judged_measured = measured_values(&data);
+    // The protocol of the last free-run search, and of the last round whose terms were
+    // kept (what judges the verdict).
+    let mut last_ctx: Option<JudgeContext> = None;
+    let mut claim_ctx: Option<JudgeContext> = None;
+    let mut confirm_cost_stop = false;
     for _ in 0..opts.max_rounds.max(1) {
         let est = &result.estimate;
         // After an accepted round, a model MME cannot handle ends the search (the first
@@ -699,6 +749,20 @@ pub fn run_discover(
         };
         let (refined, chosen_from) =
             discovery::refine_with_transfers(&search, &candidates, &initial)?;
+        let first_new_term = current.terms().len();
+        let ctx = JudgeContext {
+            model: if refined.selected.is_empty() {
+                current.clone()
+            } else {
+                refined.model.clone()
+            },
+            new_terms: (first_new_term..first_new_term + refined.selected.len()).collect(),
+            cal: cal_data.clone(),
+            cal_x0: cal_x0.clone(),
+            hold: holdout.map(|h| (h.data.clone(), h.x0.to_vec())),
+            noise_variance: est.noise_variance.clone(),
+        };
+        last_ctx = Some(ctx.clone());
         // The held-out half chose the terms; their coefficients (and intervals) come
         // from the whole estimation records.
         let refined = match &split {
@@ -805,6 +869,8 @@ pub fn run_discover(
             accepted_cost = refined.cost[1];
             spec = augmented;
             d_after_known = false;
+            confirm_cost_stop = true;
+            claim_ctx = Some(ctx);
             break;
         }
         // Proof before acceptance: the augmented model must leave MME less to correct
@@ -884,10 +950,155 @@ pub fn run_discover(
             NoiseVariance::Given(_) => 1.0,
         };
         accepted_cost = refined.cost[1] * inflation;
+        // The claim is judged against the smaller noise estimate, channel by channel.
+        let mut claim = ctx;
+        if let NoiseVariance::Auto = original.noise_variance {
+            for (r, after) in claim
+                .noise_variance
+                .iter_mut()
+                .zip(&new_result.estimate.noise_variance)
+            {
+                if after.is_finite() && *after > 0.0 {
+                    *r = r.min(*after);
+                }
+            }
+        }
+        claim_ctx = Some(claim);
         spec = augmented;
         result = new_result;
     }
 
+    // Found: a round was accepted. Unexplained: the library fitted something but the proof
+    // failed (never name an effect that does not make the model better).
+    // With nothing named, the free-run search's last cost decides between `none` (the
+    // model already simulates the (held-out) data to the noise level: J within 3σ of 1,
+    // σ = √(2/M) for M measured values) and `unexplained`.
+    let measured = judged_measured;
+    let last_cost = rounds
+        .last()
+        .map(|r| r.calibration_cost[1])
+        .filter(|c| c.is_finite());
+    let at_noise_level = |j: f64| j <= noise_level_bound(measured);
+    // Named effects are claimed only when they bring the free-run cost down to the noise
+    // level (`claim_bound`); otherwise a combination of catalogue terms may be standing
+    // in for something outside the catalogue, or for the right effect in the wrong place.
+    //
+    // The judged cost is compared with its reference distribution under the pipeline
+    // that produced it (`discovery::judge`: the model simulated with noise, initial states
+    // re-estimated, coefficients recalibrated, the same records judging), so that what
+    // the pipeline estimates does not deny a right answer. When that bootstrap cannot
+    // run, the fixed bounds decide.
+    let mut claim = claim_bound(&original.noise_variance, measured);
+    let mut judgement = None;
+    let mut judge_note = None;
+    let judged_ctx = if !effects.is_empty() && !confirm_cost_stop {
+        claim_ctx.as_ref()
+    } else if effects.is_empty() && !any_rejected {
+        last_ctx.as_ref().filter(|c| c.new_terms.is_empty())
+    } else {
+        None
+    };
+    if let Some(ctx) = judged_ctx {
+        match ctx.judge(opts.seed) {
+            Ok(j) => {
+                claim = j.threshold;
+                judgement = Some(j);
+            }
+            Err(e) => judge_note = Some(format!("the bootstrap judge could not run: {e}")),
+        }
+    }
+    // Parsimony: of a claimed set, every term must be needed by the same test — a term
+    // whose removal (the others recalibrated by the protocol) still leaves the statistic
+    // within the reference is dropped (a passenger), and the rest are recalibrated on
+    // the whole estimation records.
+    let mut passengers: Vec<String> = Vec::new();
+    if let (Some(j), Some(ctx)) = (&judgement, judged_ctx)
+        && j.accepts()
+        && !effects.is_empty()
+        && ctx.new_terms.len() > 1
+    {
+        let calibration = RefineConfig::default().calibration;
+        let protocol = discovery::Protocol {
+            cal: &ctx.cal,
+            cal_x0: &ctx.cal_x0,
+            hold: ctx.hold.as_ref().map(|(d, x)| (d, x.as_slice())),
+            noise_variance: &ctx.noise_variance,
+            calibration: &calibration,
+        };
+        let (_, _, dropped) =
+            discovery::judge::prune(&ctx.model, &ctx.new_terms, &protocol, j.threshold)?;
+        if !dropped.is_empty() && spec.terms.len() == ctx.model.terms().len() {
+            let first_new = ctx.new_terms[0];
+            let n_new = ctx.new_terms.len();
+            let effects_first = effects.len().saturating_sub(n_new);
+            let mut drop_spec: Vec<usize> = dropped.iter().map(|(k, _)| *k).collect();
+            drop_spec.sort_unstable();
+            for &k in drop_spec.iter().rev() {
+                let entry = spec.terms.remove(k);
+                let e = effects_first + (k - first_new);
+                if e < effects.len() {
+                    effects.remove(e);
+                }
+                let stat = dropped
+                    .iter()
+                    .find(|(d, _)| *d == k)
+                    .map_or(f64::NAN, |d| d.1);
+                passengers.push(format!(
+                    "{} in d({}): {} (without it the judged cost is {stat:.4}, within the \
+                     reference quantile {:.4})",
+                    entry.effect, entry.state, entry.term, j.threshold
+                ));
+            }
+            let kept_new: Vec<usize> = (first_new..spec.terms.len()).collect();
+            let model = term_model_of(&spec)?;
+            let x0s: Vec<Vec<f64>> = result
+                .estimate
+                .experiments
+                .iter()
+                .map(|e| e.states.column(0).iter().copied().collect())
+                .collect();
+            let config = discovery::CalibrationConfig {
+                terms: Some(kept_new.clone()),
+                initial_state: discovery::InitialState::Estimate,
+                weights: discovery::OutputWeights::NoiseVariance(ctx.noise_variance.clone()),
+                ..calibration
+            };
+            if let Ok(fit) = discovery::calibrate(&model, &data, &x0s, &config)
+                && fit.cost_after.is_finite()
+            {
+                for &k in &kept_new {
+                    let c = fit.coefficients_after[k];
+                    spec.terms[k].coefficient = c;
+                    let e = effects_first + (k - first_new);
+                    if let Some(effect) = effects.get_mut(e) {
+                        effect.coefficient = c;
+                    }
+                }
+            }
+            d_after_known = false;
+        }
+    }
+    let mut unconfirmed = Vec::new();
+    let claimed = match &judgement {
+        Some(j) => j.accepts(),
+        None => !(accepted_cost.is_nan() || accepted_cost > claim),
+    };
+    if !effects.is_empty() && (confirm_cost_stop || !claimed) {
+        unconfirmed = std::mem::take(&mut effects);
+    }
+    let verdict = if !effects.is_empty() {
+        Verdict::Found
+    } else if any_rejected || !unconfirmed.is_empty() {
+        Verdict::Unexplained
+    } else {
+        match (&judgement, last_cost) {
+            (Some(j), _) if j.accepts() => Verdict::None,
+            (Some(_), _) => Verdict::Unexplained,
+            (None, Some(j)) if at_noise_level(j) => Verdict::None,
+            (None, Some(_)) => Verdict::Unexplained,
+            (None, None) => first_verdict.unwrap_or(Verdict::None),
+        }
+    };
     let final_model = term_model_of(&spec)?;
     let (mut after, y_after) = free_run_gap(&final_model, &spec, &data, &x0_guess, opts.x0_window)?;
     if d_after_known {
@@ -905,41 +1116,14 @@ pub fn run_discover(
         written.noise_variance = NoiseVariance::Auto;
     }
     write_model(&out.join("model.discovered.toml"), &written)?;
-    // Found: a round was accepted. Unexplained: the library fitted something but the proof
-    // failed (never name an effect that does not make the model better).
-    // With nothing named, the free-run search's last cost decides between `none` (the
-    // model already simulates the (held-out) data to the noise level: J within 3σ of 1,
-    // σ = √(2/M) for M measured values) and `unexplained`.
-    let measured = judged_measured;
-    let last_cost = rounds
-        .last()
-        .map(|r| r.calibration_cost[1])
-        .filter(|c| c.is_finite());
-    let at_noise_level = |j: f64| j <= noise_level_bound(measured);
-    // Named effects are claimed only when they bring the free-run cost down to the noise
-    // level (`claim_bound`); otherwise a combination of catalogue terms may be standing
-    // in for something outside the catalogue, or for the right effect in the wrong place.
-    let claim = claim_bound(&original.noise_variance, measured);
-    let mut unconfirmed = Vec::new();
-    if !effects.is_empty() && (accepted_cost.is_nan() || accepted_cost > claim) {
-        unconfirmed = std::mem::take(&mut effects);
-    }
-    let verdict = if !effects.is_empty() {
-        Verdict::Found
-    } else if any_rejected || !unconfirmed.is_empty() {
-        Verdict::Unexplained
-    } else {
-        match last_cost {
-            Some(j) if at_noise_level(j) => Verdict::None,
-            Some(_) => Verdict::Unexplained,
-            None => first_verdict.unwrap_or(Verdict::None),
-        }
-    };
     let summary = DiscoverSummary {
         verdict,
         effects,
         unconfirmed,
         claim_bound: claim,
+        judgement,
+        judge_note,
+        passengers,
         ambiguity,
         gap: GapPair { before, after },
         validation_gap,
