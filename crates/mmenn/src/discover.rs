@@ -855,7 +855,13 @@ pub fn run_discover(
         // Terms that leave the free-run cost far above the noise level will not be claimed:
         // keep the better model (its free-run error fell on the judged records) but skip
         // MME's proof and stop — more rounds would only pile up stand-ins.
-        if refined.cost[1] > CONFIRM_COST && refined.cost[1] < refined.cost[0] {
+        // With `R` estimated the cost is relative to MME's R̂ with the model *before* the
+        // round, which a wrong model biases (its correction absorbs part of the noise:
+        // on a pendulum missing sin θ, R̂ of ω was a third of the truth); the MME proof
+        // below re-estimates R with the augmented model, and the claim is judged against
+        // that. So this shortcut applies to a given `R` only.
+        let r_given = matches!(original.noise_variance, NoiseVariance::Given(_));
+        if r_given && refined.cost[1] > CONFIRM_COST && refined.cost[1] < refined.cost[0] {
             rounds.push(round(
                 refined.steps,
                 calibrated,
@@ -950,7 +956,8 @@ pub fn run_discover(
             NoiseVariance::Given(_) => 1.0,
         };
         accepted_cost = refined.cost[1] * inflation;
-        // The claim is judged against the smaller noise estimate, channel by channel.
+        // With `R` estimated, the claim is judged against MME's R̂ with the model under
+        // judgement (the augmented one), channel by channel.
         let mut claim = ctx;
         if let NoiseVariance::Auto = original.noise_variance {
             for (r, after) in claim
@@ -959,7 +966,7 @@ pub fn run_discover(
                 .zip(&new_result.estimate.noise_variance)
             {
                 if after.is_finite() && *after > 0.0 {
-                    *r = r.min(*after);
+                    *r = *after;
                 }
             }
         }

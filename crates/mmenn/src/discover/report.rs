@@ -184,6 +184,7 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
             a.free_states.join(", "),
         ));
     }
+    r.push_str(&judgement_section(s));
     r.push_str("\n## Gap on the estimation data (free-run simulation; d̂ from MME)\n\n");
     r.push_str(&gap_table(&s.gap));
     if let Some(v) = &s.validation_gap {
@@ -234,4 +235,40 @@ fn code_list(items: &[String]) -> String {
         .map(|t| format!("`{t}`"))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// How the verdict was judged: the statistic, its bootstrap reference and the passengers.
+fn judgement_section(s: &DiscoverSummary) -> String {
+    let mut r = String::new();
+    match &s.judgement {
+        Some(j) => {
+            r.push_str(&format!(
+                "\n## How the verdict was judged\n\nThe judged statistic is the free-run cost J = (1/M) Σ r²/R of the model on the records that judged the search (held-out or validation records; 1 = the noise level), with its initial states re-fitted there. A right model does not score exactly 1: the pipeline estimates initial states and calibrates coefficients. So J is compared with its **reference distribution under the same pipeline**: the model itself simulated (Dormand–Prince, rtol 1e-10) with noise of variance R, and the whole judging protocol rerun on each of B = {} draws ({} failed).\n\n| statistic J | reference mean | reference sd | threshold ({:.0} % quantile, scaled χ²) | p-value | accepted |\n|---|---|---|---|---|---|\n| {:.4} | {:.4} | {:.4} | {:.4} | {:.3} | {} |\n",
+                j.draws,
+                j.failed,
+                100.0 * j.level,
+                j.statistic,
+                j.mean,
+                j.sd,
+                j.threshold,
+                j.p_value,
+                if j.accepts() { "yes" } else { "no" },
+            ));
+        }
+        None => {
+            if let Some(note) = &s.judge_note {
+                r.push_str(&format!(
+                    "\n## How the verdict was judged\n\n{note}; the fixed bound {:.4} decided.\n",
+                    s.claim_bound
+                ));
+            }
+        }
+    }
+    if !s.passengers.is_empty() {
+        r.push_str("\nTerms the search had kept but the same test showed unneeded (dropped; the rest recalibrated on the whole estimation records):\n\n");
+        for p in &s.passengers {
+            r.push_str(&format!("- {p}\n"));
+        }
+    }
+    r
 }
