@@ -28,7 +28,7 @@ use serde_json::Value;
 /// Regression floor: the number of cases that passed on the code when it was last set
 /// (baseline in `fixtures/discovery_suite/README.md`). Issue 15's target is ≥ 90 % of
 /// the cases; the lead raises this floor as the verdicts improve.
-const PASS_FLOOR: usize = 0;
+const PASS_FLOOR: usize = 23;
 
 /// The suite must not pass vacuously.
 const MIN_CASES: usize = 24;
