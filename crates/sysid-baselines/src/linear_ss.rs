@@ -51,6 +51,16 @@ pub enum Section {
         /// Constant numerator coefficient.
         b2: f64,
     },
+    /// `(b1 z + b2)/((z − 1)(z − p))`: a second-order block with one pole held at 1 (a
+    /// known integrator, e.g. position from force).
+    Integrating {
+        /// The free pole.
+        p: f64,
+        /// Numerator coefficient of `z`.
+        b1: f64,
+        /// Constant numerator coefficient.
+        b2: f64,
+    },
     /// `b/(z − λ)`.
     First {
         /// The pole.
@@ -63,14 +73,24 @@ pub enum Section {
 impl Section {
     fn states(&self) -> usize {
         match self {
-            Section::Second { .. } => 2,
+            Section::Second { .. } | Section::Integrating { .. } => 2,
             Section::First { .. } => 1,
+        }
+    }
+
+    /// `(a1, a2, b1, b2)` of a two-state block.
+    fn coefficients(&self) -> Option<(f64, f64, f64, f64)> {
+        match *self {
+            Section::Second { a1, a2, b1, b2 } => Some((a1, a2, b1, b2)),
+            Section::Integrating { p, b1, b2 } => Some((-(1.0 + p), p, b1, b2)),
+            Section::First { .. } => None,
         }
     }
 
     fn params(&self) -> Vec<f64> {
         match *self {
             Section::Second { a1, a2, b1, b2 } => vec![a1, a2, b1, b2],
+            Section::Integrating { p, b1, b2 } => vec![p, b1, b2],
             Section::First { lambda, b } => vec![lambda, b],
         }
     }
@@ -83,6 +103,11 @@ impl Section {
                 b1: t[2],
                 b2: t[3],
             },
+            Section::Integrating { .. } => Section::Integrating {
+                p: t[0],
+                b1: t[1],
+                b2: t[2],
+            },
             Section::First { .. } => Section::First {
                 lambda: t[0],
                 b: t[1],
@@ -94,6 +119,7 @@ impl Section {
     pub fn poles(&self) -> Vec<(f64, f64)> {
         match *self {
             Section::First { lambda, .. } => vec![(lambda, 0.0)],
+            Section::Integrating { p, .. } => vec![(1.0, 0.0), (p, 0.0)],
             Section::Second { a1, a2, .. } => {
                 let disc = a1 * a1 / 4.0 - a2;
                 if disc >= 0.0 {
@@ -111,13 +137,14 @@ impl Section {
     #[inline]
     fn step(&self, x: &mut [f64], v: f64) {
         match *self {
-            Section::Second { a1, a2, b1, b2 } => {
+            Section::First { lambda, b } => x[0] = lambda * x[0] + b * v,
+            _ => {
+                let (a1, a2, b1, b2) = self.coefficients().unwrap_or_default();
                 let x1 = -a1 * x[0] + x[1] + b1 * v;
                 let x2 = -a2 * x[0] + b2 * v;
                 x[0] = x1;
                 x[1] = x2;
             }
-            Section::First { lambda, b } => x[0] = lambda * x[0] + b * v,
         }
     }
 }
@@ -178,7 +205,8 @@ impl LinearSsModel {
         let mut o = 0;
         for s in &self.sections {
             match *s {
-                Section::Second { a1, a2, b1, b2 } => {
+                Section::Second { .. } | Section::Integrating { .. } => {
+                    let (a1, a2, b1, b2) = s.coefficients().unwrap_or_default();
                     a[(o, o)] = -a1;
                     a[(o, o + 1)] = 1.0;
                     a[(o + 1, o)] = -a2;
@@ -381,8 +409,11 @@ pub struct LinearSsConfig {
     pub order_tolerance: f64,
     /// Fit an input bias on top of the record mean. Default true.
     pub fit_input_offset: bool,
-    /// Trust-region iterations of each refinement. Default 300.
+    /// Levenberg–Marquardt iterations of each refinement. Default 300.
     pub max_iterations: u64,
+    /// Hold one pole at `z = 1` (a known integrator: the subspace pole nearest 1 is moved
+    /// there); orders then start at 2. Default false.
+    pub integrator: bool,
 }
 
 impl Default for LinearSsConfig {
@@ -396,6 +427,7 @@ impl Default for LinearSsConfig {
             order_tolerance: 0.02,
             fit_input_offset: true,
             max_iterations: 300,
+            integrator: false,
         }
     }
 }
@@ -556,11 +588,47 @@ impl LeastSquares for Refine<'_> {
 /// Group eigenvalues into sections with zero numerators: complex pairs (upper half
 /// plane), real poles paired in increasing order, one first-order block left for an odd
 /// count.
-fn sections_from_poles(poles: &[(f64, f64)]) -> Vec<Section> {
+fn sections_from_poles(poles: &[(f64, f64)], integrator: bool) -> Vec<Section> {
     let tol = 1e-10;
     let mut out = Vec::new();
+    let mut poles = poles.to_vec();
+    if integrator {
+        // The pole nearest 1 becomes the integrator; its partner is the next real pole
+        // nearest 1 (0.5 when none is real).
+        let near = |v: &[(f64, f64)], real_only: bool| {
+            v.iter()
+                .enumerate()
+                .filter(|(_, p)| !real_only || p.1.abs() <= tol)
+                .min_by(|a, b| {
+                    let d = |p: &(f64, f64)| (p.0 - 1.0).hypot(p.1);
+                    d(a.1).total_cmp(&d(b.1))
+                })
+                .map(|(i, _)| i)
+        };
+        if let Some(i) = near(&poles, false) {
+            let removed = poles.remove(i);
+            if removed.1.abs() > tol
+                && let Some(j) = poles
+                    .iter()
+                    .position(|p| (p.0 - removed.0).abs() <= tol && (p.1 + removed.1).abs() <= tol)
+            {
+                // A complex pair loses its conjugate too; the section keeps the modulus.
+                poles.remove(j);
+                poles.push((removed.0.hypot(removed.1), 0.0));
+            }
+            let p = match near(&poles, true) {
+                Some(j) => poles.remove(j).0,
+                None => 0.5,
+            };
+            out.push(Section::Integrating {
+                p,
+                b1: 0.0,
+                b2: 0.0,
+            });
+        }
+    }
     let mut real: Vec<f64> = Vec::new();
-    for &(re, im) in poles {
+    for &(re, im) in &poles {
         if im > tol {
             out.push(Section::Second {
                 a1: -2.0 * re,
@@ -615,13 +683,15 @@ fn numerators(template: &LinearSsModel, rec: &Record<'_>, bias: bool) -> Result<
     for s in &template.sections {
         let k = s.states();
         for e in 0..k {
+            let (u1, u2) = (f64::from(e == 0), f64::from(e == 1));
             let unit = match *s {
                 Section::Second { a1, a2, .. } => Section::Second {
                     a1,
                     a2,
-                    b1: if e == 0 { 1.0 } else { 0.0 },
-                    b2: if e == 1 { 1.0 } else { 0.0 },
+                    b1: u1,
+                    b2: u2,
                 },
+                Section::Integrating { p, .. } => Section::Integrating { p, b1: u1, b2: u2 },
                 Section::First { lambda, .. } => Section::First { lambda, b: 1.0 },
             };
             let mut x = vec![0.0; k];
@@ -664,6 +734,14 @@ fn numerators(template: &LinearSsModel, rec: &Record<'_>, bias: bool) -> Result<
                 Section::Second {
                     a1,
                     a2,
+                    b1: theta[o - 2],
+                    b2: theta[o - 1],
+                }
+            }
+            Section::Integrating { p, .. } => {
+                o += 2;
+                Section::Integrating {
+                    p,
                     b1: theta[o - 2],
                     b2: theta[o - 1],
                 }
@@ -726,6 +804,7 @@ fn subspace_model(
     base: &LinearSsModel,
     rec: &Record<'_>,
     bias: bool,
+    integrator: bool,
 ) -> Result<LinearSsModel> {
     let (a, _) = mo.a_c(n)?;
     let poles: Vec<(f64, f64)> = a
@@ -734,7 +813,7 @@ fn subspace_model(
         .map(|z| (z.re, z.im))
         .collect();
     let mut template = base.clone();
-    template.sections = sections_from_poles(&poles);
+    template.sections = sections_from_poles(&poles, integrator);
     numerators(&template, rec, bias)
 }
 
@@ -759,7 +838,9 @@ fn refine(
         .sections
         .iter()
         .flat_map(|s| match *s {
-            Section::Second { b1, b2, .. } => vec![b1.abs(), b2.abs()],
+            Section::Second { b1, b2, .. } | Section::Integrating { b1, b2, .. } => {
+                vec![b1.abs(), b2.abs()]
+            }
             Section::First { b, .. } => vec![b.abs()],
         })
         .fold(start.d.abs(), f64::max)
@@ -768,6 +849,7 @@ fn refine(
     for s in &start.sections {
         match s {
             Section::Second { .. } => typical.extend([1e-3, 1e-3, b_scale, b_scale]),
+            Section::Integrating { .. } => typical.extend([1e-3, b_scale, b_scale]),
             Section::First { .. } => typical.extend([1e-3, b_scale]),
         }
     }
@@ -784,6 +866,7 @@ fn refine(
     for s in &start.sections {
         match s {
             Section::Second { .. } => step.extend([1e-9, 1e-9, 1e-7, 1e-7]),
+            Section::Integrating { .. } => step.extend([1e-9, 1e-7, 1e-7]),
             Section::First { .. } => step.extend([1e-9, 1e-7]),
         }
     }
@@ -804,6 +887,9 @@ fn refine(
         match s {
             Section::Second { .. } => {
                 names.extend(["a1", "a2", "b1", "b2"].map(|p| format!("section {i} {p}")))
+            }
+            Section::Integrating { .. } => {
+                names.extend(["p", "b1", "b2"].map(|p| format!("section {i} {p}")))
             }
             Section::First { .. } => {
                 names.extend(["lambda", "b"].map(|p| format!("section {i} {p}")))
@@ -982,17 +1068,27 @@ pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSs
     let singular_values = mo.singular_values().iter().map(|v| v / sv0).collect();
     let orders: Vec<usize> = match config.order {
         Some(n) => vec![n],
-        None => (1..=config.max_order.min(mo.max_order())).collect(),
+        None => {
+            let low = if config.integrator { 2 } else { 1 };
+            (low..=config.max_order.min(mo.max_order())).collect()
+        }
     };
     let mut candidates = Vec::new();
     let mut refined: Vec<Option<LinearSsModel>> = Vec::new();
     for &n in &orders {
-        let attempt =
-            subspace_model(&mo, n, &base, &fit_part, config.fit_input_offset).and_then(|m0| {
-                let sub = rmse_after(&m0, &held);
-                let (m1, _) = refine(&m0, &fit_part, config, base.input_offset)?;
-                Ok((sub, m1))
-            });
+        let attempt = subspace_model(
+            &mo,
+            n,
+            &base,
+            &fit_part,
+            config.fit_input_offset,
+            config.integrator,
+        )
+        .and_then(|m0| {
+            let sub = rmse_after(&m0, &held);
+            let (m1, _) = refine(&m0, &fit_part, config, base.input_offset)?;
+            Ok((sub, m1))
+        });
         match attempt {
             Ok((sub, m1)) => {
                 candidates.push(OrderCandidate {
@@ -1051,7 +1147,14 @@ pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSs
         &centred(&y, base.output_offset),
         s,
     )?;
-    let subspace = subspace_model(&mo_all, order, &base, &whole, config.fit_input_offset)?;
+    let subspace = subspace_model(
+        &mo_all,
+        order,
+        &base,
+        &whole,
+        config.fit_input_offset,
+        config.integrator,
+    )?;
     Ok(LinearSsFit {
         model,
         subspace,

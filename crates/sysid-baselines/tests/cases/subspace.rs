@@ -167,6 +167,20 @@ fn integrator_with_input_bias() {
     assert_relative_eq!(poles[1].0, 1.0, epsilon = 1e-6);
     assert_relative_eq!(fit.model.input_offset, 0.3, epsilon = 1e-6);
     assert!(matches!(fit.model.sections[0], Section::Second { .. }));
+    // The same with the integrator held at z = 1.
+    let held = LinearSsConfig {
+        integrator: true,
+        ..cfg.clone()
+    };
+    let fit_i = fit_linear_ss(&data, &held).unwrap();
+    assert!(matches!(
+        fit_i.model.sections[0],
+        Section::Integrating { .. }
+    ));
+    let poles_i = sorted_eigs(fit_i.model.poles());
+    assert_relative_eq!(poles_i[0].0, 0.98, epsilon = 1e-6);
+    assert_eq!(poles_i[1], (1.0, 0.0));
+    assert_relative_eq!(fit_i.model.input_offset, 0.3, epsilon = 1e-6);
     assert!(fit.training_rmse < 1e-8 * y.iter().map(|v| v.abs()).fold(0.0, f64::max));
 }
 
