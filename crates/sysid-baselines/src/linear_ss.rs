@@ -773,8 +773,8 @@ fn input_bias(model: &LinearSsModel, rec: &Record<'_>) -> Option<f64> {
     let step = model.run(&shifted, &vec![0.0; n], 0, len)?;
     let mut qr = StreamingQr::new(n + 2);
     let mut row = vec![0.0; n + 2];
-    for t in 0..len {
-        row[0] = step[t] - model.output_offset;
+    for (t, s) in step.iter().enumerate() {
+        row[0] = s - model.output_offset;
         for j in 0..n {
             row[1 + j] = basis.free[(t, j)];
         }

@@ -98,7 +98,8 @@ pub(crate) fn solve_augmented_r(
         } else {
             0.0
         };
-        if !(ratio > LSQ_RTOL) {
+        // NaN counts as dependent too.
+        if ratio.is_nan() || ratio <= LSQ_RTOL {
             return Err(BaselineError::Unidentifiable {
                 name: names(i),
                 ratio,
@@ -309,7 +310,7 @@ impl Moesp {
         let down = gamma.rows(p, (s - 1) * p).into_owned();
         let svd = up.svd(true, true);
         let smax = svd.singular_values.max();
-        if !(smax > 0.0) || svd.singular_values.min() < 1e-12 * smax {
+        if smax.is_nan() || smax <= 0.0 || svd.singular_values.min() < 1e-12 * smax {
             return Err(BaselineError::Unidentifiable {
                 name: format!("A of order {n} (Γ is rank deficient)"),
                 ratio: svd.singular_values.min() / smax,
