@@ -6,6 +6,7 @@ pub mod error;
 pub mod evaluate;
 pub mod free_params;
 pub mod lags;
+pub mod linear_ss;
 mod lsq;
 pub mod narx;
 pub mod narx_model;
@@ -15,6 +16,7 @@ mod oe_sim;
 pub mod projection;
 pub mod regressors;
 pub mod residuals;
+pub mod subspace;
 
 pub use correlation::{
     CorrelationKind, Correlogram, autocorrelation, cross_correlation, pacf_from_acf,
@@ -28,6 +30,9 @@ pub use free_params::{FreeParameter, StateMatrix, parse_free_parameters};
 pub use lags::{
     InputOutputXcf, LagCandidate, LagGrid, LagOutcome, LagSearch, LagSearchConfig, LagSuggestion,
     OutputPacf, SuggestionConfig, search_lags, suggest_lags,
+};
+pub use linear_ss::{
+    LinearSsConfig, LinearSsFit, LinearSsModel, OrderCandidate, Section, fit_linear_ss,
 };
 pub use narx::{
     NarxConfig, NarxFit, NetworkChoice, Projection, RestartRecord, RestartSelection, fit_narx,
@@ -43,3 +48,4 @@ pub use residuals::{
     InputCorrelation, ResidualAnalysis, ResidualChannel, ResidualConfig, analyse_prediction,
     residual_analysis,
 };
+pub use subspace::{DiscreteStateSpace, Moesp, fit_b_d_x0, moesp};

@@ -17,3 +17,5 @@ mod foh;
 mod narx;
 #[path = "cases/oe.rs"]
 mod oe;
+#[path = "cases/subspace.rs"]
+mod subspace;
