@@ -570,6 +570,8 @@ pub fn run_discover(
     let mut last_ctx: Option<JudgeContext> = None;
     let mut claim_ctx: Option<JudgeContext> = None;
     let mut confirm_cost_stop = false;
+    // The bound against which an ambiguity was declared.
+    let mut ambiguity_bound: Option<f64> = None;
     for _ in 0..opts.max_rounds.max(1) {
         let est = &result.estimate;
         // After an accepted round, a model MME cannot handle ends the search (the first
@@ -778,7 +780,15 @@ pub fn run_discover(
         // A set that reaches the noise level but touches a state of free scale is
         // claimed only when the search, run again without its terms touching such states,
         // cannot reach the noise level too.
-        let claim_now = claim_bound(&original.noise_variance, judged_measured);
+        // "Reaching the noise level" is judged as the verdict is: against the bootstrap
+        // reference of the set's own protocol (only computed when the model has states
+        // of free scale, the only case in which an alternative is sought).
+        let mut claim_now = claim_bound(&original.noise_variance, judged_measured);
+        if !discovery::scale_free_states(&spec.linear).is_empty()
+            && let Ok(j) = ctx.judge(opts.seed)
+        {
+            claim_now = j.threshold;
+        }
         if refined.cost[1] <= claim_now
             && let Some(found_too) =
                 alternative_explanation(&spec, &search, &candidates, &refined, &chosen_from)?
@@ -796,6 +806,7 @@ pub fn run_discover(
             );
             rounds.push(round(refined.steps, vec![], refined.cost, Some(why)));
             ambiguity = Some(found_too);
+            ambiguity_bound = Some(claim_now);
             any_rejected = true;
             break;
         }
@@ -1084,6 +1095,11 @@ pub fn run_discover(
             }
             d_after_known = false;
         }
+    }
+    if judgement.is_none()
+        && let Some(b) = ambiguity_bound
+    {
+        claim = b;
     }
     let mut unconfirmed = Vec::new();
     let claimed = match &judgement {
