@@ -11,7 +11,7 @@ use sysid_core::{Dataset, MmeEstimate};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::{read_dataset, write_csv};
-use crate::error::Result;
+use crate::error::{MmennError, Result};
 use crate::model_file::{ModelSpec, NoiseVariance, read_model};
 use crate::plot::{Figure, Series};
 
@@ -69,14 +69,12 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
     if spec.terms.is_empty() {
         return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
     }
-    let dynamics = spec
-        .term_model()
-        .map_err(|problem| crate::error::MmennError::Model {
-            path: "<model>".into(),
-            line: None,
-            column: None,
-            problem,
-        })?;
+    let dynamics = spec.term_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })?;
     let lin = &spec.linear;
     let names = sysid_core::ModelNames {
         states: lin.state_names().to_vec(),
@@ -85,9 +83,28 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
         corrections: lin.correction_names().to_vec(),
     };
     let model = NonlinearModel::new(dynamics, lin.c().clone(), lin.e().clone(), names)?;
-    Ok(mme_core::estimate_nonlinear_with_report(
-        &model, data, config,
-    )?)
+    mme_core::estimate_nonlinear_with_report(&model, data, config).map_err(|e| name_terms(spec, e))
+}
+
+/// A non-finite model error with the named terms of the equation it names attached.
+pub(crate) fn name_terms(spec: &ModelSpec, e: mme_core::MmeError) -> MmennError {
+    let terms: Vec<String> = match &e {
+        mme_core::MmeError::NonFiniteModel { state, .. } => spec
+            .terms
+            .iter()
+            .filter(|t| &t.state == state || t.into.as_deref() == Some(state.as_str()))
+            .map(|t| format!("{} = {}·({})", t.effect, t.coefficient, t.term))
+            .collect(),
+        _ => Vec::new(),
+    };
+    if terms.is_empty() {
+        MmennError::Mme(e)
+    } else {
+        MmennError::MmeTerms {
+            source: e,
+            terms: terms.join(", "),
+        }
+    }
 }
 
 /// The JSON summary of an estimate (stable field names).
