@@ -7,4 +7,5 @@ mod fit;
 mod hidden_effects;
 mod monitor;
 mod real_data;
+mod reliability;
 mod simulate;
