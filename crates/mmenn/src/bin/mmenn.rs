@@ -278,6 +278,10 @@ struct EstimateArgs {
     /// Correction weight W: "auto" (covariance constraint) or a positive number (W = value·I).
     #[arg(long, default_value = "auto")]
     w: mmenn::estimate::WeightChoice,
+    /// Robust estimate: Huber weights (c = 2σ) by iterating the exact sweep on
+    /// pseudo-observations, so a few wild samples cannot move W; outliers are reported.
+    #[arg(long)]
+    robust: bool,
     /// Sub-steps per sample interval, 1 to 1000 (default: chosen from the model).
     #[arg(long, value_parser = substeps)]
     substeps: Option<usize>,
@@ -393,7 +397,14 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "estimate", force, &inputs)?;
-    let s = mmenn::estimate::run_estimate(&args.data, &args.model, &opts, staged.path())?;
+    let robust = args.robust.then(mmenn::mme_core::RobustConfig::default);
+    let s = mmenn::estimate::run_estimate_with(
+        &args.data,
+        &args.model,
+        &opts,
+        robust.as_ref(),
+        staged.path(),
+    )?;
     staged.commit()?;
     println!(
         "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
@@ -406,6 +417,18 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
         );
     }
     println!("  W diagonal: {:?}", s.w_by_correction);
+    for o in s.outliers.iter().take(10) {
+        println!(
+            "  outlier: experiment {}, {} at sample {} (t = {} s): {} is {:.1} σ out",
+            o.experiment, o.channel, o.sample, o.time, o.value, o.sigmas
+        );
+    }
+    if s.outliers.len() > 10 {
+        println!("  … {} outliers in all (report.md)", s.outliers.len());
+    }
+    if !s.outliers.is_empty() && !args.robust {
+        println!("  (outliers pull a plain estimate: consider --robust)");
+    }
     if let Some(r) = s.sweep_samples_per_second {
         println!("  final sweep: {:.3e} samples/s", r);
     }
