@@ -483,7 +483,9 @@ mod tests {
     fn running_median_ignores_one_wild_sample_and_gaps() {
         let y = [1.0, 2.0, 3.0, 100.0, 5.0, f64::NAN, 7.0];
         let m = running_median(&y, 1);
-        assert_eq!(m[3], 5.0);
-        assert_eq!(m[5], 6.0);
+        assert!(
+            (m[3] - 5.0).abs() < 1e-15 && (m[5] - 6.0).abs() < 1e-15,
+            "{m:?}"
+        );
     }
 }

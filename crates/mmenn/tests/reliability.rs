@@ -1,6 +1,8 @@
 //! Issue 21: every reproducer of the reliability report ends in a typed error (or a correct
 //! result) in bounded time and memory, through the library and through the `mmenn` binary.
 
+#![allow(clippy::result_large_err)] // errors carry paths and context; tests only
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -118,7 +120,7 @@ coefficient = 1.0
                 match source {
                     MmeError::NonFiniteModel { state, time, .. } => {
                         assert_eq!(state, "omega");
-                        assert_eq!(*time, 0.0);
+                        assert!(time.abs() < 1e-12, "{time}");
                     }
                     other => panic!("{other:?}"),
                 }
