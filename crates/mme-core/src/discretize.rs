@@ -14,19 +14,98 @@ pub const MAX_DEFAULT_SUBSTEPS: usize = 64;
 /// Fraction of the fastest model time constant that one sub-step may span by default.
 pub const SUBSTEP_FRACTION: f64 = 0.1;
 
+/// Most sub-steps per sample interval a user may ask for (`--substeps`). Checked before
+/// anything is allocated.
+pub const MAX_SUBSTEPS: usize = 1000;
+
+/// Most bytes the sub-step grid of one experiment may need (estimated by
+/// [`sweep_bytes`]): 4 GiB. Checked before anything of that size is allocated.
+pub const MAX_SWEEP_BYTES: u128 = 4 << 30;
+
+/// Iterations the Schur decomposition of [`default_substeps`] may take before it gives up
+/// and the choice falls back to a norm bound on the spectral radius.
+const SCHUR_MAX_ITERATIONS: usize = 10_000;
+
+/// Estimated bytes of the per-sub-step storage of a sweep with `n` states and `q`
+/// corrections over `steps` sub-steps, in `f64`s: for a linear model the pieces `d_j` and
+/// the gains `F_j`, `f_j`; for a nonlinear one also the linearisation `Φ_j`, `Γ_j`, `c_j`
+/// and the trajectory `x_j`, `d_j` (current and trial).
+pub fn sweep_bytes(n: usize, q: usize, steps: usize, nonlinear: bool) -> u128 {
+    let (n, q) = (n as u128, q as u128);
+    let per_step = if nonlinear {
+        n * n + n * q + n + 3 * (n + q) + q * n + q
+    } else {
+        q * n + 2 * q
+    };
+    8 * per_step * steps as u128
+}
+
+/// Check an experiment's sub-step grid against [`MAX_SWEEP_BYTES`].
+pub(crate) fn check_grid(
+    experiment: usize,
+    samples: usize,
+    substeps: usize,
+    n: usize,
+    q: usize,
+    nonlinear: bool,
+) -> Result<()> {
+    let steps = (samples.saturating_sub(1) as u128) * substeps as u128;
+    let bytes = sweep_bytes(n, q, 1, nonlinear).saturating_mul(steps);
+    if bytes > MAX_SWEEP_BYTES {
+        return Err(MmeError::TooLarge {
+            experiment,
+            samples,
+            substeps,
+            steps: usize::try_from(steps).unwrap_or(usize::MAX),
+            bytes,
+            limit: MAX_SWEEP_BYTES,
+        });
+    }
+    Ok(())
+}
+
+/// Spectral radius of `a`: the largest eigenvalue modulus from a Schur decomposition
+/// limited to [`SCHUR_MAX_ITERATIONS`]; when that does not converge, the bound
+/// `max row sum of |a|` (≥ the spectral radius). `None` when `a` is empty or has a
+/// non-finite entry (the decomposition is never attempted then: nalgebra's iteration
+/// does not end on NaN).
+fn spectral_radius(a: &DMatrix<f64>) -> Option<f64> {
+    if a.nrows() == 0 || a.nrows() != a.ncols() || a.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let schur = nalgebra::linalg::Schur::try_new(a.clone(), f64::EPSILON, SCHUR_MAX_ITERATIONS);
+    let rate = match schur {
+        Some(s) => s
+            .complex_eigenvalues()
+            .iter()
+            .map(|z| z.norm())
+            .fold(0.0, f64::max),
+        None => f64::NAN,
+    };
+    if rate.is_finite() {
+        Some(rate)
+    } else {
+        let bound = a
+            .row_iter()
+            .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
+            .fold(0.0, f64::max);
+        bound.is_finite().then_some(bound)
+    }
+}
+
 /// Default sub-steps for a model `ẋ = A x + …` sampled every `dt`: the smallest `s ≥ 1`
 /// with `dt/s ≤ SUBSTEP_FRACTION · τ_min`, where `τ_min = 1/max|λ(A)|` is the fastest
 /// time constant (or inverse natural frequency) of `A`, capped at
-/// [`MAX_DEFAULT_SUBSTEPS`]. A model with `A = 0` (pure integrators) gets `s = 1`.
+/// [`MAX_DEFAULT_SUBSTEPS`]. A model with `A = 0` (pure integrators) gets `s = 1`, and
+/// so does an empty `A` or one with a non-finite entry (callers check finiteness first
+/// and report it; this function never panics and never loops).
 ///
 /// The discretisation is exact for piecewise-constant `d` at any `s`; sub-steps only refine
 /// the time resolution of `d̂` where the model itself moves fast within one sample.
 pub fn default_substeps(a: &DMatrix<f64>, dt: f64) -> usize {
-    let rate = a
-        .complex_eigenvalues()
-        .iter()
-        .map(|z| z.norm())
-        .fold(0.0, f64::max);
+    let Some(rate) = spectral_radius(a) else {
+        return 1;
+    };
     if !(rate.is_finite() && rate > 0.0) {
         return 1;
     }
@@ -46,6 +125,11 @@ pub(crate) fn substeps_for(requested: Option<usize>, a: &DMatrix<f64>, dt: f64) 
             name: "substeps",
             value: 0.0,
             reason: "need at least one sub-step per sample",
+        }),
+        Some(s) if s > MAX_SUBSTEPS => Err(MmeError::InvalidSetting {
+            name: "substeps",
+            value: s as f64,
+            reason: "at most MAX_SUBSTEPS = 1000 sub-steps per sample interval",
         }),
         Some(s) => Ok(s),
         None => Ok(default_substeps(a, dt)),
@@ -72,17 +156,25 @@ pub(crate) struct Discrete {
     pub ramp: Option<DMatrix<f64>>,
 }
 
-/// Discretise `model` for each experiment (its period and its inputs' behaviour between
-/// samples), sharing work between equal periods. The ramp gain is computed only for
+/// Discretise `model` for each experiment (its period, its inputs' behaviour between
+/// samples and its sample count, checked against [`MAX_SWEEP_BYTES`]), sharing work between equal periods. The ramp gain is computed only for
 /// experiments whose inputs are interpolated ([`InterSample::Foh`]).
 pub(crate) fn discretize_all(
     model: &LinearModel,
-    experiments: &[(f64, InterSample)],
+    experiments: &[(f64, InterSample, usize)],
     requested: Option<usize>,
 ) -> Result<Vec<Discrete>> {
     let mut out: Vec<Discrete> = Vec::with_capacity(experiments.len());
-    for &(dt, hold) in experiments {
+    for (e, &(dt, hold, samples)) in experiments.iter().enumerate() {
         let s = substeps_for(requested, model.a(), dt)?;
+        check_grid(
+            e,
+            samples,
+            s,
+            model.n_states(),
+            model.n_corrections(),
+            false,
+        )?;
         // Bitwise-equal periods (the usual case) reuse the same matrices.
         let prev = out
             .iter()
@@ -132,5 +224,44 @@ mod tests {
         assert_eq!(default_substeps(&a, 0.01), 1);
         assert_eq!(default_substeps(&DMatrix::zeros(2, 2), 1.0), 1);
         assert_eq!(default_substeps(&a, 1e6), MAX_DEFAULT_SUBSTEPS);
+    }
+
+    #[test]
+    fn degenerate_matrices_give_one_substep_without_panicking_or_looping() {
+        assert_eq!(default_substeps(&DMatrix::zeros(0, 0), 0.1), 1);
+        let nan = DMatrix::from_row_slice(2, 2, &[f64::NAN, 1.0, 0.0, -1.0]);
+        assert_eq!(default_substeps(&nan, 0.1), 1);
+        let inf = DMatrix::from_row_slice(2, 2, &[0.0, f64::INFINITY, 0.0, -1.0]);
+        assert_eq!(default_substeps(&inf, 0.1), 1);
+        // Huge but finite entries: finishes, capped.
+        let big = DMatrix::from_row_slice(2, 2, &[1e300, -1e300, 1e300, 1e300]);
+        assert_eq!(default_substeps(&big, 0.1), MAX_DEFAULT_SUBSTEPS);
+    }
+
+    #[test]
+    fn requested_substeps_are_capped_before_allocating() {
+        let a = DMatrix::zeros(1, 1);
+        assert!(substeps_for(Some(MAX_SUBSTEPS), &a, 0.1).is_ok());
+        assert!(matches!(
+            substeps_for(Some(MAX_SUBSTEPS + 1), &a, 0.1),
+            Err(MmeError::InvalidSetting {
+                name: "substeps",
+                ..
+            })
+        ));
+        assert!(matches!(
+            substeps_for(Some(4_294_967_296), &a, 0.1),
+            Err(MmeError::InvalidSetting { .. })
+        ));
+        assert!(check_grid(0, 1_000_000, 64, 3, 1, false).is_ok());
+        assert!(check_grid(0, 1_000_000, 8, 3, 1, true).is_ok());
+        assert!(matches!(
+            check_grid(0, 1_000_000, 64, 3, 1, true),
+            Err(MmeError::TooLarge { .. })
+        ));
+        assert!(matches!(
+            check_grid(0, 10_000_000, 1000, 3, 1, false),
+            Err(MmeError::TooLarge { .. })
+        ));
     }
 }

@@ -63,6 +63,51 @@ pub enum MmeError {
     /// The dataset has no experiments.
     #[error("the dataset has no experiments")]
     NoExperiments,
+    /// The model has no states.
+    #[error("the model has no states: MME needs at least one state")]
+    NoStates,
+    /// The sub-step grid of an experiment would need more memory than the documented
+    /// bound ([`crate::discretize::MAX_SWEEP_BYTES`]).
+    #[error(
+        "experiment {experiment}: {samples} samples × {substeps} sub-steps = {steps} sub-steps \
+         would need about {bytes} bytes of sweep storage, more than the limit of {limit} bytes \
+         (use fewer sub-steps or a shorter record)"
+    )]
+    TooLarge {
+        /// Experiment index.
+        experiment: usize,
+        /// Samples of the experiment.
+        samples: usize,
+        /// Sub-steps per sample interval.
+        substeps: usize,
+        /// Sub-steps in all.
+        steps: usize,
+        /// Estimated bytes.
+        bytes: u128,
+        /// The limit, bytes.
+        limit: u128,
+    },
+    /// The model's right-hand side or its Jacobian is not finite where the estimator
+    /// evaluates it (a term undefined there, e.g. a division by zero).
+    #[error(
+        "experiment {experiment}: the model is not finite at t = {time} s: {what} in the \
+         equation of state '{state}' is {value} (at x = {point:?}); a term in that equation \
+         is undefined there (division by zero, log of a non-positive number, overflow?)"
+    )]
+    NonFiniteModel {
+        /// Experiment index.
+        experiment: usize,
+        /// Time, s.
+        time: f64,
+        /// Name of the state whose equation is not finite.
+        state: String,
+        /// What is not finite: `f` or `∂f/∂<state>`.
+        what: String,
+        /// The value found.
+        value: f64,
+        /// The state where the model was evaluated.
+        point: Vec<f64>,
+    },
     /// An experiment is too short.
     #[error("experiment {experiment} has {found} samples, need at least {needed}")]
     TooFewSamples {
@@ -100,12 +145,16 @@ pub enum MmeError {
     },
     /// A sweep lost positive definiteness or produced non-finite numbers (ill-conditioned
     /// problem, or a diverged nonlinear trajectory).
-    #[error("experiment {experiment}: numerical breakdown at step {step} ({what})")]
+    #[error(
+        "experiment {experiment}: numerical breakdown at t = {time} s (sub-step {step}): {what}"
+    )]
     Breakdown {
         /// Experiment index.
         experiment: usize,
         /// Sub-step index.
         step: usize,
+        /// Time of the sub-step, s.
+        time: f64,
         /// What went wrong.
         what: &'static str,
     },

@@ -100,6 +100,7 @@ where
     let breakdown = |step, what| MmeError::Breakdown {
         experiment: pr.experiment,
         step,
+        time: pr.t0 + step as f64 * pr.h,
         what,
     };
     let allow_steady = S::TIME_INVARIANT && pr.steady == SteadyState::Allow && p <= 64;

@@ -12,6 +12,7 @@ mod linearize;
 pub mod noise;
 pub mod nonlinear;
 pub mod result;
+pub mod robust;
 mod sweep;
 pub mod tune_w;
 pub mod update;
@@ -24,6 +25,10 @@ pub use error::{MmeError, Result};
 pub use estimate::{estimate, estimate_with_report};
 pub use nonlinear::{NonlinearModel, estimate_nonlinear, estimate_nonlinear_with_report};
 pub use result::{MmeOutput, NoiseMethod, NoiseReport, WCurvePoint, WSearch};
+pub use robust::{
+    Outlier, RobustConfig, RobustOutput, estimate_nonlinear_robust, estimate_robust,
+    screen_outliers,
+};
 pub use update::{
     Coefficient, CorrectionRegression, Intercept, ModelUpdate, RegressionPoints, UpdateConfig,
     update_model,

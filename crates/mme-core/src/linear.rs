@@ -27,11 +27,14 @@ pub(crate) struct LinearRun<'a> {
 impl<'a> LinearRun<'a> {
     /// Bind and discretise (validates channels and sub-steps).
     pub fn new(model: &'a LinearModel, data: &'a Dataset, substeps: Option<usize>) -> Result<Self> {
+        if model.n_states() == 0 {
+            return Err(crate::error::MmeError::NoStates);
+        }
         let binding = bind(model.input_names(), model.output_names(), data)?;
-        let periods: Vec<(f64, sysid_core::InterSample)> = data
+        let periods: Vec<(f64, sysid_core::InterSample, usize)> = data
             .experiments()
             .iter()
-            .map(|e| (e.dt(), e.intersample()))
+            .map(|e| (e.dt(), e.intersample(), e.len()))
             .collect();
         let discrete = discretize_all(model, &periods, substeps)?;
         let (n, q) = (model.n_states(), model.n_corrections());
@@ -99,6 +102,7 @@ impl Solve for LinearRun<'_> {
                 outputs: exp.outputs(),
                 out_map: &self.binding.outputs,
                 experiment: e,
+                t0: exp.t0(),
                 steady: SteadyState::Allow,
             };
             let steps = StepModel::Lti {

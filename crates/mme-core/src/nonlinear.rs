@@ -216,6 +216,39 @@ struct Traj {
     consistent: bool,
 }
 
+/// Where a model evaluation happens, to name a non-finite value.
+struct Where<'a> {
+    experiment: usize,
+    time: f64,
+    point: &'a [f64],
+    states: &'a [String],
+}
+
+impl Where<'_> {
+    /// Error at the first non-finite entry of `values`, a column-major matrix with `rows`
+    /// rows (row = state equation; `what(column)` describes the column).
+    fn check(&self, values: &[f64], rows: usize, what: impl Fn(usize) -> String) -> Result<()> {
+        match values.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(i) => {
+                let (r, c) = if rows == 1 {
+                    (i, 0)
+                } else {
+                    (i % rows, i / rows)
+                };
+                Err(MmeError::NonFiniteModel {
+                    experiment: self.experiment,
+                    time: self.time,
+                    state: self.states.get(r).cloned().unwrap_or_default(),
+                    what: what(c),
+                    value: values[i],
+                    point: self.point.to_vec(),
+                })
+            }
+        }
+    }
+}
+
 /// The cost of a trajectory.
 #[derive(Debug, Clone)]
 struct Eval {
@@ -240,8 +273,11 @@ struct NonlinearRun<'a, F> {
 
 impl<'a, F: Dynamics> NonlinearRun<'a, F> {
     fn new(model: &'a NonlinearModel<F>, data: &'a Dataset, config: &MmeConfig) -> Result<Self> {
-        let binding = bind(&model.names.inputs, &model.names.outputs, data)?;
         let (n, q) = (model.dynamics.n_states(), model.e.ncols());
+        if n == 0 {
+            return Err(MmeError::NoStates);
+        }
+        let binding = bind(&model.names.inputs, &model.names.outputs, data)?;
         let m = model.dynamics.n_inputs();
         let mut run = Self {
             model,
@@ -274,12 +310,26 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                     let mut a = DMatrix::zeros(n, n);
                     let mut b = DMatrix::zeros(n, m);
                     let u = run.input(e, 0);
+                    let mut f = vec![0.0; n];
+                    model.dynamics.rhs(exp.t0(), &x_first, &u, &mut f);
+                    let at = Where {
+                        experiment: e,
+                        time: exp.t0(),
+                        point: &x_first,
+                        states: &model.names.states,
+                    };
+                    at.check(&f, 1, |_| "f".to_string())?;
                     model
                         .dynamics
                         .jacobians(exp.t0(), &x_first, &u, &mut a, &mut b);
+                    // Column-major: entry (r, c) at c·n + r is ∂f_r/∂x_c.
+                    at.check(a.as_slice(), n, |c| {
+                        format!("∂f/∂{}", model.names.states[c])
+                    })?;
                     default_substeps(&a, exp.dt())
                 }
             };
+            crate::discretize::check_grid(e, exp.len(), s, n, q, true)?;
             let steps = (exp.len() - 1) * s;
             run.grids.push(Grid {
                 samples: exp.len(),
@@ -463,8 +513,10 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         }
     }
 
-    /// Linearise about `traj` into `(Φ_j, Γ_j, c_j)` for every step.
-    fn linearise(&mut self, e: usize, traj: &Traj) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    /// Linearise about `traj` into `(Φ_j, Γ_j, c_j)` for every step. Errors with
+    /// [`MmeError::NonFiniteModel`] at the first sub-step where the map or its derivatives
+    /// are not finite (they would poison the sweep).
+    fn linearise(&mut self, e: usize, traj: &Traj) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         let g = self.grids[e];
         let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
         let mut phi = vec![0.0; g.steps * n * n];
@@ -492,13 +544,48 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 ph,
                 ga,
             );
+            let at = Where {
+                experiment: e,
+                time: t,
+                point: x,
+                states: &self.model.names.states,
+            };
+            let names = &self.model.names;
+            let map_ok = [&xn[..], &ph[..], &ga[..]]
+                .iter()
+                .all(|v| v.iter().all(|x| x.is_finite()));
+            if !map_ok {
+                // Name the equation: f itself at the step's start, when it is the culprit.
+                let mut f = vec![0.0; n];
+                let frac = (j % g.substeps) as f64 / g.substeps as f64;
+                let u0: Vec<f64> = if ub.is_empty() {
+                    ua.clone()
+                } else {
+                    ua.iter()
+                        .zip(&ub)
+                        .map(|(a, b)| a + frac * (b - a))
+                        .collect()
+                };
+                self.model.dynamics.rhs(t, x, &u0, &mut f);
+                at.check(&f, 1, |_| "f".to_string())?;
+            }
+            at.check(&xn, 1, |_| "the sub-step map x(t + h)".to_string())?;
+            at.check(ph, n, |c| {
+                format!("the sub-step map's derivative by '{}'", names.states[c])
+            })?;
+            at.check(ga, n, |c| {
+                format!(
+                    "the sub-step map's derivative by d_{}",
+                    names.corrections[c]
+                )
+            })?;
             for r in 0..n {
                 let lin: f64 = (0..n).map(|c| ph[c * n + r] * x[c]).sum::<f64>()
                     + (0..q).map(|c| ga[c * n + r] * d[c]).sum::<f64>();
                 offset[j * n + r] = xn[r] - lin;
             }
         }
-        (phi, gamma, offset)
+        Ok((phi, gamma, offset))
     }
 
     /// Solve the linearised problem of experiment `e`; returns the LQ optimum
@@ -513,7 +600,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
     ) -> Result<(Traj, f64, f64, f64)> {
         let g = self.grids[e];
         let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
-        let (phi, gamma, offset) = self.linearise(e, traj);
+        let (phi, gamma, offset) = self.linearise(e, traj)?;
         let exp = &self.data.experiments()[e];
         let pr = Problem {
             n,
@@ -527,6 +614,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             outputs: exp.outputs(),
             out_map: &self.binding.outputs,
             experiment: e,
+            t0: g.t0,
             steady: SteadyState::Never,
         };
         let steps = StepModel::Tv {
@@ -738,6 +826,7 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                 return Err(MmeError::Breakdown {
                     experiment: e,
                     step: 0,
+                    time: self.grids[e].t0,
                     what: "no finite rollout found",
                 });
             }

@@ -56,6 +56,8 @@ pub(crate) struct Problem<'a> {
     pub out_map: &'a [usize],
     /// Experiment index, for errors.
     pub experiment: usize,
+    /// Time of the first sample, s (for errors).
+    pub t0: f64,
     /// Whether the steady-state shortcut may be used (time-invariant steps only).
     pub steady: SteadyState,
 }
@@ -448,6 +450,7 @@ mod tests {
             outputs: &y,
             out_map: &[0],
             experiment: 0,
+            t0: 0.0,
             steady,
         };
         let steps = StepModel::Lti {

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
-use sysid_core::dataset::UNIFORM_TIME_RTOL;
+use sysid_core::dataset::{time_resolves_step, uniform_step_tolerance};
 use sysid_core::{Channel, Dataset, Experiment};
 
 use crate::atomic::write_atomic;
@@ -164,10 +164,24 @@ fn check_time(table: &Table, t: &[f64]) -> Result<(f64, f64)> {
         }
     }
     let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    let t_max = t[0].abs().max(t[t.len() - 1].abs());
+    if !time_resolves_step(t_max, dt) {
+        let k = if t[0].abs() >= t[t.len() - 1].abs() {
+            0
+        } else {
+            t.len() - 1
+        };
+        return Err(table.err(
+            table.lines[k],
+            Some("t"),
+            CsvProblem::TimeResolution { t: t_max, dt },
+        ));
+    }
     for k in 1..t.len() {
         let step = t[k] - t[k - 1];
-        // Same tolerance as sysid-core: relative to the step plus round-off of |t|.
-        if (step - dt).abs() > UNIFORM_TIME_RTOL * dt + 1e-12 * t[k].abs() {
+        // Same tolerance as sysid-core: relative to the step, plus round-off of |t| capped
+        // at a share of the step (a missing row is caught at any |t|).
+        if (step - dt).abs() > uniform_step_tolerance(dt, t[k]) {
             return Err(table.err(
                 table.lines[k],
                 Some("t"),

@@ -62,6 +62,17 @@ pub enum CsvProblem {
         /// Mean step, s.
         dt: f64,
     },
+    /// Time values so large that `f64` cannot resolve the sample step.
+    #[error(
+        "time values up to {t} s are too large for double precision to resolve the step \
+         {dt} s: subtract a time offset (e.g. start at 0)"
+    )]
+    TimeResolution {
+        /// Largest |t|, s.
+        t: f64,
+        /// Mean step, s.
+        dt: f64,
+    },
     /// Fewer than two data rows.
     #[error("the file has {0} data rows; at least 2 are needed")]
     TooFewRows(usize),
@@ -131,6 +142,19 @@ pub enum ModelProblem {
         /// What it should be.
         kind: &'static str,
     },
+    /// A state, input or output name that cannot be a CSV column or a file name part.
+    #[error("'{name}' in '{key}' is not a usable name: {reason}")]
+    BadName {
+        /// The key where it appears.
+        key: &'static str,
+        /// The name.
+        name: String,
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// The model has no states.
+    #[error("'states' is empty: the model needs at least one state")]
+    NoStates,
     /// `noise_variance` is neither a list nor "auto".
     #[error("noise_variance must be a list of positive numbers or \"auto\", got \"{0}\"")]
     NoiseWord(String),
@@ -201,6 +225,15 @@ pub enum MmennError {
         /// What is wrong.
         problem: ModelProblem,
     },
+    /// An output folder cannot be used (it holds another run's or the user's files, or an
+    /// input file).
+    #[error("output folder {path}: {reason}")]
+    OutputDir {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
     /// A simulated system could not be generated.
     #[error("simulation: {0}")]
     Plant(#[from] plants::PlantError),
@@ -219,6 +252,14 @@ pub enum MmennError {
     /// The MME estimator failed.
     #[error("MME: {0}")]
     Mme(#[from] mme_core::MmeError),
+    /// The MME estimator found the model non-finite in an equation with named terms.
+    #[error("MME: {source}; named terms in that equation: {terms}")]
+    MmeTerms {
+        /// The estimator's error.
+        source: mme_core::MmeError,
+        /// The terms, as `effect = coefficient·(term)`.
+        terms: String,
+    },
     /// A network could not be built or trained.
     #[error("network: {0}")]
     Nn(#[from] nn::NnError),

@@ -11,7 +11,7 @@ use sysid_core::{Dataset, MmeEstimate};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::{read_dataset, write_csv};
-use crate::error::Result;
+use crate::error::{MmennError, Result};
 use crate::model_file::{ModelSpec, NoiseVariance, read_model};
 use crate::plot::{Figure, Series};
 
@@ -69,14 +69,12 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
     if spec.terms.is_empty() {
         return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
     }
-    let dynamics = spec
-        .term_model()
-        .map_err(|problem| crate::error::MmennError::Model {
-            path: "<model>".into(),
-            line: None,
-            column: None,
-            problem,
-        })?;
+    let dynamics = spec.term_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })?;
     let lin = &spec.linear;
     let names = sysid_core::ModelNames {
         states: lin.state_names().to_vec(),
@@ -85,9 +83,28 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
         corrections: lin.correction_names().to_vec(),
     };
     let model = NonlinearModel::new(dynamics, lin.c().clone(), lin.e().clone(), names)?;
-    Ok(mme_core::estimate_nonlinear_with_report(
-        &model, data, config,
-    )?)
+    mme_core::estimate_nonlinear_with_report(&model, data, config).map_err(|e| name_terms(spec, e))
+}
+
+/// A non-finite model error with the named terms of the equation it names attached.
+pub(crate) fn name_terms(spec: &ModelSpec, e: mme_core::MmeError) -> MmennError {
+    let terms: Vec<String> = match &e {
+        mme_core::MmeError::NonFiniteModel { state, .. } => spec
+            .terms
+            .iter()
+            .filter(|t| &t.state == state || t.into.as_deref() == Some(state.as_str()))
+            .map(|t| format!("{} = {}·({})", t.effect, t.coefficient, t.term))
+            .collect(),
+        _ => Vec::new(),
+    };
+    if terms.is_empty() {
+        MmennError::Mme(e)
+    } else {
+        MmennError::MmeTerms {
+            source: e,
+            terms: terms.join(", "),
+        }
+    }
 }
 
 /// The JSON summary of an estimate (stable field names).
@@ -122,6 +139,11 @@ pub struct EstimateSummary {
     pub phase_seconds: BTreeMap<String, f64>,
     /// Samples per second of the final sweep (samples / time of the sweep phase).
     pub sweep_samples_per_second: Option<f64>,
+    /// Samples reported as outliers (largest first): against the robust estimate when it
+    /// ran, else by the running-median screen.
+    pub outliers: Vec<mme_core::Outlier>,
+    /// Passes of the robust estimate (`None`: not robust).
+    pub robust_passes: Option<usize>,
     /// Files written.
     pub files: Vec<String>,
 }
@@ -277,11 +299,61 @@ pub fn estimate_figures(
     Ok(written)
 }
 
+/// Robust MME (Huber, see [`mme_core::robust`]) with the model file's assumed model.
+pub fn estimate_spec_robust(
+    spec: &ModelSpec,
+    data: &Dataset,
+    config: &MmeConfig,
+    robust: &mme_core::RobustConfig,
+) -> Result<mme_core::RobustOutput> {
+    if spec.terms.is_empty() {
+        return Ok(mme_core::estimate_robust(
+            &spec.linear,
+            data,
+            config,
+            robust,
+        )?);
+    }
+    let dynamics = spec.term_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })?;
+    let lin = &spec.linear;
+    let names = sysid_core::ModelNames {
+        states: lin.state_names().to_vec(),
+        inputs: lin.input_names().to_vec(),
+        outputs: lin.output_names().to_vec(),
+        corrections: lin.correction_names().to_vec(),
+    };
+    let model = NonlinearModel::new(dynamics, lin.c().clone(), lin.e().clone(), names)?;
+    mme_core::estimate_nonlinear_robust(&model, data, config, robust)
+        .map_err(|e| name_terms(spec, e))
+}
+
+/// Samples farther than this many noise standard deviations from a running median are
+/// reported by a plain (not robust) estimate.
+pub const OUTLIER_SCREEN_SIGMA: f64 = 8.0;
+
 /// Read data and model files, run MME, write every output into `out`.
 pub fn run_estimate(
     data_paths: &[PathBuf],
     model_path: &Path,
     opts: &EstimateOptions,
+    out: &Path,
+) -> Result<EstimateSummary> {
+    run_estimate_with(data_paths, model_path, opts, None, out)
+}
+
+/// [`run_estimate`], robust when `robust` is given: outliers are then reported against
+/// the Huber estimate; otherwise by a running-median screen
+/// ([`OUTLIER_SCREEN_SIGMA`]).
+pub fn run_estimate_with(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    opts: &EstimateOptions,
+    robust: Option<&mme_core::RobustConfig>,
     out: &Path,
 ) -> Result<EstimateSummary> {
     let mut phases = BTreeMap::new();
@@ -298,7 +370,23 @@ pub fn run_estimate(
     phases.insert("read".to_string(), clock.elapsed().as_secs_f64());
 
     let clock = Instant::now();
-    let result = estimate_spec(&spec, &data, &mme_config(&spec, opts))?;
+    let config = mme_config(&spec, opts);
+    let (result, outliers, robust_passes) = match robust {
+        Some(r) => {
+            let ro = estimate_spec_robust(&spec, &data, &config, r)?;
+            (ro.output, ro.outliers, Some(ro.passes))
+        }
+        None => {
+            let result = estimate_spec(&spec, &data, &config)?;
+            let outliers = mme_core::screen_outliers(
+                &data,
+                spec.linear.output_names(),
+                &result.estimate.noise_variance,
+                OUTLIER_SCREEN_SIGMA,
+            )?;
+            (result, outliers, None)
+        }
+    };
     phases.insert("estimate".to_string(), clock.elapsed().as_secs_f64());
 
     let clock = Instant::now();
@@ -352,6 +440,8 @@ pub fn run_estimate(
         samples,
         phase_seconds: phases,
         sweep_samples_per_second: sweep_time.filter(|s| *s > 0.0).map(|s| samples as f64 / s),
+        outliers,
+        robust_passes,
         files,
     };
     write_atomic(
@@ -403,6 +493,21 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
             "Gauss–Newton iterations: {}.\n",
             s.report.iterations.len()
         ));
+    }
+    if let Some(p) = s.robust_passes {
+        r.push_str(&format!(
+            "\nRobust (Huber) estimate: {p} passes; residual variances are those of the \
+             pseudo-observations.\n"
+        ));
+    }
+    if !s.outliers.is_empty() {
+        r.push_str("\n| outlier: experiment | channel | sample | t (s) | value | σ out |\n|---|---|---|---|---|---|\n");
+        for o in s.outliers.iter().take(50) {
+            r.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {:.1} |\n",
+                o.experiment, o.channel, o.sample, o.time, o.value, o.sigmas
+            ));
+        }
     }
     r.push_str("\nFigures: `measured_*.svg` (measurement vs estimate), `states.svg`, `d_vs_time.svg`, `d_*_vs_*.svg` (d̂ against each state and input), `w_curve.svg`.\n");
     r

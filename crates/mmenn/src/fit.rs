@@ -55,6 +55,54 @@ pub struct HybridFile {
 pub type HybridModel = CorrectedModel<TermModel, NetCorrection>;
 
 impl HybridFile {
+    /// Parse and check `model.json` text (`path` only names the file in errors): the
+    /// format tag, `dt` finite and > 0, `substeps` in `1..=MAX_SUBSTEPS`, the model-file
+    /// part, an initial state of finite numbers, one per state.
+    pub fn parse(path: &Path, text: &str) -> Result<Self> {
+        let problem = |line, column, message: String| MmennError::Model {
+            path: path.to_path_buf(),
+            line,
+            column,
+            problem: crate::error::ModelProblem::Syntax { message },
+        };
+        let file: HybridFile = serde_json::from_str(text)
+            .map_err(|e| problem(Some(e.line()), Some(e.column()), e.to_string()))?;
+        if file.format != HYBRID_FORMAT {
+            return Err(problem(
+                None,
+                None,
+                format!("format is '{}', expected '{HYBRID_FORMAT}'", file.format),
+            ));
+        }
+        if !(file.dt.is_finite() && file.dt > 0.0) {
+            return Err(problem(
+                None,
+                None,
+                format!("dt = {} must be finite and > 0", file.dt),
+            ));
+        }
+        if !(1..=mme_core::discretize::MAX_SUBSTEPS).contains(&file.substeps) {
+            return Err(problem(
+                None,
+                None,
+                format!(
+                    "substeps = {} must be in 1..={}",
+                    file.substeps,
+                    mme_core::discretize::MAX_SUBSTEPS
+                ),
+            ));
+        }
+        let n = file.spec()?.linear.n_states();
+        if file.x0.len() != n || file.x0.iter().any(|v| !v.is_finite()) {
+            return Err(problem(
+                None,
+                None,
+                format!("x0 must hold {n} finite numbers, got {:?}", file.x0),
+            ));
+        }
+        Ok(file)
+    }
+
     /// The model-file part (its `intersample` is how `predict` treats the inputs between
     /// samples).
     pub fn spec(&self) -> Result<ModelSpec> {
@@ -679,14 +727,7 @@ pub fn run_predict(
         path: model_json.to_path_buf(),
         source,
     })?;
-    let file: HybridFile = serde_json::from_str(&text).map_err(|e| MmennError::Model {
-        path: model_json.to_path_buf(),
-        line: Some(e.line()),
-        column: Some(e.column()),
-        problem: crate::error::ModelProblem::Syntax {
-            message: e.to_string(),
-        },
-    })?;
+    let file = HybridFile::parse(model_json, &text)?;
     let spec = file.spec()?;
     let model = file.model()?;
     let lin = &spec.linear;

@@ -168,7 +168,64 @@ fn selection(
     Ok(m)
 }
 
+/// Why `name` cannot name a state, input or output, if it cannot: names become CSV
+/// header cells (beside the time column `t`) and parts of output file names, so they must
+/// be non-empty, differ from `t`, carry no CSV separator, quote, line break, control
+/// character, path separator or `..`, characters that file systems refuse, or
+/// surrounding whitespace (the CSV reader trims cells).
+pub fn name_problem(name: &str) -> Option<&'static str> {
+    if name.is_empty() {
+        return Some("it is empty");
+    }
+    if name == "t" {
+        return Some("'t' is the time column of every data file");
+    }
+    if name.trim() != name {
+        return Some("it has leading or trailing whitespace");
+    }
+    if name.chars().any(|c| c.is_control()) {
+        return Some("it contains a control character or line break");
+    }
+    if name.contains([',', '"', '\'', ';']) {
+        return Some("it contains a CSV separator or quote");
+    }
+    if name.contains(['/', '\\']) {
+        return Some("it contains a path separator");
+    }
+    if name.contains("..") {
+        return Some("it contains '..'");
+    }
+    if name.contains([':', '*', '?', '<', '>', '|']) {
+        return Some("it contains a character file names cannot hold (: * ? < > |)");
+    }
+    if name.chars().count() > 64 {
+        return Some("it is longer than 64 characters");
+    }
+    None
+}
+
+fn check_names(key: &'static str, names: &[String]) -> Result<(), ModelProblem> {
+    for name in names {
+        if let Some(reason) = name_problem(name) {
+            return Err(ModelProblem::BadName {
+                key,
+                name: name.clone(),
+                reason,
+            });
+        }
+    }
+    Ok(())
+}
+
 fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
+    if raw.states.is_empty() {
+        return Err(ModelProblem::NoStates);
+    }
+    check_names("states", &raw.states)?;
+    check_names("inputs", &raw.inputs)?;
+    if let Some(outputs) = &raw.outputs {
+        check_names("outputs", outputs)?;
+    }
     let n = raw.states.len();
     let m = raw.inputs.len();
     let a = matrix("A", &raw.a, n, n)?;

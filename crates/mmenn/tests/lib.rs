@@ -6,5 +6,7 @@ mod discover;
 mod fit;
 mod hidden_effects;
 mod monitor;
+mod never_panics;
 mod real_data;
+mod reliability;
 mod simulate;

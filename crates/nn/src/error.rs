@@ -106,6 +106,25 @@ pub enum NnError {
         /// First sample of the window, 0-based.
         sample: usize,
     },
+    /// A problem would need more memory than the documented bound.
+    #[error(
+        "{what} would need about {bytes} bytes ({rows} × {columns}), more than the limit of \
+         {limit} bytes; {hint}"
+    )]
+    TooLarge {
+        /// What would be allocated.
+        what: &'static str,
+        /// Rows.
+        rows: usize,
+        /// Columns.
+        columns: usize,
+        /// Estimated bytes.
+        bytes: u128,
+        /// The limit, bytes.
+        limit: u128,
+        /// What to do instead.
+        hint: &'static str,
+    },
 }
 
 /// Result alias for `nn`.

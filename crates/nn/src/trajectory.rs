@@ -21,6 +21,12 @@ use crate::mlp::Mlp;
 mod shooting;
 use shooting::{Buffers, Linearisation, Shooter, Window};
 
+/// Most bytes the dense least-squares matrices of [`refine_on_trajectories`] may take (the
+/// Jacobian `rows × θ`, its normal matrix and a damped copy `θ × θ` twice): 2 GiB. The
+/// unknowns `θ` are the weights plus one start state per window, so both grow with the
+/// record length; a problem beyond this bound is refused before anything is allocated.
+pub const MAX_TRAJECTORY_BYTES: u128 = 2 << 30;
+
 /// Settings of [`refine_on_trajectories`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -404,6 +410,22 @@ pub fn refine_on_trajectories<F: Dynamics>(
         val_w.clear();
     }
     let rows_train: usize = train_w.iter().map(|w| (w.end - w.start) * p).sum();
+    // Memory bound before any allocation of the record's size (see MAX_TRAJECTORY_BYTES).
+    let n_theta_planned = net.n_weights() + n * train_w.len();
+    let bytes = 8
+        * (rows_train as u128 * n_theta_planned as u128
+            + 2 * (n_theta_planned as u128).pow(2)
+            + 2 * rows_train as u128);
+    if bytes > MAX_TRAJECTORY_BYTES {
+        return Err(NnError::TooLarge {
+            what: "the trajectory refinement's Jacobian",
+            rows: rows_train,
+            columns: n_theta_planned,
+            bytes,
+            limit: MAX_TRAJECTORY_BYTES,
+            hint: "refine on a shorter record, or skip the refinement (--refine none)",
+        });
+    }
     let starts_of = |ws: &[Window]| -> Vec<f64> {
         ws.iter()
             .flat_map(|w| {

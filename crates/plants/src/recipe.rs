@@ -181,6 +181,8 @@ pub const MIN_NOISE_VARIANCE: f64 = 1e-10;
 
 /// Most samples one request may produce.
 pub const MAX_SAMPLES: usize = 10_000_000;
+// The request check's message quotes the value.
+const _: () = assert!(MAX_SAMPLES == 10_000_000);
 
 /// The noise-free truth of a simulated experiment, on the data's sample grid.
 #[derive(Debug, Clone, PartialEq)]
@@ -303,7 +305,7 @@ pub fn simulate_system(req: &SimulationRequest) -> Result<SimulatedData> {
     check_request_value(
         "duration",
         duration,
-        "gives more than MAX_SAMPLES samples at this fs",
+        "gives more than MAX_SAMPLES = 10,000,000 samples at this fs",
         steps < MAX_SAMPLES as f64,
     )?;
     let len = steps as usize + 1;

@@ -16,6 +16,27 @@ use crate::integrate::InterSample;
 /// 1e-6 of a step accepts that while still catching a dropped or duplicated sample.
 pub const UNIFORM_TIME_RTOL: f64 = 1e-6;
 
+/// Largest share of the sample step that the round-off of the absolute time values may
+/// take: beyond it (|t| so large that `f64` cannot resolve the step, e.g. t ≈ 1e12 s
+/// with dt = 0.01 s), a time vector is refused instead of being checked with a tolerance
+/// that would hide a missing sample.
+pub const TIME_RESOLUTION_SHARE: f64 = 0.01;
+
+/// Tolerance on `|step − dt|` for a step ending at time `t`: [`UNIFORM_TIME_RTOL`] of
+/// `dt`, plus the round-off of decimal time text (`1e-12·|t|`) but never more than
+/// [`TIME_RESOLUTION_SHARE`] of `dt`, so that a missing or duplicated sample (an error
+/// of a whole step) is always caught, however large `|t|` is.
+pub fn uniform_step_tolerance(dt: f64, t: f64) -> f64 {
+    UNIFORM_TIME_RTOL * dt + (1e-12 * t.abs()).min(TIME_RESOLUTION_SHARE * dt)
+}
+
+/// Whether `f64` time values up to `t_max` in magnitude resolve a step `dt`: four units
+/// of round-off of `t_max` (the error of a difference of two rounded times) stay within
+/// [`TIME_RESOLUTION_SHARE`] of `dt`.
+pub fn time_resolves_step(t_max: f64, dt: f64) -> bool {
+    4.0 * f64::EPSILON * t_max.abs() <= TIME_RESOLUTION_SHARE * dt
+}
+
 /// A named channel (an input, or a measured state/output) with an optional unit.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Channel {
@@ -241,10 +262,20 @@ pub fn uniform_step(t: &[f64]) -> Result<(f64, f64)> {
         }
     }
     let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    let t_max = t[0].abs().max(t[t.len() - 1].abs());
+    if !time_resolves_step(t_max, dt) {
+        return Err(CoreError::InvalidArgument {
+            name: "time",
+            value: t_max,
+            reason: "too large for double precision to resolve the sample step; \
+                     subtract a time offset",
+        });
+    }
     for (k, w) in t.windows(2).enumerate() {
         let step = w[1] - w[0];
-        // Tolerance: relative to the step, plus round-off of the absolute time value.
-        let tol = UNIFORM_TIME_RTOL * dt + 1e-12 * w[1].abs();
+        // Tolerance: relative to the step, plus round-off of the absolute time value
+        // (capped at a share of the step).
+        let tol = uniform_step_tolerance(dt, w[1]);
         if (step - dt).abs() > tol {
             return Err(CoreError::NonUniformTime {
                 sample: k + 1,
@@ -461,6 +492,40 @@ mod tests {
             Err(CoreError::NonUniformTime { sample: 2, .. })
         ));
         assert!(Experiment::from_times(&[0.0, 0.1, 0.2, 0.3], u, y).is_ok());
+    }
+
+    /// Issue 21: at t ≈ 1e9 a missing row is caught (the old `1e-12·|t|` tolerance was
+    /// 1e-3 s there, a tenth of the step at 100 Hz, and at 1e12 it was a whole second);
+    /// times too large to resolve the step are refused with a typed error.
+    #[test]
+    fn large_absolute_times_still_catch_a_missing_row() {
+        let dt = 0.01;
+        let (u, y) = (DMatrix::zeros(1, 6), DMatrix::zeros(1, 6));
+        let base = 1.0e9;
+        let mut t: Vec<f64> = (0..7).map(|k| base + k as f64 * dt).collect();
+        assert!(Experiment::from_times(&t[..6], u.clone(), y.clone()).is_ok());
+        t.remove(3);
+        assert!(matches!(
+            Experiment::from_times(&t, u.clone(), y.clone()),
+            Err(CoreError::NonUniformTime { .. })
+        ));
+        // At 1e12 the step cannot be resolved; at 1e15 the times even coincide.
+        for base in [1.0e12, 1.0e15] {
+            let mut t: Vec<f64> = (0..7).map(|k| base + k as f64 * dt).collect();
+            t.remove(3);
+            let r = Experiment::from_times(&t, u.clone(), y.clone());
+            assert!(
+                matches!(
+                    r,
+                    Err(CoreError::InvalidArgument { name: "time", .. }
+                        | CoreError::NonIncreasingTime { .. })
+                ),
+                "{r:?}"
+            );
+        }
+        // Coarse steps at large t are fine: 1 s steps around 1e12 s.
+        let t: Vec<f64> = (0..6).map(|k| 1.0e12 + k as f64).collect();
+        assert!(Experiment::from_times(&t, u, y).is_ok());
     }
 
     #[test]

@@ -10,4 +10,5 @@ mod limits;
 mod msd;
 mod noise;
 mod nonlinear;
+mod robust;
 mod update;

@@ -1,17 +1,85 @@
 //! The `mmenn` command-line tool: thin argument parsing over the facade's workflows.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
+use mmenn::atomic::{StageOptions, StagedDir};
 use mmenn::plants::{self, Recipe, SimulationRequest};
 
 /// Hybrid nonlinear system identification: Minimum Model Error estimation + neural networks.
+///
+/// Every command writes its --out folder all-or-nothing: into a fresh folder beside it,
+/// put in place at the end. An existing --out folder is replaced only when it holds the
+/// results of the same command (or with --force). Errors are printed without a backtrace
+/// unless --debug is given or MMENN_BACKTRACE is set. Exit status: 0 success, 1 error,
+/// 3 results written but the estimator did not converge (2: bad arguments).
 #[derive(Debug, Parser)]
 #[command(name = "mmenn", version, about)]
 struct Cli {
+    /// Print errors with their full detail (and a backtrace when RUST_BACKTRACE=1).
+    #[arg(long, global = true)]
+    debug: bool,
+    /// Replace an existing --out folder even when it holds another command's results or
+    /// files mmenn did not write (never one holding an input file).
+    #[arg(long, global = true)]
+    force: bool,
     #[command(subcommand)]
     command: Command,
+}
+
+/// A count that must be at least 1.
+fn at_least_one(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v >= 1 => Ok(v),
+        Ok(_) => Err("must be at least 1".into()),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
+/// Sub-steps per sample interval: 1 to `MAX_SUBSTEPS`.
+fn substeps(text: &str) -> std::result::Result<usize, String> {
+    let max = mmenn::mme_core::discretize::MAX_SUBSTEPS;
+    match text.trim().parse::<u64>() {
+        Ok(v) if (1..=max as u64).contains(&v) => Ok(v as usize),
+        Ok(v) => Err(format!("{v} is outside 1..={max}")),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
+/// A fraction in [0, 1).
+fn fraction(text: &str) -> std::result::Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..1.0).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} is not a fraction in [0, 1)")),
+        Err(e) => Err(format!("'{text}' is not a number ({e})")),
+    }
+}
+
+/// The results were written, but an iterative search did not converge (exit status 3).
+#[derive(Debug)]
+struct NotConverged(String);
+
+impl std::fmt::Display for NotConverged {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for NotConverged {}
+
+/// Stage `out` for `command` (see [`StagedDir`]).
+fn stage(out: &Path, command: &str, force: bool, inputs: &[&PathBuf]) -> Result<StagedDir> {
+    Ok(StagedDir::begin(
+        out,
+        StageOptions {
+            command: command.into(),
+            force,
+            inputs: inputs.iter().map(|p| p.to_path_buf()).collect(),
+            protect: Vec::new(),
+        },
+    )?)
 }
 
 #[derive(Debug, Subcommand)]
@@ -48,10 +116,10 @@ struct CompareArgs {
     #[arg(long)]
     narx_lags: Option<usize>,
     /// Largest network of the MME/NN sizing sweep.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
     max_hidden: usize,
     /// Initialisations per network size (MME/NN).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
     inits: usize,
     /// How the MME/NN networks are trained: trainlm or accelerated (as `fit --training`).
     #[arg(long, default_value = "trainlm")]
@@ -78,7 +146,7 @@ struct DiscoverArgs {
     val: Vec<PathBuf>,
     /// Without --val: fraction at the end of every estimation record held out to judge
     /// the free-run search (0: judge on the estimation records).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = fraction)]
     holdout_fraction: f64,
     /// Most discover–augment rounds.
     #[arg(long, default_value_t = 3)]
@@ -111,7 +179,7 @@ struct MonitorTrainArgs {
     #[arg(long, default_value = "canonical+physical")]
     features: mmenn::monitor::FeatureKind,
     /// Hidden units of each record's network.
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = 3, value_parser = at_least_one)]
     hidden: usize,
     /// Seed of the networks.
     #[arg(long, default_value_t = 1)]
@@ -146,10 +214,10 @@ struct FitArgs {
     #[arg(long, default_value = "auto")]
     hidden: mmenn::fit::HiddenChoice,
     /// Initialisations per network size.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
     inits: usize,
     /// Largest network of the automatic sizing sweep.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
     max_hidden: usize,
     /// How networks are trained: trainlm (MATLAB's schedule, the thesis) or accelerated
     /// (trainlm for 10 steps, then gain ratio with geodesic acceleration).
@@ -167,7 +235,7 @@ struct FitArgs {
     #[arg(long, default_value = "trajectory")]
     refine: mmenn::fit::RefineChoice,
     /// Samples per shooting window of the trajectory refinement.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = 100, value_parser = at_least_one)]
     refine_window: usize,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
@@ -192,7 +260,7 @@ struct PredictArgs {
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     x0: Option<Vec<f64>>,
     /// Samples used to fit the initial state.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 200, value_parser = at_least_one)]
     x0_window: usize,
     /// Output directory.
     #[arg(long)]
@@ -210,8 +278,12 @@ struct EstimateArgs {
     /// Correction weight W: "auto" (covariance constraint) or a positive number (W = value·I).
     #[arg(long, default_value = "auto")]
     w: mmenn::estimate::WeightChoice,
-    /// Sub-steps per sample interval (default: chosen from the model).
+    /// Robust estimate: Huber weights (c = 2σ) by iterating the exact sweep on
+    /// pseudo-observations, so a few wild samples cannot move W; outliers are reported.
     #[arg(long)]
+    robust: bool,
+    /// Sub-steps per sample interval, 1 to 1000 (default: chosen from the model).
+    #[arg(long, value_parser = substeps)]
     substeps: Option<usize>,
     /// Output directory.
     #[arg(long)]
@@ -261,7 +333,7 @@ fn parse_param(text: &str) -> Result<(String, f64)> {
 }
 
 #[allow(clippy::print_stdout)]
-fn simulate(args: SimulateArgs) -> Result<()> {
+fn simulate(args: SimulateArgs, force: bool) -> Result<()> {
     if args.list {
         for s in plants::systems() {
             println!(
@@ -296,23 +368,44 @@ fn simulate(args: SimulateArgs) -> Result<()> {
         params,
         duration: args.duration,
     };
-    let files = mmenn::simulate::run_simulate(&request, &out)?;
+    // Never silently replace a data, truth or model file with different contents.
+    let staged = StagedDir::begin(
+        &out,
+        StageOptions {
+            command: "simulate".into(),
+            force,
+            inputs: Vec::new(),
+            protect: vec!["data.csv".into(), "truth.csv".into(), "model.toml".into()],
+        },
+    )?;
+    mmenn::simulate::run_simulate(&request, staged.path())?;
+    staged.commit()?;
     println!(
         "wrote {}, {}, {}",
-        files.data.display(),
-        files.truth.display(),
-        files.model.display()
+        out.join("data.csv").display(),
+        out.join("truth.csv").display(),
+        out.join("model.toml").display()
     );
     Ok(())
 }
 
 #[allow(clippy::print_stdout)]
-fn estimate(args: EstimateArgs) -> Result<()> {
+fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
     let opts = mmenn::estimate::EstimateOptions {
         w: args.w,
         substeps: args.substeps,
     };
-    let s = mmenn::estimate::run_estimate(&args.data, &args.model, &opts, &args.out)?;
+    let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
+    let staged = stage(&args.out, "estimate", force, &inputs)?;
+    let robust = args.robust.then(mmenn::mme_core::RobustConfig::default);
+    let s = mmenn::estimate::run_estimate_with(
+        &args.data,
+        &args.model,
+        &opts,
+        robust.as_ref(),
+        staged.path(),
+    )?;
+    staged.commit()?;
     println!(
         "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
         s.samples
@@ -324,10 +417,45 @@ fn estimate(args: EstimateArgs) -> Result<()> {
         );
     }
     println!("  W diagonal: {:?}", s.w_by_correction);
+    for o in s.outliers.iter().take(10) {
+        println!(
+            "  outlier: experiment {}, {} at sample {} (t = {} s): {} is {:.1} σ out",
+            o.experiment, o.channel, o.sample, o.time, o.value, o.sigmas
+        );
+    }
+    if s.outliers.len() > 10 {
+        println!("  … {} outliers in all (report.md)", s.outliers.len());
+    }
+    if !s.outliers.is_empty() && !args.robust {
+        println!("  (outliers pull a plain estimate: consider --robust)");
+    }
     if let Some(r) = s.sweep_samples_per_second {
         println!("  final sweep: {:.3e} samples/s", r);
     }
     println!("wrote {} files into {}", s.files.len(), args.out.display());
+    if let Some(ended) = s.report.termination
+        && !matches!(
+            ended,
+            mmenn::sysid_core::Termination::Exact | mmenn::sysid_core::Termination::Converged
+        )
+    {
+        let detail = s
+            .w_search
+            .as_ref()
+            .map(|w| {
+                format!(
+                    "; W search: α = {:.4e}, ratio {:.4}, {:?} after {} sweeps",
+                    w.alpha, w.ratio, w.termination, w.evaluations
+                )
+            })
+            .unwrap_or_default();
+        return Err(NotConverged(format!(
+            "the estimate did not converge ({ended:?}{detail}); the results in {} are \
+             written for inspection only (see report.md)",
+            args.out.display()
+        ))
+        .into());
+    }
     Ok(())
 }
 
@@ -346,7 +474,7 @@ fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
 }
 
 #[allow(clippy::print_stdout)]
-fn fit(args: FitArgs) -> Result<()> {
+fn fit(args: FitArgs, force: bool) -> Result<()> {
     let opts = mmenn::fit::FitOptions {
         estimate: mmenn::estimate::EstimateOptions {
             w: args.w,
@@ -366,7 +494,15 @@ fn fit(args: FitArgs) -> Result<()> {
         },
         ..Default::default()
     };
-    let s = mmenn::fit::run_fit(&args.data, &args.model, &args.val, &opts, &args.out)?;
+    let inputs: Vec<&PathBuf> = args
+        .data
+        .iter()
+        .chain(&args.val)
+        .chain([&args.model])
+        .collect();
+    let staged = stage(&args.out, "fit", force, &inputs)?;
+    let s = mmenn::fit::run_fit(&args.data, &args.model, &args.val, &opts, staged.path())?;
+    staged.commit()?;
     println!(
         "network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)",
         s.hidden, s.chosen.train_mse, s.chosen.test_mse
@@ -395,18 +531,20 @@ fn fit(args: FitArgs) -> Result<()> {
     Ok(())
 }
 
-fn predict(args: PredictArgs) -> Result<()> {
+fn predict(args: PredictArgs, force: bool) -> Result<()> {
     let x0 = match args.x0 {
         Some(v) => mmenn::fit::InitialChoice::Given(v),
         None => mmenn::fit::InitialChoice::Fit,
     };
-    let s = mmenn::fit::run_predict(&args.model, &args.data, &x0, args.x0_window, &args.out)?;
+    let staged = stage(&args.out, "predict", force, &[&args.model, &args.data])?;
+    let s = mmenn::fit::run_predict(&args.model, &args.data, &x0, args.x0_window, staged.path())?;
+    staged.commit()?;
     print_free_run("prediction", &s.free_run);
     Ok(())
 }
 
 #[allow(clippy::print_stdout)]
-fn compare(a: CompareArgs) -> Result<()> {
+fn compare(a: CompareArgs, force: bool) -> Result<()> {
     let opts = mmenn::compare::CompareOptions {
         fit: mmenn::fit::FitOptions {
             max_hidden: a.max_hidden,
@@ -418,7 +556,10 @@ fn compare(a: CompareArgs) -> Result<()> {
         narx_lags: a.narx_lags,
         ..Default::default()
     };
-    let s = mmenn::compare::run_compare(&a.data, &a.model, &a.val, &opts, &a.out)?;
+    let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
+    let staged = stage(&a.out, "compare", force, &inputs)?;
+    let s = mmenn::compare::run_compare(&a.data, &a.model, &a.val, &opts, staged.path())?;
+    staged.commit()?;
     for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
         println!("{} — {}:", t.title(), t.horizon());
         for row in t.rows() {
@@ -441,14 +582,17 @@ fn compare(a: CompareArgs) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn discover(a: DiscoverArgs) -> Result<()> {
+fn discover(a: DiscoverArgs, force: bool) -> Result<()> {
     let opts = mmenn::discover::DiscoverOptions {
         max_rounds: a.max_rounds,
         seed: a.seed,
         holdout_fraction: a.holdout_fraction,
         ..Default::default()
     };
-    let s = mmenn::discover::run_discover(&a.data, &a.model, &a.val, &opts, &a.out)?;
+    let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
+    let staged = stage(&a.out, "discover", force, &inputs)?;
+    let s = mmenn::discover::run_discover(&a.data, &a.model, &a.val, &opts, staged.path())?;
+    staged.commit()?;
     println!("verdict: {:?}", s.verdict);
     for e in &s.effects {
         println!(
@@ -492,7 +636,7 @@ fn discover(a: DiscoverArgs) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn monitor(cmd: MonitorCommand) -> Result<()> {
+fn monitor(cmd: MonitorCommand, force: bool) -> Result<()> {
     match cmd {
         MonitorCommand::Train(a) => {
             let mut classes = Vec::new();
@@ -511,7 +655,11 @@ fn monitor(cmd: MonitorCommand) -> Result<()> {
                 seed: a.seed,
                 ..Default::default()
             };
-            let m = mmenn::monitor::train_monitor(&classes, &a.model, &opts, &a.out)?;
+            let mut inputs: Vec<&PathBuf> = classes.iter().flat_map(|(_, f)| f).collect();
+            inputs.push(&a.model);
+            let staged = stage(&a.out, "monitor train", force, &inputs)?;
+            let m = mmenn::monitor::train_monitor(&classes, &a.model, &opts, staged.path())?;
+            staged.commit()?;
             println!(
                 "trained on {} records; classify will use {} with {}",
                 m.rows.len(),
@@ -541,15 +689,54 @@ fn monitor(cmd: MonitorCommand) -> Result<()> {
     Ok(())
 }
 
-fn main() -> Result<()> {
+/// Whether errors are printed in full detail: `--debug`, or `MMENN_BACKTRACE` set to
+/// anything but empty or `0`. `RUST_BACKTRACE` alone does not: a user error is not a bug.
+fn debug_requested(flag: bool) -> bool {
+    flag || std::env::var_os("MMENN_BACKTRACE").is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// The error and its causes on one line, skipping a cause whose text the message already
+/// holds (several errors print their source themselves).
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut msg = e.to_string();
+    for cause in e.chain().skip(1) {
+        let c = cause.to_string();
+        if !msg.contains(&c) {
+            msg.push_str(": ");
+            msg.push_str(&c);
+        }
+    }
+    msg
+}
+
+#[allow(clippy::print_stderr)]
+fn main() -> ExitCode {
     let cli = Cli::parse();
-    match cli.command {
-        Command::Simulate(a) => simulate(a),
-        Command::Estimate(a) => estimate(a),
-        Command::Fit(a) => fit(a),
-        Command::Predict(a) => predict(a),
-        Command::Compare(a) => compare(a),
-        Command::Discover(a) => discover(a),
-        Command::Monitor(c) => monitor(c),
+    let force = cli.force;
+    let result = match cli.command {
+        Command::Simulate(a) => simulate(a, force),
+        Command::Estimate(a) => estimate(a, force),
+        Command::Fit(a) => fit(a, force),
+        Command::Predict(a) => predict(a, force),
+        Command::Compare(a) => compare(a, force),
+        Command::Discover(a) => discover(a, force),
+        Command::Monitor(c) => monitor(c, force),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            if debug_requested(cli.debug) {
+                // The chain, one cause per line, and anyhow's backtrace when one was
+                // captured (RUST_BACKTRACE / RUST_LIB_BACKTRACE).
+                eprintln!("error: {e:?}");
+            } else {
+                eprintln!("error: {}", error_chain(&e));
+            }
+            if e.downcast_ref::<NotConverged>().is_some() {
+                ExitCode::from(3)
+            } else {
+                ExitCode::FAILURE
+            }
+        }
     }
 }

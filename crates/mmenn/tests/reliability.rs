@@ -1,0 +1,559 @@
+//! Issue 21: every reproducer of the reliability report ends in a typed error (or a correct
+//! result) in bounded time and memory, through the library and through the `mmenn` binary.
+
+#![allow(clippy::result_large_err)] // errors carry paths and context; tests only
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use mmenn::error::{CsvProblem, MmennError, ModelProblem};
+use mmenn::mme_core::{self, MmeConfig, MmeError, NoiseSpec, WeightSpec};
+use mmenn::model_file::parse_model;
+use mmenn::sysid_core::{Dataset, Experiment, LinearModel};
+use nalgebra::DMatrix;
+
+fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mmenn-rel-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn model_problem(text: &str) -> ModelProblem {
+    match parse_model(Path::new("m.toml"), text) {
+        Err(MmennError::Model { problem, .. }) => problem,
+        other => panic!("expected a model error, got {other:?}"),
+    }
+}
+
+/// Pendulum-like data: 400 samples at 0.02 s of a damped oscillation, position measured.
+fn oscillation_csv() -> String {
+    let mut s = String::from("t,u,theta\n");
+    for k in 0..400 {
+        let t = k as f64 * 0.02;
+        let u = (0.7 * t).sin();
+        let y = (-(0.1 * t)).exp() * (4.4 * t).cos();
+        s.push_str(&format!("{t},{u},{y}\n"));
+    }
+    s
+}
+
+const PENDULUM: &str = r#"
+states = ["theta", "omega"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-19.62, -0.2]]
+B = [[0.0], [-2.0]]
+measured = ["theta"]
+corrected = ["omega"]
+noise_variance = [0.01]
+"#;
+
+#[test]
+fn empty_state_list_is_a_typed_error() {
+    let text = "states = []\nA = []\nmeasured = []\nnoise_variance = []\n";
+    assert_eq!(model_problem(text), ModelProblem::NoStates);
+    // And mme-core refuses a model without states before any decomposition.
+    let Ok(model) = LinearModel::new(
+        DMatrix::zeros(0, 0),
+        DMatrix::zeros(0, 0),
+        DMatrix::zeros(0, 0),
+        DMatrix::zeros(0, 0),
+    ) else {
+        return; // refused even earlier: also fine
+    };
+    let exp = Experiment::new(0.0, 0.1, DMatrix::zeros(0, 5), DMatrix::zeros(0, 5)).unwrap();
+    let data = Dataset::new(vec![], vec![], vec![exp]).unwrap();
+    for substeps in [None, Some(1)] {
+        let config = MmeConfig {
+            substeps,
+            ..MmeConfig::default()
+        };
+        assert_eq!(
+            mme_core::estimate(&model, &data, &config).unwrap_err(),
+            MmeError::NoStates
+        );
+    }
+}
+
+/// `term = "theta/q"` on an unmeasured state `q` is infinite at the data-based start: an
+/// error naming the equation, the time and the term, quickly (it used to hang in the
+/// eigenvalue routine).
+#[test]
+fn a_term_undefined_at_the_start_is_named_not_a_hang() {
+    let dir = scratch("nanterm");
+    let data = dir.join("d.csv");
+    std::fs::write(&data, oscillation_csv()).unwrap();
+    let text = r#"
+states = ["theta", "omega", "q"]
+inputs = ["u"]
+A = [[0.0, 1.0, 0.0], [-19.62, -0.2, 0.0], [0.0, 0.0, -1.0]]
+B = [[0.0], [-2.0], [0.0]]
+measured = ["theta"]
+corrected = ["omega"]
+noise_variance = [0.01]
+[[terms]]
+state = "omega"
+effect = "ratio"
+term = "theta/q"
+coefficient = 1.0
+"#;
+    let model = dir.join("m.toml");
+    std::fs::write(&model, text).unwrap();
+    for substeps in [None, Some(1)] {
+        let clock = Instant::now();
+        let opts = mmenn::estimate::EstimateOptions {
+            substeps,
+            ..Default::default()
+        };
+        let err = mmenn::estimate::run_estimate(
+            std::slice::from_ref(&data),
+            &model,
+            &opts,
+            &dir.join("out"),
+        )
+        .unwrap_err();
+        assert!(clock.elapsed() < Duration::from_secs(30));
+        match &err {
+            MmennError::MmeTerms { source, terms } => {
+                assert!(terms.contains("theta/q"), "{terms}");
+                match source {
+                    MmeError::NonFiniteModel { state, time, .. } => {
+                        assert_eq!(state, "omega");
+                        assert!(time.abs() < 1e-12, "{time}");
+                    }
+                    other => panic!("{other:?}"),
+                }
+            }
+            other => panic!("expected a named non-finite term, got {other:?}"),
+        }
+        let msg = err.to_string();
+        assert!(msg.contains("t = 0 s") && msg.contains("'omega'"), "{msg}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn substeps_are_capped_before_allocating() {
+    let spec = parse_model(Path::new("m.toml"), PENDULUM).unwrap();
+    let table =
+        mmenn::data_file::parse_table(Path::new("d.csv"), oscillation_csv().as_bytes()).unwrap();
+    let exp = mmenn::data_file::table_to_experiment(
+        &table,
+        spec.linear.input_names(),
+        spec.linear.output_names(),
+    )
+    .unwrap();
+    let data = Dataset::new(
+        vec![mmenn::sysid_core::Channel::new("u")],
+        vec![mmenn::sysid_core::Channel::new("theta")],
+        vec![exp],
+    )
+    .unwrap();
+    for s in [
+        4_294_967_296usize,
+        100_000,
+        mme_core::discretize::MAX_SUBSTEPS + 1,
+    ] {
+        let clock = Instant::now();
+        let config = MmeConfig {
+            substeps: Some(s),
+            w: WeightSpec::Scalar(1.0),
+            noise_variance: NoiseSpec::Given(vec![0.01]),
+            ..MmeConfig::default()
+        };
+        let err = mme_core::estimate(&spec.linear, &data, &config).unwrap_err();
+        assert!(
+            matches!(
+                err,
+                MmeError::InvalidSetting {
+                    name: "substeps",
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        assert!(clock.elapsed() < Duration::from_secs(5));
+    }
+}
+
+fn csv_problem(text: &str) -> CsvProblem {
+    let r = mmenn::data_file::parse_table(Path::new("d.csv"), text.as_bytes()).and_then(|t| {
+        mmenn::data_file::table_to_experiment(&t, &["u".to_string()], &["y".to_string()])
+    });
+    match r {
+        Err(MmennError::Csv { problem, .. }) => problem,
+        other => panic!("expected a CSV error, got {other:?}"),
+    }
+}
+
+/// A missing row is caught at any |t|: at 1e9 as a non-uniform step; at 1e12 and 1e15,
+/// where `f64` cannot resolve a 0.01 s step, the file is refused as such.
+#[test]
+fn uniform_time_check_is_exact_at_large_times() {
+    let rows = |base: f64, skip: usize| {
+        let mut s = String::from("t,u,y\n");
+        for k in (0..8).filter(|&k| k != skip) {
+            s.push_str(&format!("{},1,2\n", base + k as f64 * 0.01));
+        }
+        s
+    };
+    assert!(matches!(
+        csv_problem(&rows(1e9, 4)),
+        CsvProblem::NonUniformTime { .. }
+    ));
+    for base in [1e12, 1e15] {
+        let p = csv_problem(&rows(base, 4));
+        assert!(
+            matches!(
+                p,
+                CsvProblem::TimeResolution { .. } | CsvProblem::NonIncreasingTime { .. }
+            ),
+            "{p:?}"
+        );
+    }
+    // Complete files at large t with a resolvable step are fine.
+    let ok =
+        mmenn::data_file::parse_table(Path::new("d.csv"), rows(1e9, 99).as_bytes()).and_then(|t| {
+            mmenn::data_file::table_to_experiment(&t, &["u".to_string()], &["y".to_string()])
+        });
+    assert!(ok.is_ok(), "{ok:?}");
+}
+
+#[test]
+fn names_that_break_csv_or_paths_are_refused() {
+    let bad = [
+        "t",
+        "",
+        "a,b",
+        "a\"b",
+        "a\nb",
+        "x/../../../escaped",
+        "..",
+        "a\\b",
+        " x",
+    ];
+    for name in bad {
+        let quoted = serde_json::to_string(name).unwrap();
+        // As a state (also measured).
+        let text = PENDULUM
+            .replace("\"theta\"", &quoted)
+            .replace("measured = [\"theta\"]", &format!("measured = [{quoted}]"));
+        assert!(
+            matches!(
+                model_problem(&text),
+                ModelProblem::BadName { key: "states", .. }
+            ),
+            "state {name:?}: {:?}",
+            model_problem(&text)
+        );
+        // As an input.
+        let text = PENDULUM.replace("inputs = [\"u\"]", &format!("inputs = [{quoted}]"));
+        assert!(
+            matches!(
+                model_problem(&text),
+                ModelProblem::BadName { key: "inputs", .. }
+            ),
+            "input {name:?}"
+        );
+        // As an output of C.
+        let text = PENDULUM.replace(
+            "measured = [\"theta\"]",
+            &format!("C = [[1.0, 0.0]]\noutputs = [{quoted}]"),
+        );
+        assert!(
+            matches!(
+                model_problem(&text),
+                ModelProblem::BadName { key: "outputs", .. }
+            ),
+            "output {name:?}"
+        );
+    }
+    assert!(parse_model(Path::new("m.toml"), PENDULUM).is_ok());
+}
+
+#[test]
+fn model_json_with_a_bad_period_is_refused() {
+    let spec = parse_model(Path::new("m.toml"), PENDULUM).unwrap();
+    let file = mmenn::fit::HybridFile {
+        format: mmenn::fit::HYBRID_FORMAT.into(),
+        model_toml: mmenn::model_file::format_model(&spec).unwrap(),
+        network: mmenn::nn::Mlp::new(&mmenn::nn::Architecture::single(3, 2, 1), 1).unwrap(),
+        x0: vec![0.0, 0.0],
+        dt: 0.01,
+        substeps: 4,
+    };
+    let good = serde_json::to_string(&file).unwrap();
+    assert!(mmenn::fit::HybridFile::parse(Path::new("model.json"), &good).is_ok());
+    for (dt, substeps, x0) in [
+        (0.0, 4, vec![0.0, 0.0]),
+        (-1.0, 4, vec![0.0, 0.0]),
+        (0.01, 0, vec![0.0, 0.0]),
+        (0.01, 4, vec![0.0]),
+    ] {
+        let bad = mmenn::fit::HybridFile {
+            dt,
+            substeps,
+            x0,
+            ..file.clone()
+        };
+        let text = serde_json::to_string(&bad).unwrap();
+        assert!(matches!(
+            mmenn::fit::HybridFile::parse(Path::new("model.json"), &text),
+            Err(MmennError::Model { .. })
+        ));
+    }
+    // NaN cannot be written in JSON; a text with `null` is a syntax error, not a panic.
+    let text = good.replace("\"dt\":0.01", "\"dt\":null");
+    assert!(mmenn::fit::HybridFile::parse(Path::new("model.json"), &text).is_err());
+}
+
+#[test]
+fn max_samples_message_names_the_value() {
+    let request = mmenn::plants::SimulationRequest {
+        system: "pendulum".into(),
+        recipe: mmenn::plants::Recipe::Train,
+        noise_variance: None,
+        fs: Some(1000.0),
+        seed: 1,
+        params: vec![],
+        duration: Some(1e5),
+    };
+    let err = mmenn::plants::simulate_system(&request).unwrap_err();
+    assert!(err.to_string().contains("10,000,000"), "{err}");
+}
+
+/// The trajectory refinement of a 1,000,000-sample record used to abort allocating
+/// 102 GB; it is refused with a typed error before allocating.
+#[test]
+fn trajectory_refinement_of_a_huge_record_is_refused_before_allocating() {
+    use mmenn::nn::{
+        Architecture, HybridParts, Mlp, NnError, ShootingRecord, TrajectoryConfig,
+        refine_on_trajectories,
+    };
+    let lin = parse_model(Path::new("m.toml"), PENDULUM).unwrap().linear;
+    let n = 1_000_000;
+    let exp = Experiment::new(
+        0.0,
+        0.01,
+        DMatrix::zeros(1, n),
+        DMatrix::from_element(1, n, 0.1),
+    )
+    .unwrap();
+    let states = DMatrix::zeros(2, n);
+    let parts = HybridParts {
+        base: &lin,
+        e: lin.e(),
+        c: lin.c(),
+    };
+    let mut net = Mlp::new(&Architecture::single(3, 3, 1), 1).unwrap();
+    let records = [ShootingRecord {
+        experiment: &exp,
+        states: &states,
+    }];
+    let clock = Instant::now();
+    let err = refine_on_trajectories(
+        &mut net,
+        &parts,
+        &records,
+        &[],
+        &TrajectoryConfig::default(),
+        None,
+    )
+    .unwrap_err();
+    assert!(matches!(err, NnError::TooLarge { .. }), "{err:?}");
+    assert!(clock.elapsed() < Duration::from_secs(20));
+}
+
+// ---- through the binary ----
+
+fn mmenn(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (i32, String) {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_mmenn"));
+    cmd.current_dir(dir).args(args);
+    cmd.env_remove("MMENN_BACKTRACE");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn cli_rejects_bad_arguments_and_prints_no_backtrace() {
+    let dir = scratch("cli");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    let base = ["--data", "d.csv", "--model", "m.toml", "--out", "o"];
+    for (cmd, extra) in [
+        ("discover", ["--holdout-fraction", "2"]),
+        ("discover", ["--holdout-fraction", "NaN"]),
+        ("discover", ["--holdout-fraction", "1"]),
+        ("fit", ["--max-hidden", "0"]),
+        ("compare", ["--max-hidden", "0"]),
+        ("estimate", ["--substeps", "4294967296"]),
+        ("estimate", ["--substeps", "0"]),
+    ] {
+        let mut args = vec![cmd];
+        args.extend(base);
+        args.extend(extra);
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(err.contains("invalid value"), "{err}");
+    }
+    let (code, err) = mmenn(
+        &dir,
+        &[
+            "predict",
+            "--model",
+            "model.json",
+            "--data",
+            "d.csv",
+            "--out",
+            "p",
+            "--x0-window",
+            "0",
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    // An ordinary user error with RUST_BACKTRACE=1: one line, no backtrace.
+    let mut args = vec!["estimate"];
+    args.extend(["--data", "missing.csv", "--model", "m.toml", "--out", "o"]);
+    let (code, err) = mmenn(&dir, &args, &[("RUST_BACKTRACE", "1")]);
+    assert_eq!(code, 1);
+    assert!(
+        err.starts_with("error: ") && err.contains("missing.csv"),
+        "{err}"
+    );
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        !dir.join("o").exists(),
+        "a failed run left its output folder"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A noise variance far above the data's makes the covariance constraint unreachable: the
+/// W search cannot bracket, the results are written for inspection, and the exit status is
+/// 3 with the reason on the terminal.
+#[test]
+fn an_unconverged_w_search_exits_non_zero() {
+    let dir = scratch("wsearch");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(
+        dir.join("m.toml"),
+        PENDULUM.replace("noise_variance = [0.01]", "noise_variance = [100.0]"),
+    )
+    .unwrap();
+    let (code, err) = mmenn(
+        &dir,
+        &[
+            "estimate", "--data", "d.csv", "--model", "m.toml", "--out", "o",
+        ],
+        &[],
+    );
+    assert_eq!(code, 3, "{err}");
+    assert!(err.contains("did not converge"), "{err}");
+    assert!(dir.join("o").join("report.md").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Output folders are all-or-nothing: a re-run replaces the whole folder (a stale
+/// `estimate_1.csv` goes), leftovers of killed runs are removed, a folder of someone
+/// else's files is refused without --force, `simulate` never silently replaces a
+/// different data file, and a failed run leaves the previous folder untouched.
+#[test]
+fn output_folders_are_all_or_nothing() {
+    let dir = scratch("outdir");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    let est = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "estimate", "--data", "d.csv", "--model", "m.toml", "--w", "1", "--out", out,
+        ];
+        args.extend(extra);
+        mmenn(&dir, &args, &[])
+    };
+    let (code, err) = est("o", &[]);
+    assert_eq!(code, 0, "{err}");
+    let o = dir.join("o");
+    let manifest = mmenn::atomic::read_manifest(&o).unwrap();
+    assert_eq!(manifest.command, "estimate");
+    assert!(manifest.files.contains(&"estimate.csv".to_string()));
+    // Stale files: one of an old run, one temp file of a killed writer, one staging
+    // folder of a killed run beside the folder (PID far above any pid_max).
+    std::fs::write(o.join("estimate_1.csv"), "stale").unwrap();
+    std::fs::write(o.join(".estimate.csv.4000000000.tmp"), "partial").unwrap();
+    std::fs::create_dir(dir.join(".o.4000000001.staging")).unwrap();
+    let (code, err) = est("o", &[]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!o.join("estimate_1.csv").exists());
+    assert!(!o.join(".estimate.csv.4000000000.tmp").exists());
+    assert!(!dir.join(".o.4000000001.staging").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // A failed run (bad W) leaves the previous results in place.
+    let before = std::fs::read(o.join("estimate.csv")).unwrap();
+    let (code, _) = est("o", &["--substeps", "1000", "--w", "-1"]);
+    assert_ne!(code, 0);
+    assert_eq!(std::fs::read(o.join("estimate.csv")).unwrap(), before);
+    // A folder of the user's files: refused, then replaced with --force.
+    let mine = dir.join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    std::fs::write(mine.join("notes.txt"), "mine").unwrap();
+    let (code, err) = est("mine", &[]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--force"), "{err}");
+    assert!(mine.join("notes.txt").exists());
+    let (code, err) = est("mine", &["--force"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(!mine.join("notes.txt").exists());
+    // Another command's folder is refused too.
+    let (code, err) = mmenn(
+        &dir,
+        &["simulate", "--system", "pendulum", "--out", "o"],
+        &[],
+    );
+    assert_eq!(code, 1);
+    assert!(err.contains("mmenn estimate"), "{err}");
+    // Never into a folder holding an input, even with --force.
+    let (code, err) = mmenn(
+        &dir,
+        &[
+            "estimate", "--data", "d.csv", "--model", "m.toml", "--out", ".", "--force",
+        ],
+        &[],
+    );
+    assert_eq!(code, 1, "{err}");
+    assert!(dir.join("d.csv").exists());
+    // simulate: the same request again is fine (same bytes), a different one is refused.
+    let sim = |extra: &[&str]| {
+        let mut args = vec!["simulate", "--system", "pendulum", "--out", "sim"];
+        args.extend(extra);
+        mmenn(&dir, &args, &[])
+    };
+    assert_eq!(sim(&[]).0, 0);
+    assert_eq!(sim(&[]).0, 0);
+    let data = std::fs::read(dir.join("sim").join("data.csv")).unwrap();
+    let (code, err) = sim(&["--seed", "2"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("data.csv"), "{err}");
+    assert_eq!(
+        std::fs::read(dir.join("sim").join("data.csv")).unwrap(),
+        data
+    );
+    assert_eq!(sim(&["--seed", "2", "--force"]).0, 0);
+    assert_ne!(
+        std::fs::read(dir.join("sim").join("data.csv")).unwrap(),
+        data
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
