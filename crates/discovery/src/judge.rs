@@ -367,15 +367,13 @@ pub fn statistic(model: &TermModel, new_terms: &[usize], protocol: &Protocol<'_>
 /// Backward elimination by the judge's own test: while the set `new_terms` has more than
 /// one term, the term whose removal (the others recalibrated by the protocol) leaves the
 /// smallest statistic is dropped if that statistic still lies within `threshold` — the
-/// data cannot show it is needed. Returns the model without the dropped terms, the
-/// surviving terms' indices in it, and the dropped indices of `model` with the statistic
-/// each removal left, in the order dropped.
+/// data cannot show it is needed.
 pub fn prune(
     model: &TermModel,
     new_terms: &[usize],
     protocol: &Protocol<'_>,
     threshold: f64,
-) -> Result<(TermModel, Vec<usize>, Vec<(usize, f64)>)> {
+) -> Result<Pruned> {
     // Work with original indices; `kept` lists the original indices still in.
     let mut kept: Vec<usize> = new_terms.to_vec();
     let mut dropped = Vec::new();
@@ -414,8 +412,24 @@ pub fn prune(
         let (m, _) = without_terms(model, new_terms, &kept, &current)?;
         current = m;
     }
-    let (m, idx) = without_terms(model, new_terms, &kept, &current)?;
-    Ok((m, idx, dropped))
+    let (model, kept) = without_terms(model, new_terms, &kept, &current)?;
+    Ok(Pruned {
+        model,
+        kept,
+        dropped,
+    })
+}
+
+/// What [`prune`] leaves.
+#[derive(Debug, Clone)]
+pub struct Pruned {
+    /// The model without the dropped terms.
+    pub model: TermModel,
+    /// Indices in `model` of the surviving new terms.
+    pub kept: Vec<usize>,
+    /// Indices (in the model given to [`prune`]) of the dropped terms, with the statistic
+    /// each removal left, in the order dropped.
+    pub dropped: Vec<(usize, f64)>,
 }
 
 /// `model` keeping, of its terms `new_terms`, only `keep` (original indices), with the
@@ -458,6 +472,113 @@ fn statrs_upper_tail(x: f64, k: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sysid_core::{Channel, InterSample, LinearModel, ModelNames, TermSpec};
+
+    /// Oscillator `ẋ = v`, `v̇ = −4x − 0.2v + u` (x measured, v corrected) with `terms`.
+    fn oscillator(terms: &[(&str, &str, f64)]) -> TermModel {
+        let names = ModelNames {
+            states: vec!["x".into(), "v".into()],
+            inputs: vec!["u".into()],
+            outputs: vec!["x".into()],
+            corrections: vec!["v".into()],
+        };
+        let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.2]);
+        let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+        let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+        let e = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
+        let linear = LinearModel::with_names(a, b, c, e, names).unwrap_or_else(|e| panic!("{e}"));
+        TermModel::from_specs(
+            linear,
+            terms.iter().map(|&(effect, term, coefficient)| TermSpec {
+                state: "v",
+                into: None,
+                effect,
+                term,
+                coefficient,
+            }),
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// A record of `truth` (Dormand–Prince, tight) driven by a sum of incommensurate
+    /// sines held between samples, with noise of variance `r` (its own seed).
+    fn record(truth: &TermModel, n: usize, r: f64, seed: u64) -> Dataset {
+        let dt = 0.05;
+        let u = DMatrix::from_fn(1, n, |_, k| {
+            let t = k as f64 * dt;
+            1.5 * (0.7 * t).sin() + (1.9 * t + 1.0).sin() + 0.6 * (3.1 * t + 2.0).sin()
+        });
+        let xs = simulate_with(
+            truth,
+            &[0.3, 0.0],
+            0.0,
+            dt,
+            &u,
+            InterSample::Zoh,
+            &JudgeConfig::default().truth_integrator,
+            DEFAULT_BLOW_UP,
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let mut y: DMatrix<f64> = truth.linear().c() * xs;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        for k in 0..n {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            y[(0, k)] += r.sqrt() * z;
+        }
+        let exp = Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"));
+        Dataset::new(vec![Channel::new("u")], vec![Channel::new("x")], vec![exp])
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// The truth (cubic spring −2 x³) judged on its own protocol is accepted; the same
+    /// term with its coefficient frozen 15 % off (nothing recalibrated) is rejected; and
+    /// a useless second term rides along only until `prune` drops it.
+    #[test]
+    fn right_model_accepted_wrong_rejected_passenger_pruned() {
+        let truth = oscillator(&[("cubic_stiffness", "x^3", -2.0)]);
+        let r = 1e-4;
+        let cal = record(&truth, 1200, r, 5);
+        let hold = record(&truth, 1200, r, 6);
+        let x0 = vec![vec![0.3, 0.0]];
+        let calibration = CalibrationConfig {
+            horizons: vec![0.25, 1.0],
+            tolerance: 1e-8,
+            ..CalibrationConfig::default()
+        };
+        let noise = [r];
+        let protocol = Protocol {
+            cal: &cal,
+            cal_x0: &x0,
+            hold: Some((&hold, &x0)),
+            noise_variance: &noise,
+            calibration: &calibration,
+        };
+        let config = JudgeConfig::default();
+        let right = judge(&truth, &[0], &protocol, &config).unwrap_or_else(|e| panic!("{e}"));
+        assert!(right.accepts(), "{right:?}");
+        assert!(right.mean > 0.9 && right.mean < 1.2, "{right:?}");
+        let off = oscillator(&[("cubic_stiffness", "x^3", -2.3)]);
+        let wrong = judge(&off, &[], &protocol, &config).unwrap_or_else(|e| panic!("{e}"));
+        assert!(!wrong.accepts(), "{wrong:?}");
+        // The same test is deterministic.
+        let again = judge(&truth, &[0], &protocol, &config).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(right, again);
+        let with_passenger = oscillator(&[
+            ("cubic_stiffness", "x^3", -2.0),
+            ("quadratic_drag", "v*abs(v)", 0.0),
+        ]);
+        let Pruned {
+            model: kept,
+            kept: idx,
+            dropped,
+        } = prune(&with_passenger, &[0, 1], &protocol, right.threshold)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(dropped.len(), 1, "{dropped:?}");
+        assert_eq!(dropped[0].0, 1);
+        assert_eq!(idx, vec![0]);
+        assert_eq!(kept.terms().len(), 1);
+        assert_eq!(kept.terms()[0].effect, "cubic_stiffness");
+    }
 
     #[test]
     fn scaled_chi2_matches_chi2_when_scale_is_one() {

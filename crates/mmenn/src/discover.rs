@@ -1043,8 +1043,8 @@ pub fn run_discover(
             noise_variance: &ctx.noise_variance,
             calibration: &calibration,
         };
-        let (_, _, dropped) =
-            discovery::judge::prune(&ctx.model, &ctx.new_terms, &protocol, j.threshold)?;
+        let dropped =
+            discovery::judge::prune(&ctx.model, &ctx.new_terms, &protocol, j.threshold)?.dropped;
         if !dropped.is_empty() && spec.terms.len() == ctx.model.terms().len() {
             let first_new = ctx.new_terms[0];
             let n_new = ctx.new_terms.len();
