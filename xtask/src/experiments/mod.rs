@@ -4,6 +4,7 @@
 pub mod ch2;
 pub mod ch6;
 pub mod discovery;
+pub mod grey;
 pub mod real;
 pub mod systems;
 
