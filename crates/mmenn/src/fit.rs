@@ -365,11 +365,33 @@ pub fn run_fit(
     opts: &FitOptions,
     out: &Path,
 ) -> Result<FitSummary> {
+    run_fit_with_progress(
+        data_paths,
+        model_path,
+        val_paths,
+        opts,
+        out,
+        &crate::progress::NoProgress,
+    )
+}
+
+/// [`run_fit`], reporting the MME estimate and the network sizing sweep (one step per
+/// trained network) to `progress`. The results do not depend on the sink.
+pub fn run_fit_with_progress(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &FitOptions,
+    out: &Path,
+    progress: &dyn crate::progress::ProgressSink,
+) -> Result<FitSummary> {
     let mut spec = read_model(model_path)?;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     let config = mme_config(&spec, &opts.estimate);
-    let mut result = estimate_spec(&spec, &data, &config)?;
+    let mut result = crate::progress::stage(progress, "MME estimate", || {
+        estimate_spec(&spec, &data, &config)
+    })?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
         let up = mme_core::update_model(
@@ -437,7 +459,30 @@ pub fn run_fit(
             ..sweep_config
         },
     };
-    let sweep = nn::sizing_sweep(&x_fit, &d_fit, &x_test, &d_test, &sweep_config, None)?;
+    const SWEEP: &str = "network sizing sweep";
+    let on_run = |p: nn::SweepProgress| {
+        progress.report(
+            &crate::progress::Progress::new(SWEEP, p.done, Some(p.total)).with_note(format!(
+                "{} hidden, init {}: test MSE {:.3e}",
+                p.hidden, p.init, p.test_mse
+            )),
+        );
+    };
+    progress.report(&crate::progress::Progress::new(
+        SWEEP,
+        0,
+        Some(sweep_config.hidden_sizes.len() * sweep_config.inits),
+    ));
+    let sweep = nn::sizing_sweep(
+        &x_fit,
+        &d_fit,
+        &x_test,
+        &d_test,
+        &sweep_config,
+        Some(&on_run),
+    );
+    progress.finish(SWEEP);
+    let sweep = sweep?;
     let x0: Vec<f64> = est.experiments[0]
         .states
         .column(0)
@@ -465,6 +510,7 @@ pub fn run_fit(
             val_pair,
             &x0,
             opts,
+            progress,
         )?),
     };
     let hybrid = hybrid_model(&spec, network.clone(), &x0, opts.substeps)?;

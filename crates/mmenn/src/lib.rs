@@ -11,6 +11,7 @@ pub mod fit;
 pub mod model_file;
 pub mod monitor;
 pub mod plot;
+pub mod progress;
 pub mod refine;
 pub mod simulate;
 

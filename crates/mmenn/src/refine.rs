@@ -110,6 +110,7 @@ pub(crate) fn refine_network(
     val: Option<(&MmeEstimate, &Dataset)>,
     x0: &[f64],
     opts: &FitOptions,
+    progress: &dyn crate::progress::ProgressSink,
 ) -> Result<RefineSummary> {
     let lin = &spec.linear;
     let before = match val {
@@ -140,7 +141,21 @@ pub(crate) fn refine_network(
     };
     let train = shooting(data, est);
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
-    let report = nn::refine_on_trajectories(network, &parts, &train, &val, &config, None)?;
+    const TASK: &str = "trajectory refinement";
+    let most = config.max_iterations;
+    let mut on_step = |p: nn::RefineProgress| {
+        let note = match p.val_objective {
+            Some(v) => format!("objective {:.4e}, held out {v:.4e}", p.train_objective),
+            None => format!("objective {:.4e}", p.train_objective),
+        };
+        progress
+            .report(&crate::progress::Progress::new(TASK, p.iteration, Some(most)).with_note(note));
+    };
+    progress.report(&crate::progress::Progress::new(TASK, 0, Some(most)));
+    let report =
+        nn::refine_on_trajectories(network, &parts, &train, &val, &config, Some(&mut on_step));
+    progress.finish(TASK);
+    let report = report?;
     Ok(RefineSummary {
         report,
         validation_fit_before: before,
