@@ -516,24 +516,40 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         s.samples,
         s.substeps
     ));
-    r.push_str("| channel | noise variance | residual variance | ratio |\n|---|---|---|---|\n");
+    r.push_str("| channel | noise variance R | residual variance | ratio |\n|---|---|---|---|\n");
     for (name, nv) in &s.noise_variance {
         r.push_str(&format!(
             "| {name} | {nv:.4e} | {:.4e} | {:.3} |\n",
             s.residual_variance[name], s.residual_to_noise[name]
         ));
     }
-    r.push_str(&format!("\nNoise variance: {:?}. ", s.noise_method));
+    r.push_str(
+        "\n*Noise variance R*: the measurement noise assumed per channel. *Residual \
+         variance*: mean square of measurement minus estimate. *Ratio*: residual / noise \
+         variance; the covariance constraint chooses W so that it is about 1 (well below 1: \
+         the estimate follows the noise; well above 1: W holds the correction back).\n\n",
+    );
+    r.push_str(&format!(
+        "Noise variance: {}.\n\n",
+        crate::words::noise_method(s.noise_method)
+    ));
     match &s.w_search {
         Some(w) => r.push_str(&format!(
-            "W chosen by the covariance constraint: α = {:.4e}, ratio {:.4} ({:?}, {} sweeps).\n",
-            w.alpha, w.ratio, w.termination, w.evaluations
+            "W (weight of the model correction d̂, per unit time) chosen by the covariance \
+             constraint: α = {:.4e}, ratio reached {:.4}; search {} after {} sweeps.\n",
+            w.alpha,
+            w.ratio,
+            crate::words::termination(Some(w.termination)),
+            w.evaluations
         )),
-        None => r.push_str("W given by the user.\n"),
+        None => r.push_str("W (weight of the model correction d̂) given by the user.\n"),
     }
     r.push_str(&format!(
-        "\nW diagonal: {:?}. Cost J = {:.6e}. Termination: {:?}.\n",
-        s.w_by_correction, s.cost, s.report.termination
+        "\nW diagonal by corrected state: {}. MME cost J = {:.6e} (weighted misfit to the \
+         data plus weighted size of d̂, at the optimum). Solve: {}.\n",
+        crate::words::named_values(&s.w_by_correction),
+        s.cost,
+        crate::words::termination(s.report.termination)
     ));
     if !s.report.iterations.is_empty() {
         r.push_str(&format!(
@@ -548,7 +564,16 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         ));
     }
     if !s.outliers.is_empty() {
-        r.push_str("\n| outlier: experiment | channel | sample | t (s) | value | σ out |\n|---|---|---|---|---|---|\n");
+        let screen = if s.robust_passes.is_some() {
+            format!(
+                "{} noise standard deviations (σ) from the robust estimate",
+                mme_core::RobustConfig::default().report_sigma
+            )
+        } else {
+            format!("{OUTLIER_SCREEN_SIGMA} noise standard deviations (σ) from a running median")
+        };
+        r.push_str(&format!("\nOutliers: samples more than {screen}.\n\n"));
+        r.push_str("| experiment | channel | sample | t (s) | value | σ out |\n|---|---|---|---|---|---|\n");
         for o in s.outliers.iter().take(50) {
             r.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {:.1} |\n",

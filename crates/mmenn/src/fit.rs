@@ -577,7 +577,7 @@ pub fn run_fit_with_progress(
     }
     write_sweep(&out.join("sweep.csv"), &sweep.rows)?;
     files.push("sweep.csv".into());
-    sweep_figure(&sweep.rows).write(&out.join("sweep.svg"))?;
+    sweep_figure(&sweep.rows, chosen).write(&out.join("sweep.svg"))?;
     files.push("sweep.svg".into());
 
     let file = HybridFile {
@@ -656,8 +656,9 @@ fn compare_figure(
     })
 }
 
-fn sweep_figure(rows: &[SweepRow]) -> Figure {
+fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {
     let h: Vec<f64> = rows.iter().map(|r| r.hidden as f64).collect();
+    let marked: Vec<&SweepRow> = rows.get(chosen).into_iter().collect();
     Figure {
         title: "network sizing sweep (thesis Figs. 4.5, 4.9)".into(),
         x_label: "hidden units".into(),
@@ -669,6 +670,14 @@ fn sweep_figure(rows: &[SweepRow]) -> Figure {
                 rows.iter().map(|r| r.train_mse.log10()).collect(),
             ),
             Series::points("test", h, rows.iter().map(|r| r.test_mse.log10()).collect()),
+            Series::highlight(
+                marked
+                    .first()
+                    .map(|r| format!("chosen: {} hidden, init {} (test)", r.hidden, r.init))
+                    .unwrap_or_default(),
+                marked.iter().map(|r| r.hidden as f64).collect(),
+                marked.iter().map(|r| r.test_mse.log10()).collect(),
+            ),
         ],
         bands: vec![],
     }
@@ -714,10 +723,34 @@ fn metrics_table(rep: &FreeRunReport) -> String {
 
 fn fit_report(s: &FitSummary) -> String {
     let mut r = String::from("# MME/NN hybrid model\n\n");
+    let training = match s.training {
+        Training::Trainlm => "Levenberg–Marquardt with MATLAB trainlm's damping schedule",
+        Training::Accelerated => {
+            "Levenberg–Marquardt, trainlm's schedule for 10 steps, then gain-ratio damping \
+             with geodesic acceleration"
+        }
+    };
+    let selection = match s.selection {
+        NetworkSelection::CorrectionMse => "the thesis rule on the test MSE of d̂",
+        NetworkSelection::FreeRun => "smallest free-run output error on the training data",
+    };
     r.push_str(&format!(
-        "Network: {} hidden tanh units (sizing sweep, training {:?}; test MSE of d from {}). {} training pairs. MME W: {:?}.\n\n",
-        s.hidden, s.training, s.test_source, s.training_pairs, s.w_by_correction
+        "Network: {} hidden tanh units, picked from the sizing sweep by {selection}; trained \
+         by {training}. Train MSE of d̂ {:.3e}, test MSE {:.3e} (test set: {}). {} training \
+         pairs (x̂, u) → d̂. MME W by corrected state: {}.\n\n",
+        s.hidden,
+        s.chosen.train_mse,
+        s.chosen.test_mse,
+        s.test_source,
+        s.training_pairs,
+        crate::words::named_values(&s.w_by_correction)
     ));
+    r.push_str(
+        "*Fit %* = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖): 100 is perfect, 0 is no better than \
+         the mean. *R²* = 1 − Σ(y − ŷ)² / Σ(y − mean y)². *RMSE*: root mean square of \
+         y − ŷ, in the channel's unit. *Error variance*: variance of y − ŷ. ŷ is the \
+         free-run simulation (no measurement used after the initial state).\n\n",
+    );
     r.push_str(&format!(
         "## Training data — {} ({})\n\n",
         s.train.horizon, s.train.x0_source

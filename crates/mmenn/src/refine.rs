@@ -59,12 +59,19 @@ impl RefineSummary {
         let mut s = format!(
             "\n## Trajectory refinement (thesis §7.1)\n\nMultiple shooting over {} training \
              windows ({} held out for early stopping), started from MME's x̂: {} LM steps, \
-             returned step {} ({:?}); training objective {:.4e} → {:.4e}.\n",
+             returned step {} (stopped: {}); training objective (mean squared residual in \
+             units of each channel's standard deviation) {:.4e} → {:.4e}.\n",
             r.train_windows,
             r.val_windows,
             r.iterations,
             r.best_iteration,
-            r.termination,
+            match r.termination {
+                nn::RefineStop::MaxIterations => "step limit reached",
+                nn::RefineStop::MuMax => "no step lowered the objective before μ hit its limit",
+                nn::RefineStop::SmallDecrease => "the objective stopped decreasing",
+                nn::RefineStop::ValidationStop => "the held-out objective stopped improving",
+                _ => "another reason",
+            },
             r.initial_train_objective(),
             r.final_train_objective(),
         );

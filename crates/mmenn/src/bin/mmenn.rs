@@ -526,11 +526,16 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
     );
     for (name, nv) in &s.noise_variance {
         println!(
-            "  {name}: noise variance {nv:.4e} ({:?}), residual variance {:.4e} (ratio {:.3})",
-            s.noise_method, s.residual_variance[name], s.residual_to_noise[name]
+            "  {name}: noise variance {nv:.4e} ({}), residual variance {:.4e} (ratio {:.3})",
+            mmenn::words::noise_method(s.noise_method),
+            s.residual_variance[name],
+            s.residual_to_noise[name]
         );
     }
-    println!("  W diagonal: {:?}", s.w_by_correction);
+    println!(
+        "  W diagonal: {}",
+        mmenn::words::named_values(&s.w_by_correction)
+    );
     for o in s.outliers.iter().take(10) {
         println!(
             "  outlier: experiment {}, {} at sample {} (t = {} s): {} is {:.1} σ out",
@@ -558,14 +563,18 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
             .as_ref()
             .map(|w| {
                 format!(
-                    "; W search: α = {:.4e}, ratio {:.4}, {:?} after {} sweeps",
-                    w.alpha, w.ratio, w.termination, w.evaluations
+                    "; W search: α = {:.4e}, ratio {:.4}, {} after {} sweeps",
+                    w.alpha,
+                    w.ratio,
+                    mmenn::words::termination(Some(w.termination)),
+                    w.evaluations
                 )
             })
             .unwrap_or_default();
         return Err(NotConverged(format!(
-            "the estimate did not converge ({ended:?}{detail}); the results in {} are \
+            "the estimate did not converge ({}{detail}); the results in {} are \
              written for inspection only (see report.md)",
+            mmenn::words::termination(Some(ended)),
             args.out.display()
         ))
         .into());
