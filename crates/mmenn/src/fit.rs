@@ -565,10 +565,22 @@ pub fn run_fit_with_progress(
         let fig = Figure {
             title: format!("d_{name}: MME estimate and network"),
             x_label: "training pair".into(),
-            y_label: format!("d_{name}"),
+            y_label: match spec.units.get(&format!("d_{name}")) {
+                Some(u) => format!("d_{name} ({u})"),
+                None => format!("d_{name}"),
+            },
             series: vec![
                 Series::points("MME d̂", idx.clone(), row(&d_train, i)),
-                Series::line("NN(x̂, u)", idx, row(&pred, i)),
+                Series::line(
+                    match sysid_core::channel_metrics(&row(&d_train, i), &row(&pred, i)) {
+                        Ok(m) if m.fit_percent.is_finite() => {
+                            format!("NN(x̂, u) (fit {:.1} % to d̂)", m.fit_percent)
+                        }
+                        _ => "NN(x̂, u)".to_string(),
+                    },
+                    idx,
+                    row(&pred, i),
+                ),
             ],
             bands: vec![],
         };
@@ -634,9 +646,18 @@ fn compare_figure(
     let t = exp.times();
     let y = spec.linear.c() * xs;
     let mut series = Vec::new();
-    for (i, name) in spec.linear.output_names().iter().enumerate() {
+    let outputs = spec.linear.output_names();
+    let with_unit = |n: &str| match spec.units.get(n) {
+        Some(u) => format!("{n} ({u})"),
+        None => n.to_string(),
+    };
+    let y_label = match outputs {
+        [one] => with_unit(one),
+        _ => "output (units in the legend)".to_string(),
+    };
+    for (i, name) in outputs.iter().enumerate() {
         series.push(Series::points(
-            format!("{name} measured"),
+            format!("{} measured", with_unit(name)),
             t.clone(),
             row(exp.outputs(), i),
         ));
@@ -650,7 +671,7 @@ fn compare_figure(
     Ok(Figure {
         title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
         x_label: "t (s)".into(),
-        y_label: "output".into(),
+        y_label,
         series,
         bands: vec![],
     })

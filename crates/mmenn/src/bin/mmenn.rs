@@ -77,12 +77,15 @@ enum Shown {
     Nothing,
     /// A bar (or spinner) on the terminal.
     Bar(String, indicatif::ProgressBar),
-    /// Plain lines: the task, when it started and when the last line was printed.
-    Lines(String, std::time::Instant, std::time::Instant),
+    /// Plain lines: the task, when it started, when the last line was due or printed,
+    /// and whether any line was printed (short tasks print nothing).
+    Lines(String, std::time::Instant, std::time::Instant, bool),
 }
 
-/// Progress on stderr: an `indicatif` bar with ETA on a terminal, a plain line at most
-/// every few seconds otherwise, nothing with `--quiet`.
+/// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
+/// every few seconds of a task's progress reports (a task shorter than that prints
+/// nothing, so a failing command's stderr stays its one error line); nothing with
+/// `--quiet`.
 struct Reporter {
     quiet: bool,
     terminal: bool,
@@ -91,6 +94,8 @@ struct Reporter {
 
 /// Seconds between plain progress lines when stderr is not a terminal.
 const LINE_EVERY_SECONDS: u64 = 5;
+/// A finished task gets a "done in …" line when it took at least this long.
+const WORTH_A_LINE_SECONDS: u64 = 2;
 
 impl Reporter {
     fn new(quiet: bool) -> Self {
@@ -132,7 +137,7 @@ impl mmenn::progress::ProgressSink for Reporter {
             return;
         };
         let same = match &*shown {
-            Shown::Bar(t, _) | Shown::Lines(t, _, _) => t == &p.task,
+            Shown::Bar(t, _) | Shown::Lines(t, _, _, _) => t == &p.task,
             Shown::Nothing => false,
         };
         if !same {
@@ -142,9 +147,8 @@ impl mmenn::progress::ProgressSink for Reporter {
             *shown = if self.terminal {
                 Shown::Bar(p.task.clone(), Self::bar(p))
             } else {
-                eprintln!("{}: started", p.task);
                 let now = std::time::Instant::now();
-                Shown::Lines(p.task.clone(), now, now)
+                Shown::Lines(p.task.clone(), now, now, false)
             };
         }
         match &mut *shown {
@@ -152,9 +156,10 @@ impl mmenn::progress::ProgressSink for Reporter {
                 b.set_position(p.done as u64);
                 b.set_message(p.note.clone());
             }
-            Shown::Lines(_, _, last) => {
+            Shown::Lines(_, _, last, printed) => {
                 if last.elapsed().as_secs() >= LINE_EVERY_SECONDS {
                     *last = std::time::Instant::now();
+                    *printed = true;
                     let of = p.total.map(|n| format!(" of {n}")).unwrap_or_default();
                     eprintln!("{}: {}{of} done  {}", p.task, p.done, p.note);
                 }
@@ -170,12 +175,14 @@ impl mmenn::progress::ProgressSink for Reporter {
         match &*shown {
             Shown::Bar(t, b) if t == task => {
                 b.finish_and_clear();
-                if !self.quiet {
+                if b.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
                     eprintln!("{task}: done in {:.1} s", b.elapsed().as_secs_f64());
                 }
             }
-            Shown::Lines(t, start, _) if t == task => {
-                eprintln!("{task}: done in {:.1} s", start.elapsed().as_secs_f64());
+            Shown::Lines(t, start, _, printed) if t == task => {
+                if *printed || start.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
+                    eprintln!("{task}: done in {:.1} s", start.elapsed().as_secs_f64());
+                }
             }
             _ => return,
         }
@@ -504,7 +511,7 @@ fn simulate(args: SimulateArgs, force: bool) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
+fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> {
     let opts = mmenn::estimate::EstimateOptions {
         w: args.w,
         substeps: args.substeps,
@@ -512,13 +519,17 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "estimate", force, &inputs)?;
     let robust = args.robust.then(mmenn::mme_core::RobustConfig::default);
-    let s = mmenn::estimate::run_estimate_with(
-        &args.data,
-        &args.model,
-        &opts,
-        robust.as_ref(),
-        staged.path(),
-    )?;
+    // One spinner for the whole job (the W search inside mme-core reports no steps yet).
+    let s = mmenn::progress::stage(progress, "MME estimate", || {
+        mmenn::estimate::run_estimate_with(
+            &args.data,
+            &args.model,
+            &opts,
+            robust.as_ref(),
+            staged.path(),
+        )
+        .map_err(anyhow::Error::from)
+    })?;
     staged.commit()?;
     println!(
         "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
@@ -846,7 +857,7 @@ fn main() -> ExitCode {
     let progress = Reporter::new(cli.quiet);
     let result = match cli.command {
         Command::Simulate(a) => simulate(a, force),
-        Command::Estimate(a) => estimate(a, force),
+        Command::Estimate(a) => estimate(a, force, &progress),
         Command::Fit(a) => fit(a, force, &progress),
         Command::Predict(a) => predict(a, force),
         Command::Compare(a) => compare(a, force),
