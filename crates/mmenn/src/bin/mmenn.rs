@@ -111,11 +111,11 @@ impl Reporter {
         let (bar, template) = match p.total {
             Some(n) => (
                 indicatif::ProgressBar::new(n as u64),
-                "{prefix} [{bar:30}] {pos}/{len}, {elapsed} elapsed, ETA {eta}  {msg}",
+                "{prefix} [{bar:30}] {pos}/{len}, {elapsed} elapsed, ETA {eta}  {wide_msg}",
             ),
             None => (
                 indicatif::ProgressBar::new_spinner(),
-                "{prefix} {spinner} {elapsed}  {msg}",
+                "{prefix} {spinner} {elapsed}  {wide_msg}",
             ),
         };
         if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
