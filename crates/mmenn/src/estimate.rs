@@ -174,12 +174,25 @@ pub fn write_estimate_csv(path: &Path, est: &MmeEstimate, experiment: usize) -> 
 }
 
 /// Figures of an estimate (first experiment): measurement vs estimate per measured
-/// channel, every state, `d̂` vs time, `d̂` against each state and input, and the W curve.
+/// channel, every state, `d̂` vs time, `d̂` against each state and input, and the W curve
+/// (with the covariance constraint's target ratio 1).
 pub fn estimate_figures(
     out: &MmeOutput,
     data: &Dataset,
     spec: &ModelSpec,
     dir: &Path,
+) -> Result<Vec<PathBuf>> {
+    estimate_figures_with_target(out, data, spec, dir, 1.0)
+}
+
+/// [`estimate_figures`] with the W search's target ratio (a robust estimate aims at
+/// `κ(c)`, see [`mme_core::robust::huber_variance`]).
+pub fn estimate_figures_with_target(
+    out: &MmeOutput,
+    data: &Dataset,
+    spec: &ModelSpec,
+    dir: &Path,
+    target_ratio: f64,
 ) -> Result<Vec<PathBuf>> {
     let est = &out.estimate;
     let (e, exp) = (&est.experiments[0], &data.experiments()[0]);
@@ -202,13 +215,24 @@ pub fn estimate_figures(
         let Ok(j) = data.output_index(name) else {
             continue;
         };
+        let measured = row(exp.outputs(), j);
+        let smoothed = row(&y_hat, i);
+        let label = match sysid_core::channel_metrics(&measured, &smoothed) {
+            Ok(m) if m.fit_percent.is_finite() => {
+                format!(
+                    "MME estimate (fit {:.1} % to the measurement)",
+                    m.fit_percent
+                )
+            }
+            _ => "MME estimate".to_string(),
+        };
         let fig = Figure {
-            title: format!("{name}: measurement and MME estimate"),
+            title: format!("{name}: measurement and MME estimate (smoother, not a prediction)"),
             x_label: "t (s)".into(),
             y_label: unit(name),
             series: vec![
-                Series::points("measured", t.clone(), row(exp.outputs(), j)),
-                Series::line("MME estimate", t.clone(), row(&y_hat, i)),
+                Series::points("measured", t.clone(), measured),
+                Series::line(label, t.clone(), smoothed),
             ],
             bands: vec![],
         };
@@ -217,7 +241,7 @@ pub fn estimate_figures(
     let fig = Figure {
         title: "estimated states".into(),
         x_label: "t (s)".into(),
-        y_label: "state".into(),
+        y_label: "state (units in the legend)".into(),
         series: est
             .state_names
             .iter()
@@ -231,12 +255,12 @@ pub fn estimate_figures(
     let fig = Figure {
         title: "model correction d̂(t)".into(),
         x_label: "t (s)".into(),
-        y_label: "d̂".into(),
+        y_label: "d̂ (units in the legend)".into(),
         series: est
             .correction_names
             .iter()
             .enumerate()
-            .map(|(i, n)| Series::line(format!("d_{n}"), t.clone(), row(&d, i)))
+            .map(|(i, n)| Series::line(unit(&format!("d_{n}")), t.clone(), row(&d, i)))
             .collect(),
         bands: vec![],
     };
@@ -258,7 +282,7 @@ pub fn estimate_figures(
             let fig = Figure {
                 title: format!("d_{cname} against {vname}"),
                 x_label: unit(&vname),
-                y_label: format!("d_{cname}"),
+                y_label: unit(&format!("d_{cname}")),
                 series: vec![Series::points("MME estimate", v, dv.clone())],
                 bands: vec![],
             };
@@ -283,16 +307,38 @@ pub fn estimate_figures(
             })
             .collect();
         series.push(Series::points(
-            "constraint ratio",
+            "constraint ratio ρ (sweeps of the search)",
             x.clone(),
             out.w_curve.iter().map(|p| p.ratio).collect(),
         ));
+        let (xa, xb) = x
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(*v), b.max(*v))
+            });
+        if xa.is_finite() {
+            series.push(Series::dashed(
+                format!("target ρ = {target_ratio:.3}"),
+                vec![xa, xb],
+                vec![target_ratio, target_ratio],
+            ));
+        }
+        if let Some(w) = &out.w_search
+            && w.alpha > 0.0
+        {
+            series.push(Series::highlight(
+                format!("chosen α = {:.4e}", w.alpha),
+                vec![w.alpha.log10()],
+                vec![w.ratio],
+            ));
+        }
         let fig = Figure {
             title: "covariance constraint: residual variance against W".into(),
             x_label: "log10 α  (W = α·shape)".into(),
             y_label: "residual variance / noise variance".into(),
             series,
-            bands: vec![("target 1".into(), 1.0)],
+            bands: vec![],
         };
         save("w_curve.svg".into(), fig)?;
     }
@@ -402,7 +448,8 @@ pub fn run_estimate_with(
         write_estimate_csv(&out.join(&name), est, i)?;
         files.push(name);
     }
-    for p in estimate_figures(&result, &data, &spec, out)? {
+    let target_ratio = robust.map_or(1.0, |r| mme_core::robust::huber_variance(r.huber_c));
+    for p in estimate_figures_with_target(&result, &data, &spec, out, target_ratio)? {
         files.push(
             p.file_name()
                 .map(|f| f.to_string_lossy().into_owned())
@@ -469,24 +516,40 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         s.samples,
         s.substeps
     ));
-    r.push_str("| channel | noise variance | residual variance | ratio |\n|---|---|---|---|\n");
+    r.push_str("| channel | noise variance R | residual variance | ratio |\n|---|---|---|---|\n");
     for (name, nv) in &s.noise_variance {
         r.push_str(&format!(
             "| {name} | {nv:.4e} | {:.4e} | {:.3} |\n",
             s.residual_variance[name], s.residual_to_noise[name]
         ));
     }
-    r.push_str(&format!("\nNoise variance: {:?}. ", s.noise_method));
+    r.push_str(
+        "\n*Noise variance R*: the measurement noise assumed per channel. *Residual \
+         variance*: mean square of measurement minus estimate. *Ratio*: residual / noise \
+         variance; the covariance constraint chooses W so that it is about 1 (well below 1: \
+         the estimate follows the noise; well above 1: W holds the correction back).\n\n",
+    );
+    r.push_str(&format!(
+        "Noise variance: {}.\n\n",
+        crate::words::noise_method(s.noise_method)
+    ));
     match &s.w_search {
         Some(w) => r.push_str(&format!(
-            "W chosen by the covariance constraint: α = {:.4e}, ratio {:.4} ({:?}, {} sweeps).\n",
-            w.alpha, w.ratio, w.termination, w.evaluations
+            "W (weight of the model correction d̂, per unit time) chosen by the covariance \
+             constraint: α = {:.4e}, ratio reached {:.4}; search {} after {} sweeps.\n",
+            w.alpha,
+            w.ratio,
+            crate::words::termination(Some(w.termination)),
+            w.evaluations
         )),
-        None => r.push_str("W given by the user.\n"),
+        None => r.push_str("W (weight of the model correction d̂) given by the user.\n"),
     }
     r.push_str(&format!(
-        "\nW diagonal: {:?}. Cost J = {:.6e}. Termination: {:?}.\n",
-        s.w_by_correction, s.cost, s.report.termination
+        "\nW diagonal by corrected state: {}. MME cost J = {:.6e} (weighted misfit to the \
+         data plus weighted size of d̂, at the optimum). Solve: {}.\n",
+        crate::words::named_values(&s.w_by_correction),
+        s.cost,
+        crate::words::termination(s.report.termination)
     ));
     if !s.report.iterations.is_empty() {
         r.push_str(&format!(
@@ -501,7 +564,16 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         ));
     }
     if !s.outliers.is_empty() {
-        r.push_str("\n| outlier: experiment | channel | sample | t (s) | value | σ out |\n|---|---|---|---|---|---|\n");
+        let screen = if s.robust_passes.is_some() {
+            format!(
+                "{} noise standard deviations (σ) from the robust estimate",
+                mme_core::RobustConfig::default().report_sigma
+            )
+        } else {
+            format!("{OUTLIER_SCREEN_SIGMA} noise standard deviations (σ) from a running median")
+        };
+        r.push_str(&format!("\nOutliers: samples more than {screen}.\n\n"));
+        r.push_str("| experiment | channel | sample | t (s) | value | σ out |\n|---|---|---|---|---|---|\n");
         for o in s.outliers.iter().take(50) {
             r.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {:.1} |\n",

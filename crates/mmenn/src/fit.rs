@@ -365,11 +365,33 @@ pub fn run_fit(
     opts: &FitOptions,
     out: &Path,
 ) -> Result<FitSummary> {
+    run_fit_with_progress(
+        data_paths,
+        model_path,
+        val_paths,
+        opts,
+        out,
+        &crate::progress::NoProgress,
+    )
+}
+
+/// [`run_fit`], reporting the MME estimate and the network sizing sweep (one step per
+/// trained network) to `progress`. The results do not depend on the sink.
+pub fn run_fit_with_progress(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &FitOptions,
+    out: &Path,
+    progress: &dyn crate::progress::ProgressSink,
+) -> Result<FitSummary> {
     let mut spec = read_model(model_path)?;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     let config = mme_config(&spec, &opts.estimate);
-    let mut result = estimate_spec(&spec, &data, &config)?;
+    let mut result = crate::progress::stage(progress, "MME estimate", || {
+        estimate_spec(&spec, &data, &config)
+    })?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
         let up = mme_core::update_model(
@@ -437,7 +459,30 @@ pub fn run_fit(
             ..sweep_config
         },
     };
-    let sweep = nn::sizing_sweep(&x_fit, &d_fit, &x_test, &d_test, &sweep_config, None)?;
+    const SWEEP: &str = "network sizing sweep";
+    let on_run = |p: nn::SweepProgress| {
+        progress.report(
+            &crate::progress::Progress::new(SWEEP, p.done, Some(p.total)).with_note(format!(
+                "{} hidden, init {}: test MSE {:.3e}",
+                p.hidden, p.init, p.test_mse
+            )),
+        );
+    };
+    progress.report(&crate::progress::Progress::new(
+        SWEEP,
+        0,
+        Some(sweep_config.hidden_sizes.len() * sweep_config.inits),
+    ));
+    let sweep = nn::sizing_sweep(
+        &x_fit,
+        &d_fit,
+        &x_test,
+        &d_test,
+        &sweep_config,
+        Some(&on_run),
+    );
+    progress.finish(SWEEP);
+    let sweep = sweep?;
     let x0: Vec<f64> = est.experiments[0]
         .states
         .column(0)
@@ -465,6 +510,7 @@ pub fn run_fit(
             val_pair,
             &x0,
             opts,
+            progress,
         )?),
     };
     let hybrid = hybrid_model(&spec, network.clone(), &x0, opts.substeps)?;
@@ -519,10 +565,22 @@ pub fn run_fit(
         let fig = Figure {
             title: format!("d_{name}: MME estimate and network"),
             x_label: "training pair".into(),
-            y_label: format!("d_{name}"),
+            y_label: match spec.units.get(&format!("d_{name}")) {
+                Some(u) => format!("d_{name} ({u})"),
+                None => format!("d_{name}"),
+            },
             series: vec![
                 Series::points("MME d̂", idx.clone(), row(&d_train, i)),
-                Series::line("NN(x̂, u)", idx, row(&pred, i)),
+                Series::line(
+                    match sysid_core::channel_metrics(&row(&d_train, i), &row(&pred, i)) {
+                        Ok(m) if m.fit_percent.is_finite() => {
+                            format!("NN(x̂, u) (fit {:.1} % to d̂)", m.fit_percent)
+                        }
+                        _ => "NN(x̂, u)".to_string(),
+                    },
+                    idx,
+                    row(&pred, i),
+                ),
             ],
             bands: vec![],
         };
@@ -531,7 +589,7 @@ pub fn run_fit(
     }
     write_sweep(&out.join("sweep.csv"), &sweep.rows)?;
     files.push("sweep.csv".into());
-    sweep_figure(&sweep.rows).write(&out.join("sweep.svg"))?;
+    sweep_figure(&sweep.rows, chosen).write(&out.join("sweep.svg"))?;
     files.push("sweep.svg".into());
 
     let file = HybridFile {
@@ -588,9 +646,18 @@ fn compare_figure(
     let t = exp.times();
     let y = spec.linear.c() * xs;
     let mut series = Vec::new();
-    for (i, name) in spec.linear.output_names().iter().enumerate() {
+    let outputs = spec.linear.output_names();
+    let with_unit = |n: &str| match spec.units.get(n) {
+        Some(u) => format!("{n} ({u})"),
+        None => n.to_string(),
+    };
+    let y_label = match outputs {
+        [one] => with_unit(one),
+        _ => "output (units in the legend)".to_string(),
+    };
+    for (i, name) in outputs.iter().enumerate() {
         series.push(Series::points(
-            format!("{name} measured"),
+            format!("{} measured", with_unit(name)),
             t.clone(),
             row(exp.outputs(), i),
         ));
@@ -604,14 +671,15 @@ fn compare_figure(
     Ok(Figure {
         title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
         x_label: "t (s)".into(),
-        y_label: "output".into(),
+        y_label,
         series,
         bands: vec![],
     })
 }
 
-fn sweep_figure(rows: &[SweepRow]) -> Figure {
+fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {
     let h: Vec<f64> = rows.iter().map(|r| r.hidden as f64).collect();
+    let marked: Vec<&SweepRow> = rows.get(chosen).into_iter().collect();
     Figure {
         title: "network sizing sweep (thesis Figs. 4.5, 4.9)".into(),
         x_label: "hidden units".into(),
@@ -623,6 +691,14 @@ fn sweep_figure(rows: &[SweepRow]) -> Figure {
                 rows.iter().map(|r| r.train_mse.log10()).collect(),
             ),
             Series::points("test", h, rows.iter().map(|r| r.test_mse.log10()).collect()),
+            Series::highlight(
+                marked
+                    .first()
+                    .map(|r| format!("chosen: {} hidden, init {} (test)", r.hidden, r.init))
+                    .unwrap_or_default(),
+                marked.iter().map(|r| r.hidden as f64).collect(),
+                marked.iter().map(|r| r.test_mse.log10()).collect(),
+            ),
         ],
         bands: vec![],
     }
@@ -668,10 +744,34 @@ fn metrics_table(rep: &FreeRunReport) -> String {
 
 fn fit_report(s: &FitSummary) -> String {
     let mut r = String::from("# MME/NN hybrid model\n\n");
+    let training = match s.training {
+        Training::Trainlm => "Levenberg–Marquardt with MATLAB trainlm's damping schedule",
+        Training::Accelerated => {
+            "Levenberg–Marquardt, trainlm's schedule for 10 steps, then gain-ratio damping \
+             with geodesic acceleration"
+        }
+    };
+    let selection = match s.selection {
+        NetworkSelection::CorrectionMse => "the thesis rule on the test MSE of d̂",
+        NetworkSelection::FreeRun => "smallest free-run output error on the training data",
+    };
     r.push_str(&format!(
-        "Network: {} hidden tanh units (sizing sweep, training {:?}; test MSE of d from {}). {} training pairs. MME W: {:?}.\n\n",
-        s.hidden, s.training, s.test_source, s.training_pairs, s.w_by_correction
+        "Network: {} hidden tanh units, picked from the sizing sweep by {selection}; trained \
+         by {training}. Train MSE of d̂ {:.3e}, test MSE {:.3e} (test set: {}). {} training \
+         pairs (x̂, u) → d̂. MME W by corrected state: {}.\n\n",
+        s.hidden,
+        s.chosen.train_mse,
+        s.chosen.test_mse,
+        s.test_source,
+        s.training_pairs,
+        crate::words::named_values(&s.w_by_correction)
     ));
+    r.push_str(
+        "*Fit %* = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖): 100 is perfect, 0 is no better than \
+         the mean. *R²* = 1 − Σ(y − ŷ)² / Σ(y − mean y)². *RMSE*: root mean square of \
+         y − ŷ, in the channel's unit. *Error variance*: variance of y − ŷ. ŷ is the \
+         free-run simulation (no measurement used after the initial state).\n\n",
+    );
     r.push_str(&format!(
         "## Training data — {} ({})\n\n",
         s.train.horizon, s.train.x0_source

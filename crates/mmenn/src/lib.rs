@@ -11,8 +11,10 @@ pub mod fit;
 pub mod model_file;
 pub mod monitor;
 pub mod plot;
+pub mod progress;
 pub mod refine;
 pub mod simulate;
+pub mod words;
 
 pub use error::{CsvProblem, MmennError, ModelProblem, Result};
 pub use model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};

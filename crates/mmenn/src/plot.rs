@@ -1,5 +1,12 @@
 //! SVG figures for reports: line/point plots with a legend, and correlation stem plots
 //! with confidence bands. Drawn with plotters' SVG backend (no fonts or system libraries).
+//!
+//! Figures stay small whatever the number of samples: a line with more points than the
+//! plot has pixel columns is reduced to, per column, its first, lowest, highest and last
+//! point in their original order (the exact extremes are kept, so a one-sample spike
+//! stays visible), and a point series is binned on a grid of cells a few pixels wide, one
+//! dot per occupied cell (the grid is coarsened until the dots fit the budget). Both
+//! reductions are deterministic and only change what is drawn, never the data.
 
 use std::path::Path;
 
@@ -15,6 +22,10 @@ pub enum Mark {
     Line,
     /// Unconnected dots (measurements, scatter plots).
     Points,
+    /// Dashed reference line (a target level, a chosen value), drawn as given.
+    Dashed,
+    /// Large open rings marking chosen points (e.g. the chosen network of a sweep).
+    Highlight,
 }
 
 /// One series of a figure.
@@ -38,6 +49,24 @@ impl Series {
             x,
             y,
             mark: Mark::Line,
+        }
+    }
+    /// A dashed reference line through the given points.
+    pub fn dashed(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
+        Self {
+            label: label.into(),
+            x,
+            y,
+            mark: Mark::Dashed,
+        }
+    }
+    /// Rings around chosen points.
+    pub fn highlight(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
+        Self {
+            label: label.into(),
+            x,
+            y,
+            mark: Mark::Highlight,
         }
     }
     /// A point series.
@@ -96,12 +125,138 @@ fn draw_err<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> M
     MmennError::Plot(e.to_string())
 }
 
+/// Plot size in pixels.
+const SIZE: (u32, u32) = (900, 500);
+/// Columns a line is reduced to (a little more than the plot area is wide).
+const LINE_COLUMNS: usize = 1000;
+/// Most dots drawn for all point series of one figure together.
+const DOT_BUDGET: usize = 8000;
+/// Smallest binning cell of a point series, in pixels.
+const MIN_CELL_PX: f64 = 3.0;
+
+/// Reduce a line (finite points, in drawing order) to at most four points per column
+/// of `columns` equal slices of `[x0, x1]`: for each run of consecutive points in one
+/// column, its first, lowest, highest and last point in their original order. The exact
+/// extremes of every column are kept. Lines with at most `4·columns` points, and lines
+/// whose abscissae are so unordered that the reduction does not shorten them enough, are
+/// thinned by a fixed stride after the envelope (never at random).
+pub fn decimate_line(pts: &[(f64, f64)], x0: f64, x1: f64, columns: usize) -> Vec<(f64, f64)> {
+    let columns = columns.max(1);
+    let limit = 4 * columns;
+    if pts.len() <= limit {
+        return pts.to_vec();
+    }
+    let width = x1 - x0;
+    let column = |x: f64| -> usize {
+        if width > 0.0 && width.is_finite() {
+            (((x - x0) / width * columns as f64).floor().max(0.0) as usize).min(columns - 1)
+        } else {
+            0
+        }
+    };
+    let mut out = Vec::with_capacity(limit);
+    let mut start = 0;
+    while start < pts.len() {
+        let c = column(pts[start].0);
+        let mut end = start + 1;
+        while end < pts.len() && column(pts[end].0) == c {
+            end += 1;
+        }
+        let run = &pts[start..end];
+        let (mut lo, mut hi) = (0, 0);
+        for (i, p) in run.iter().enumerate() {
+            if p.1 < run[lo].1 {
+                lo = i;
+            }
+            if p.1 > run[hi].1 {
+                hi = i;
+            }
+        }
+        let mut keep = [0, lo, hi, run.len() - 1];
+        keep.sort_unstable();
+        let mut last = usize::MAX;
+        for k in keep {
+            if k != last {
+                out.push(run[k]);
+                last = k;
+            }
+        }
+        start = end;
+    }
+    if out.len() > 2 * limit {
+        // Unordered abscissae: thin by a fixed stride, keeping the first and last point.
+        let stride = out.len().div_ceil(limit);
+        let last = out[out.len() - 1];
+        let mut thinned: Vec<(f64, f64)> = out.iter().copied().step_by(stride).collect();
+        if thinned.last() != Some(&last) {
+            thinned.push(last);
+        }
+        return thinned;
+    }
+    out
+}
+
+/// Bin points (finite, any order) on a grid over `[x0, x1] × [y0, y1]` with `cols × rows`
+/// cells and keep, per occupied cell, the first point that fell in it (in data order).
+fn bin_points(
+    pts: &[(f64, f64)],
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+    (cols, rows): (usize, usize),
+) -> Vec<(f64, f64)> {
+    let cell = |v: f64, lo: f64, hi: f64, n: usize| -> usize {
+        let w = hi - lo;
+        if w > 0.0 && w.is_finite() {
+            (((v - lo) / w * n as f64).floor().max(0.0) as usize).min(n - 1)
+        } else {
+            0
+        }
+    };
+    let mut seen = vec![false; cols * rows];
+    let mut out = Vec::new();
+    for &(x, y) in pts {
+        let k = cell(y, y0, y1, rows) * cols + cell(x, x0, x1, cols);
+        if !seen[k] {
+            seen[k] = true;
+            out.push((x, y));
+        }
+    }
+    out
+}
+
+/// Thin point series to at most `budget` dots together: untouched when they already fit;
+/// otherwise binned on cells of `MIN_CELL_PX` pixels, doubled until the dots fit.
+pub fn thin_points(
+    series: &[Vec<(f64, f64)>],
+    xr: (f64, f64),
+    yr: (f64, f64),
+    plot_px: (u32, u32),
+    budget: usize,
+) -> Vec<Vec<(f64, f64)>> {
+    if series.iter().map(Vec::len).sum::<usize>() <= budget {
+        return series.to_vec();
+    }
+    let mut cell_px = MIN_CELL_PX;
+    loop {
+        let cols = ((f64::from(plot_px.0) / cell_px).ceil() as usize).max(1);
+        let rows = ((f64::from(plot_px.1) / cell_px).ceil() as usize).max(1);
+        let binned: Vec<Vec<(f64, f64)>> = series
+            .iter()
+            .map(|s| bin_points(s, xr, yr, (cols, rows)))
+            .collect();
+        if binned.iter().map(Vec::len).sum::<usize>() <= budget || cols * rows <= series.len() {
+            return binned;
+        }
+        cell_px *= 1.5;
+    }
+}
+
 impl Figure {
     /// Render to SVG text.
     pub fn to_svg(&self) -> Result<String> {
         let mut svg = String::new();
         {
-            let root = SVGBackend::with_string(&mut svg, (900, 500)).into_drawing_area();
+            let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
             root.fill(&WHITE).map_err(draw_err)?;
             let (x0, x1) = range(self.series.iter().flat_map(|s| s.x.iter().copied()));
             let band_max = self.bands.iter().map(|b| b.1.abs()).fold(0.0, f64::max);
@@ -124,27 +279,74 @@ impl Figure {
                 .y_desc(&self.y_label)
                 .draw()
                 .map_err(draw_err)?;
-            for (i, s) in self.series.iter().enumerate() {
-                let color = PALETTE[i % PALETTE.len()];
-                let pts: Vec<(f64, f64)> =
+            let finite: Vec<Vec<(f64, f64)>> = self
+                .series
+                .iter()
+                .map(|s| {
                     s.x.iter()
                         .zip(&s.y)
                         .filter(|(a, b)| a.is_finite() && b.is_finite())
                         .map(|(a, b)| (*a, *b))
-                        .collect();
+                        .collect()
+                })
+                .collect();
+            let plot_px = chart.plotting_area().dim_in_pixel();
+            let point_idx: Vec<usize> = (0..self.series.len())
+                .filter(|&i| self.series[i].mark == Mark::Points)
+                .collect();
+            let thinned = thin_points(
+                &point_idx
+                    .iter()
+                    .map(|&i| finite[i].clone())
+                    .collect::<Vec<_>>(),
+                (x0, x1),
+                (y0, y1),
+                plot_px,
+                DOT_BUDGET,
+            );
+            let mut thinned = thinned.into_iter();
+            for (i, (s, pts)) in self.series.iter().zip(finite).enumerate() {
+                let color = PALETTE[i % PALETTE.len()];
                 match s.mark {
                     Mark::Line => chart
-                        .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+                        .draw_series(LineSeries::new(
+                            decimate_line(&pts, x0, x1, LINE_COLUMNS),
+                            color.stroke_width(2),
+                        ))
                         .map_err(draw_err)?
                         .label(&s.label)
                         .legend(move |(x, y)| {
                             PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                         }),
-                    Mark::Points => chart
-                        .draw_series(pts.into_iter().map(|p| Circle::new(p, 2, color.filled())))
+                    Mark::Points => {
+                        let pts = thinned.next().unwrap_or_default();
+                        chart
+                            .draw_series(pts.into_iter().map(|p| Circle::new(p, 2, color.filled())))
+                            .map_err(draw_err)?
+                            .label(&s.label)
+                            .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()))
+                    }
+                    Mark::Dashed => chart
+                        .draw_series(DashedLineSeries::new(
+                            decimate_line(&pts, x0, x1, LINE_COLUMNS),
+                            8,
+                            5,
+                            color.stroke_width(2),
+                        ))
                         .map_err(draw_err)?
                         .label(&s.label)
-                        .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled())),
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                        }),
+                    Mark::Highlight => chart
+                        .draw_series(
+                            pts.into_iter()
+                                .take(DOT_BUDGET)
+                                .map(|p| Circle::new(p, 7, color.stroke_width(2))),
+                        )
+                        .map_err(draw_err)?
+                        .label(&s.label)
+                        .legend(move |(x, y)| Circle::new((x + 10, y), 6, color.stroke_width(2))),
                 };
             }
             for (label, b) in &self.bands {
@@ -216,5 +418,101 @@ mod tests {
         }
         // 50 measured points drawn as circles.
         assert!(svg.matches("<circle").count() >= 50);
+    }
+
+    /// A deterministic pseudo-random sequence in [0, 1) (no RNG dependency needed).
+    fn noise(n: usize, seed: u64) -> Vec<f64> {
+        let mut z = seed;
+        (0..n)
+            .map(|_| {
+                z = z
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                (z >> 11) as f64 / (1u64 << 53) as f64
+            })
+            .collect()
+    }
+
+    #[test]
+    fn million_sample_figures_stay_under_one_megabyte() {
+        let n = 1_000_000;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+        let e = noise(n, 7);
+        let y: Vec<f64> = t.iter().zip(&e).map(|(t, e)| t.sin() + e - 0.5).collect();
+        let smooth: Vec<f64> = t.iter().map(|t| t.sin()).collect();
+        // A time series: measured dots and two lines.
+        let time = Figure {
+            title: "time series".into(),
+            x_label: "t (s)".into(),
+            y_label: "x (m)".into(),
+            series: vec![
+                Series::points("measured", t.clone(), y.clone()),
+                Series::line("estimate", t.clone(), smooth.clone()),
+                Series::line("noisy line", t.clone(), y.clone()),
+            ],
+            bands: vec![],
+        };
+        // A worst-case scatter: independent uniform noise filling the whole plot.
+        let scatter = Figure {
+            title: "scatter".into(),
+            x_label: "u (N)".into(),
+            y_label: "d".into(),
+            series: vec![
+                Series::points("a", noise(n, 1), noise(n, 2)),
+                Series::points("b", noise(n, 3), noise(n, 4)),
+            ],
+            bands: vec![("band".into(), 0.5)],
+        };
+        for fig in [time, scatter] {
+            let svg = fig.to_svg().unwrap();
+            assert!(svg.len() < 1_000_000, "{}: {} bytes", fig.title, svg.len());
+            for s in &fig.series {
+                assert!(svg.contains(&s.label));
+            }
+        }
+    }
+
+    #[test]
+    fn decimation_keeps_every_column_extreme_in_order() {
+        let n = 200_000;
+        let x: Vec<f64> = (0..n).map(|k| k as f64).collect();
+        let mut y = noise(n, 3);
+        y[123_457] = 50.0; // one-sample spike
+        y[7] = -40.0;
+        let pts: Vec<(f64, f64)> = x.iter().copied().zip(y.iter().copied()).collect();
+        let d = decimate_line(&pts, 0.0, (n - 1) as f64, 1000);
+        assert!(d.len() <= 4000);
+        assert!(d.contains(&(123_457.0, 50.0)));
+        assert!(d.contains(&(7.0, -40.0)));
+        assert_eq!(d.first(), pts.first());
+        assert_eq!(d.last(), pts.last());
+        assert!(d.windows(2).all(|w| w[0].0 < w[1].0), "order kept");
+        // Same input, same output.
+        assert_eq!(d, decimate_line(&pts, 0.0, (n - 1) as f64, 1000));
+        // Short lines are untouched.
+        assert_eq!(
+            decimate_line(&pts[..100], 0.0, 99.0, 1000),
+            pts[..100].to_vec()
+        );
+    }
+
+    #[test]
+    fn thinning_is_deterministic_and_keeps_isolated_points() {
+        let n = 100_000;
+        let mut pts: Vec<(f64, f64)> = noise(n, 5).into_iter().zip(noise(n, 6)).collect();
+        pts.push((3.0, 3.0)); // an isolated outlier
+        let a = thin_points(
+            &[pts.clone()],
+            (0.0, 3.0),
+            (0.0, 3.0),
+            (800, 400),
+            DOT_BUDGET,
+        );
+        assert!(a[0].len() <= DOT_BUDGET);
+        assert!(a[0].contains(&(3.0, 3.0)));
+        assert_eq!(
+            a,
+            thin_points(&[pts], (0.0, 3.0), (0.0, 3.0), (800, 400), DOT_BUDGET)
+        );
     }
 }

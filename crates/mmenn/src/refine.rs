@@ -59,12 +59,19 @@ impl RefineSummary {
         let mut s = format!(
             "\n## Trajectory refinement (thesis §7.1)\n\nMultiple shooting over {} training \
              windows ({} held out for early stopping), started from MME's x̂: {} LM steps, \
-             returned step {} ({:?}); training objective {:.4e} → {:.4e}.\n",
+             returned step {} (stopped: {}); training objective (mean squared residual in \
+             units of each channel's standard deviation) {:.4e} → {:.4e}.\n",
             r.train_windows,
             r.val_windows,
             r.iterations,
             r.best_iteration,
-            r.termination,
+            match r.termination {
+                nn::RefineStop::MaxIterations => "step limit reached",
+                nn::RefineStop::MuMax => "no step lowered the objective before μ hit its limit",
+                nn::RefineStop::SmallDecrease => "the objective stopped decreasing",
+                nn::RefineStop::ValidationStop => "the held-out objective stopped improving",
+                _ => "another reason",
+            },
             r.initial_train_objective(),
             r.final_train_objective(),
         );
@@ -110,6 +117,7 @@ pub(crate) fn refine_network(
     val: Option<(&MmeEstimate, &Dataset)>,
     x0: &[f64],
     opts: &FitOptions,
+    progress: &dyn crate::progress::ProgressSink,
 ) -> Result<RefineSummary> {
     let lin = &spec.linear;
     let before = match val {
@@ -140,7 +148,21 @@ pub(crate) fn refine_network(
     };
     let train = shooting(data, est);
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
-    let report = nn::refine_on_trajectories(network, &parts, &train, &val, &config, None)?;
+    const TASK: &str = "trajectory refinement";
+    let most = config.max_iterations;
+    let mut on_step = |p: nn::RefineProgress| {
+        let note = match p.val_objective {
+            Some(v) => format!("objective {:.4e}, held out {v:.4e}", p.train_objective),
+            None => format!("objective {:.4e}", p.train_objective),
+        };
+        progress
+            .report(&crate::progress::Progress::new(TASK, p.iteration, Some(most)).with_note(note));
+    };
+    progress.report(&crate::progress::Progress::new(TASK, 0, Some(most)));
+    let report =
+        nn::refine_on_trajectories(network, &parts, &train, &val, &config, Some(&mut on_step));
+    progress.finish(TASK);
+    let report = report?;
     Ok(RefineSummary {
         report,
         validation_fit_before: before,

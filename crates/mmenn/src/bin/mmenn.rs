@@ -25,6 +25,9 @@ struct Cli {
     /// files mmenn did not write (never one holding an input file).
     #[arg(long, global = true)]
     force: bool,
+    /// Print no progress (bars on a terminal, periodic lines otherwise) on stderr.
+    #[arg(long, short, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -68,6 +71,124 @@ impl std::fmt::Display for NotConverged {
 }
 
 impl std::error::Error for NotConverged {}
+
+/// What the progress reporter is showing.
+enum Shown {
+    Nothing,
+    /// A bar (or spinner) on the terminal.
+    Bar(String, indicatif::ProgressBar),
+    /// Plain lines: the task, when it started, when the last line was due or printed,
+    /// and whether any line was printed (short tasks print nothing).
+    Lines(String, std::time::Instant, std::time::Instant, bool),
+}
+
+/// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
+/// every few seconds of a task's progress reports (a task shorter than that prints
+/// nothing, so a failing command's stderr stays its one error line); nothing with
+/// `--quiet`.
+struct Reporter {
+    quiet: bool,
+    terminal: bool,
+    shown: std::sync::Mutex<Shown>,
+}
+
+/// Seconds between plain progress lines when stderr is not a terminal.
+const LINE_EVERY_SECONDS: u64 = 5;
+/// A finished task gets a "done in …" line when it took at least this long.
+const WORTH_A_LINE_SECONDS: u64 = 2;
+
+impl Reporter {
+    fn new(quiet: bool) -> Self {
+        use std::io::IsTerminal;
+        Self {
+            quiet,
+            terminal: std::io::stderr().is_terminal(),
+            shown: std::sync::Mutex::new(Shown::Nothing),
+        }
+    }
+
+    fn bar(p: &mmenn::progress::Progress) -> indicatif::ProgressBar {
+        let (bar, template) = match p.total {
+            Some(n) => (
+                indicatif::ProgressBar::new(n as u64),
+                "{prefix} [{bar:30}] {pos}/{len}, {elapsed} elapsed, ETA {eta}  {wide_msg}",
+            ),
+            None => (
+                indicatif::ProgressBar::new_spinner(),
+                "{prefix} {spinner} {elapsed}  {wide_msg}",
+            ),
+        };
+        if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_prefix(p.task.clone());
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+        bar
+    }
+}
+
+#[allow(clippy::print_stderr)]
+impl mmenn::progress::ProgressSink for Reporter {
+    fn report(&self, p: &mmenn::progress::Progress) {
+        if self.quiet {
+            return;
+        }
+        let Ok(mut shown) = self.shown.lock() else {
+            return;
+        };
+        let same = match &*shown {
+            Shown::Bar(t, _) | Shown::Lines(t, _, _, _) => t == &p.task,
+            Shown::Nothing => false,
+        };
+        if !same {
+            if let Shown::Bar(_, b) = &*shown {
+                b.finish_and_clear();
+            }
+            *shown = if self.terminal {
+                Shown::Bar(p.task.clone(), Self::bar(p))
+            } else {
+                let now = std::time::Instant::now();
+                Shown::Lines(p.task.clone(), now, now, false)
+            };
+        }
+        match &mut *shown {
+            Shown::Bar(_, b) => {
+                b.set_position(p.done as u64);
+                b.set_message(p.note.clone());
+            }
+            Shown::Lines(_, _, last, printed) => {
+                if last.elapsed().as_secs() >= LINE_EVERY_SECONDS {
+                    *last = std::time::Instant::now();
+                    *printed = true;
+                    let of = p.total.map(|n| format!(" of {n}")).unwrap_or_default();
+                    eprintln!("{}: {}{of} done  {}", p.task, p.done, p.note);
+                }
+            }
+            Shown::Nothing => {}
+        }
+    }
+
+    fn finish(&self, task: &str) {
+        let Ok(mut shown) = self.shown.lock() else {
+            return;
+        };
+        match &*shown {
+            Shown::Bar(t, b) if t == task => {
+                b.finish_and_clear();
+                if b.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
+                    eprintln!("{task}: done in {:.1} s", b.elapsed().as_secs_f64());
+                }
+            }
+            Shown::Lines(t, start, _, printed) if t == task => {
+                if *printed || start.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
+                    eprintln!("{task}: done in {:.1} s", start.elapsed().as_secs_f64());
+                }
+            }
+            _ => return,
+        }
+        *shown = Shown::Nothing;
+    }
+}
 
 /// Stage `out` for `command` (see [`StagedDir`]).
 fn stage(out: &Path, command: &str, force: bool, inputs: &[&PathBuf]) -> Result<StagedDir> {
@@ -390,7 +511,7 @@ fn simulate(args: SimulateArgs, force: bool) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
+fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> {
     let opts = mmenn::estimate::EstimateOptions {
         w: args.w,
         substeps: args.substeps,
@@ -398,13 +519,17 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "estimate", force, &inputs)?;
     let robust = args.robust.then(mmenn::mme_core::RobustConfig::default);
-    let s = mmenn::estimate::run_estimate_with(
-        &args.data,
-        &args.model,
-        &opts,
-        robust.as_ref(),
-        staged.path(),
-    )?;
+    // One spinner for the whole job (the W search inside mme-core reports no steps yet).
+    let s = mmenn::progress::stage(progress, "MME estimate", || {
+        mmenn::estimate::run_estimate_with(
+            &args.data,
+            &args.model,
+            &opts,
+            robust.as_ref(),
+            staged.path(),
+        )
+        .map_err(anyhow::Error::from)
+    })?;
     staged.commit()?;
     println!(
         "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
@@ -412,11 +537,16 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
     );
     for (name, nv) in &s.noise_variance {
         println!(
-            "  {name}: noise variance {nv:.4e} ({:?}), residual variance {:.4e} (ratio {:.3})",
-            s.noise_method, s.residual_variance[name], s.residual_to_noise[name]
+            "  {name}: noise variance {nv:.4e} ({}), residual variance {:.4e} (ratio {:.3})",
+            mmenn::words::noise_method(s.noise_method),
+            s.residual_variance[name],
+            s.residual_to_noise[name]
         );
     }
-    println!("  W diagonal: {:?}", s.w_by_correction);
+    println!(
+        "  W diagonal: {}",
+        mmenn::words::named_values(&s.w_by_correction)
+    );
     for o in s.outliers.iter().take(10) {
         println!(
             "  outlier: experiment {}, {} at sample {} (t = {} s): {} is {:.1} σ out",
@@ -444,14 +574,18 @@ fn estimate(args: EstimateArgs, force: bool) -> Result<()> {
             .as_ref()
             .map(|w| {
                 format!(
-                    "; W search: α = {:.4e}, ratio {:.4}, {:?} after {} sweeps",
-                    w.alpha, w.ratio, w.termination, w.evaluations
+                    "; W search: α = {:.4e}, ratio {:.4}, {} after {} sweeps",
+                    w.alpha,
+                    w.ratio,
+                    mmenn::words::termination(Some(w.termination)),
+                    w.evaluations
                 )
             })
             .unwrap_or_default();
         return Err(NotConverged(format!(
-            "the estimate did not converge ({ended:?}{detail}); the results in {} are \
+            "the estimate did not converge ({}{detail}); the results in {} are \
              written for inspection only (see report.md)",
+            mmenn::words::termination(Some(ended)),
             args.out.display()
         ))
         .into());
@@ -474,7 +608,7 @@ fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
 }
 
 #[allow(clippy::print_stdout)]
-fn fit(args: FitArgs, force: bool) -> Result<()> {
+fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     let opts = mmenn::fit::FitOptions {
         estimate: mmenn::estimate::EstimateOptions {
             w: args.w,
@@ -501,7 +635,14 @@ fn fit(args: FitArgs, force: bool) -> Result<()> {
         .chain([&args.model])
         .collect();
     let staged = stage(&args.out, "fit", force, &inputs)?;
-    let s = mmenn::fit::run_fit(&args.data, &args.model, &args.val, &opts, staged.path())?;
+    let s = mmenn::fit::run_fit_with_progress(
+        &args.data,
+        &args.model,
+        &args.val,
+        &opts,
+        staged.path(),
+        progress,
+    )?;
     staged.commit()?;
     println!(
         "network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)",
@@ -713,10 +854,11 @@ fn error_chain(e: &anyhow::Error) -> String {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let force = cli.force;
+    let progress = Reporter::new(cli.quiet);
     let result = match cli.command {
         Command::Simulate(a) => simulate(a, force),
-        Command::Estimate(a) => estimate(a, force),
-        Command::Fit(a) => fit(a, force),
+        Command::Estimate(a) => estimate(a, force, &progress),
+        Command::Fit(a) => fit(a, force, &progress),
         Command::Predict(a) => predict(a, force),
         Command::Compare(a) => compare(a, force),
         Command::Discover(a) => discover(a, force),

@@ -1,0 +1,59 @@
+//! Words for reports and the command line: how an enum reads to a person (never Rust's
+//! debug text), and `name = value` lists.
+
+use std::collections::BTreeMap;
+
+use mme_core::NoiseMethod;
+use sysid_core::Termination;
+
+/// How a solve or search ended, in words.
+pub fn termination(t: Option<Termination>) -> &'static str {
+    match t {
+        None => "not run",
+        Some(Termination::Exact) => "solved exactly (one linear sweep)",
+        Some(Termination::Converged) => "converged",
+        Some(Termination::MaxIterations) => "stopped at the iteration limit (not converged)",
+        Some(Termination::LineSearchFailed) => {
+            "stopped: the line search could not lower the cost (not converged)"
+        }
+        Some(Termination::NotBracketed) => {
+            "the target was never bracketed; the closest end of the search was used"
+        }
+        Some(_) => "ended for another reason",
+    }
+}
+
+/// How the noise variance was obtained, in words.
+pub fn noise_method(m: NoiseMethod) -> &'static str {
+    match m {
+        NoiseMethod::Given => "given in the model file",
+        NoiseMethod::MarginalLikelihood => "estimated by maximum marginal likelihood",
+        NoiseMethod::DifferenceBased => {
+            "estimated from sample differences (the likelihood was degenerate)"
+        }
+        _ => "estimated",
+    }
+}
+
+/// `a = 1.2345e0, b = …` with four significant digits.
+pub fn named_values(values: &BTreeMap<String, f64>) -> String {
+    values
+        .iter()
+        .map(|(k, v)| format!("{k} = {v:.4e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_have_no_debug_text() {
+        assert_eq!(termination(Some(Termination::Converged)), "converged");
+        assert_eq!(termination(None), "not run");
+        assert!(!noise_method(NoiseMethod::Given).contains("Given"));
+        let m: BTreeMap<String, f64> = [("v".to_string(), 5.25)].into_iter().collect();
+        assert_eq!(named_values(&m), "v = 5.2500e0");
+    }
+}
