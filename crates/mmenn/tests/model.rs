@@ -1,0 +1,140 @@
+//! One model, one judge: simulate → discover → predict on the discovered model → compare
+//! with the discovered model as a row; the discovered model's free-run fit % on the test
+//! record is the same number in `predict` and in `compare`. Also: every model mmenn writes
+//! loads through one loader, and a data file given as a model is a typed error.
+
+use std::path::PathBuf;
+
+use mmenn::compare::{CompareOptions, GIVEN_MODEL_ROW, run_compare};
+use mmenn::discover::{DiscoverOptions, run_discover};
+use mmenn::fit::{FitOptions, HiddenChoice, InitialChoice, RefineChoice, run_predict};
+use mmenn::plants::{Recipe, SimulationRequest};
+use mmenn::simulate::run_simulate;
+use mmenn::{LoadedModel, MmennError, ModelKind, ModelProblem};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mmenn-model-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn discovered_model_gets_one_fit_in_predict_and_compare() {
+    let dir = scratch("chain");
+    // Small records: 20 Hz for 10 s (201 samples); initial states fitted to 50 samples.
+    let req = |recipe| SimulationRequest {
+        system: "msd_cubic".into(),
+        recipe,
+        seed: 2,
+        fs: Some(20.0),
+        ..Default::default()
+    };
+    let train = run_simulate(&req(Recipe::Train), &dir.join("train")).unwrap();
+    let test = run_simulate(&req(Recipe::Test), &dir.join("test")).unwrap();
+    let d = run_discover(
+        std::slice::from_ref(&train.data),
+        &train.model,
+        &[],
+        &DiscoverOptions {
+            max_rounds: 1,
+            ..DiscoverOptions::default()
+        },
+        &dir.join("discover"),
+    )
+    .unwrap();
+    let discovered = dir.join("discover").join(&d.model);
+    let loaded = LoadedModel::read(&discovered).unwrap();
+    let text = mmenn::show::show_model(&discovered).unwrap();
+    assert!(text.contains("v' = "), "{text}");
+
+    let p = run_predict(
+        &discovered,
+        &test.data,
+        &InitialChoice::Fit,
+        50,
+        &dir.join("predict"),
+    )
+    .unwrap();
+    assert!(dir.join("predict/prediction.json").exists());
+
+    let opts = CompareOptions {
+        fit: FitOptions {
+            hidden: HiddenChoice::Fixed(1),
+            max_hidden: 1,
+            inits: 1,
+            refine: RefineChoice::None,
+            x0_window: 50,
+            ..FitOptions::default()
+        },
+        narx_lags: Some(2),
+        ..CompareOptions::default()
+    };
+    let c = run_compare(
+        std::slice::from_ref(&train.data),
+        &discovered,
+        std::slice::from_ref(&test.data),
+        &opts,
+        &dir.join("compare"),
+    )
+    .unwrap();
+    let val = c.validation.as_ref().unwrap();
+    // The discovered model names the cubic spring (and damping): it is more than its
+    // linear part, so compare gives it its own row, judged as predict judges it.
+    assert_eq!(loaded.kind, ModelKind::WithTerms, "{:?}", d.effects);
+    assert_eq!(c.given_model, ModelKind::WithTerms);
+    let row = val
+        .rows()
+        .iter()
+        .find(|r| r.label == GIVEN_MODEL_ROW)
+        .unwrap();
+    assert!(!p.free_run.channels.is_empty());
+    for (name, m) in &p.free_run.channels {
+        let cm = row.evaluation.channel(name).unwrap();
+        // Identical to the bit: one judge, one rule, one window.
+        assert_eq!(
+            cm.fit_percent.to_bits(),
+            m.fit_percent.to_bits(),
+            "{name}: compare {} vs predict {}",
+            cm.fit_percent,
+            m.fit_percent
+        );
+        assert_eq!(cm.rmse.to_bits(), m.rmse.to_bits());
+    }
+    // The discovered model beats its own linear part on the test record.
+    let assumed = val
+        .rows()
+        .iter()
+        .find(|r| r.label == "assumed model")
+        .unwrap();
+    assert!(
+        row.evaluation.channel("x").unwrap().fit_percent
+            > assumed.evaluation.channel("x").unwrap().fit_percent
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn one_loader_reads_every_model_and_names_what_is_not_one() {
+    let dir = scratch("loader");
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("data.csv");
+    std::fs::write(&csv, "t,u,x\n0,0,1\n0.1,0,1\n").unwrap();
+    match LoadedModel::read(&csv) {
+        Err(MmennError::Model {
+            problem: ModelProblem::NotAModel { .. },
+            path,
+            ..
+        }) => assert_eq!(path, csv),
+        other => panic!("{other:?}"),
+    }
+    let json = dir.join("model.json");
+    std::fs::write(&json, "{\"format\": \"something else\"}").unwrap();
+    assert!(matches!(
+        LoadedModel::read(&json),
+        Err(MmennError::Model {
+            problem: ModelProblem::Syntax { .. },
+            ..
+        })
+    ));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
