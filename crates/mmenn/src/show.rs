@@ -118,9 +118,12 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
     lines.push(format!("states: {}", names(lin.state_names())));
     if lin.n_inputs() > 0 {
         lines.push(format!(
-            "inputs: {} (between samples: {:?})",
+            "inputs: {} (between samples: {})",
             names(lin.input_names()),
-            model.intersample()
+            match model.intersample() {
+                sysid_core::InterSample::Zoh => "held, zoh",
+                sysid_core::InterSample::Foh => "linear, foh",
+            }
         ));
     }
     let corrected = lin.corrected_states().unwrap_or_default();

@@ -138,3 +138,71 @@ fn one_loader_reads_every_model_and_names_what_is_not_one() {
     ));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A model whose output is a combination of states (`C` + `outputs`): `predict` writes the
+/// output column, reports the channel, estimates the initial state from the new record
+/// (the model stores none) and, on the model's own noise-free response, recovers it.
+#[test]
+fn predict_judges_a_general_output_and_estimates_x0_from_the_record() {
+    use mmenn::data_file::{read_table, write_csv};
+    use mmenn::fit::{PredictOptions, run_predict_with};
+    use mmenn::sysid_core::Experiment;
+    use nalgebra::DMatrix;
+
+    let dir = scratch("outputs");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model_path = dir.join("m.toml");
+    std::fs::write(
+        &model_path,
+        r#"
+states = ["x1", "x2"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-2.0, -0.3]]
+B = [[0.0], [1.0]]
+C = [[1.0, 0.5]]
+outputs = ["s"]
+corrected = ["x2"]
+noise_variance = [1e-4]
+units = { x1 = "m", x2 = "m/s", u = "N", s = "m" }
+"#,
+    )
+    .unwrap();
+    let model = LoadedModel::read(&model_path).unwrap();
+    let n = 301;
+    let dt = 0.05;
+    let u = DMatrix::from_fn(1, n, |_, k| (0.7 * k as f64 * dt).sin());
+    let exp = Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, n)).unwrap();
+    let truth_x0 = [0.8, -0.4];
+    let xs = model.simulate_states(&truth_x0, &exp).unwrap();
+    let s: Vec<f64> = (0..n).map(|k| xs[(0, k)] + 0.5 * xs[(1, k)]).collect();
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let uu: Vec<f64> = u.row(0).iter().copied().collect();
+    let data = dir.join("d.csv");
+    write_csv(&data, &["t".into(), "u".into(), "s".into()], &[&t, &uu, &s]).unwrap();
+    let p = run_predict_with(
+        &model_path,
+        &data,
+        &PredictOptions {
+            horizon: Some(3),
+            ..PredictOptions::default()
+        },
+        &dir.join("p"),
+    )
+    .unwrap();
+    assert_eq!(p.model_kind, ModelKind::Assumed);
+    let m = p.free_run.channels["s"];
+    assert!(m.fit_percent > 99.9, "{m:?}");
+    for (a, b) in p.free_run.x0.iter().zip(truth_x0) {
+        assert!((a - b).abs() < 1e-4, "x0 {:?}", p.free_run.x0);
+    }
+    let k = p.k_step.as_ref().unwrap();
+    assert_eq!(k.horizon, mmenn::sysid_core::Horizon::Steps(3));
+    assert_eq!(k.scored.first, 3);
+    let table = read_table(&dir.join("p/prediction.csv")).unwrap();
+    for col in ["x1", "x2", "s", "s_3step"] {
+        assert!(table.column_index(col).is_some(), "no column {col}");
+    }
+    let json = std::fs::read_to_string(dir.join("p/prediction.json")).unwrap();
+    assert!(json.contains("first 200 of 301 samples"), "{json}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
