@@ -19,7 +19,7 @@ use sysid_baselines::{
     ResidualAnalysis, ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions,
     residual_analysis, suggest_lags,
 };
-use sysid_core::{Dataset, Horizon, InitialStateFit, Model, fit_initial_state};
+use sysid_core::{Dataset, Horizon, Model};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
@@ -110,31 +110,24 @@ fn default_free(spec: &ModelSpec) -> Vec<String> {
     free
 }
 
-/// The hybrid model with its initial state fitted to the first samples of `data`'s
-/// first experiment (the same rule `mmenn predict` uses). The records carry the model
-/// file's `intersample`, which this fit and the hybrid model's free runs
-/// (`Model::simulate`) follow, and so do the linear baselines (the assumed model and the
-/// output-error fit are `OeModel`s, simulated and fitted with the exact discretisation of
-/// each record's hold); NARX reads the samples only.
+/// The hybrid model with its initial state from the one free-run judge on `data`'s first
+/// experiment (the rule and numbers of `mmenn predict`: fitted to the first `window`
+/// samples). The records carry the model file's `intersample`, which this fit and the
+/// hybrid model's free runs (`Model::simulate`) follow, and so do the linear baselines
+/// (the assumed model and the output-error fit are `OeModel`s, simulated and fitted with
+/// the exact discretisation of each record's hold); NARX reads the samples only.
 fn hybrid_for(file: &HybridFile, data: &Dataset, window: usize) -> Result<HybridModel> {
-    let mut model = file.model()?;
-    let spec = file.spec()?;
-    let fit = InitialStateFit {
-        window,
-        integrator: model.integrator,
-        ..InitialStateFit::default()
-    };
-    model.x0 = fit_initial_state(
-        &model,
-        spec.linear.c(),
+    let loaded = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), file.clone())?;
+    let judged = judge_free_run(
+        &loaded,
         &data.experiments()[0],
-        &file.x0,
-        &fit,
-    )
-    .map_err(|source| MmennError::Core {
-        context: "fitting the hybrid model's initial state",
-        source,
-    })?;
+        &Observation::outputs(&loaded),
+        &InitialRule::Fit {
+            window: Some(window),
+        },
+    )?;
+    let mut model = file.model()?;
+    model.x0 = judged.x0;
     Ok(model)
 }
 
@@ -552,7 +545,7 @@ pub fn run_compare(
     initialisation.push((
         "MME/NN".to_string(),
         format!(
-            "initial state fitted to the first {} samples (not skipped); every state is simulated",
+            "initial state fitted to the first {} samples (not skipped), as for the given model and `mmenn predict`; every state is simulated",
             opts.fit.x0_window
         ),
     ));

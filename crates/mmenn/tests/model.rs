@@ -100,6 +100,24 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
         );
         assert_eq!(cm.rmse.to_bits(), m.rmse.to_bits());
     }
+    // compare's own MME/NN row is judged the same way: predict on its model.json agrees.
+    let ph = run_predict(
+        &dir.join("compare/mme_nn/model.json"),
+        &test.data,
+        &InitialChoice::Fit,
+        50,
+        &dir.join("predict-hybrid"),
+    )
+    .unwrap();
+    let hybrid_row = val.rows().iter().find(|r| r.label == "MME/NN").unwrap();
+    let (a, b) = (
+        hybrid_row.evaluation.channel("x").unwrap().fit_percent,
+        ph.free_run.channels["x"].fit_percent,
+    );
+    assert!(
+        (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+        "MME/NN: compare {a} vs predict {b}"
+    );
     // The discovered model beats its own linear part on the test record.
     let assumed = val
         .rows()
