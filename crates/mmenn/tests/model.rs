@@ -128,6 +128,29 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
         row.evaluation.channel("x").unwrap().fit_percent
             > assumed.evaluation.channel("x").unwrap().fit_percent
     );
+    // A baseline that cannot be fitted (a free parameter outside the model) has no row of
+    // numbers, and the report and summary say so with the reason.
+    let bad = CompareOptions {
+        oe_free: Some(vec!["A[9,9]".into()]),
+        ..opts.clone()
+    };
+    let c = run_compare(
+        std::slice::from_ref(&train.data),
+        &discovered,
+        std::slice::from_ref(&test.data),
+        &bad,
+        &dir.join("compare-bad"),
+    )
+    .unwrap();
+    assert_eq!(c.failures.len(), 1, "{:?}", c.failures);
+    assert_eq!(c.failures[0].model, "linear OE");
+    assert!(!c.failures[0].reason.is_empty());
+    assert!(c.estimation.rows().iter().all(|r| r.label != "linear OE"));
+    let report = std::fs::read_to_string(dir.join("compare-bad/report.md")).unwrap();
+    assert!(
+        report.contains("| linear OE | — | not fitted: "),
+        "{report}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
