@@ -247,3 +247,47 @@ units = { x1 = "m", x2 = "m/s", u = "N", s = "m" }
     assert!(json.contains("first 200 of 301 samples"), "{json}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The command line: `show` prints a model's equations; `predict` on a data file given as
+/// the model fails with a message naming the file and what it is, without a backtrace.
+#[test]
+fn cli_show_and_a_data_file_as_model() {
+    use std::process::Command;
+
+    let dir = scratch("cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = dir.join("m.toml");
+    std::fs::write(
+        &model,
+        "states = [\"x\", \"v\"]\ninputs = [\"u\"]\nA = [[0.0, 1.0], [-4.03, -0.2]]\nB = [[0.0], [1.01]]\nmeasured = [\"x\"]\ncorrected = [\"v\"]\nnoise_variance = [1e-4]\n\n[[terms]]\nstate = \"v\"\neffect = \"quadratic_drag\"\nterm = \"v*abs(v)\"\ncoefficient = -0.803\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .args(["show", model.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(
+        text.contains("v' = -4.03 x - 0.2 v + 1.01 u - 0.803 v*abs(v)"),
+        "{text}"
+    );
+    let csv = dir.join("d.csv");
+    std::fs::write(&csv, "t,u,x\n0,0,1\n0.1,0,1\n0.2,0,1\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .current_dir(&dir)
+        .env_remove("MMENN_BACKTRACE")
+        .args([
+            "predict", "--model", "d.csv", "--data", "d.csv", "--out", "p",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("d.csv") && err.contains("not a model mmenn reads"),
+        "{err}"
+    );
+    assert!(!err.contains("backtrace"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
