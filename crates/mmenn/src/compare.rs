@@ -3,22 +3,42 @@
 //! simulation, fit %, R², RMSE and error variance per channel, on estimation and
 //! validation data; compare plots with fit % in the legend, residual correlation plots
 //! with 99 % bands, and `compare.json`.
+//!
+//! `--model` is any model mmenn writes ([`crate::model::LoadedModel`]). When it is more
+//! than the linear assumed model (it has `[[terms]]`, e.g. a discovered model, or it is a
+//! hybrid `model.json`), it gets its own row, [`GIVEN_MODEL_ROW`], judged by the one
+//! free-run judge ([`crate::model::judge_free_run`]: the numbers `mmenn predict` gives on
+//! the same record); the baselines start from its linear part. A baseline that cannot be
+//! fitted has no numbers: the table, the report and the terminal say so, with the reason.
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 use sysid_baselines::{
-    EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel, ResidualAnalysis,
-    ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions, residual_analysis,
-    suggest_lags,
+    Evaluation, EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel,
+    ResidualAnalysis, ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions,
+    residual_analysis, suggest_lags,
 };
-use sysid_core::{Dataset, Horizon, InitialStateFit, Model, fit_initial_state};
+use sysid_core::{Dataset, Horizon, Model};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
 use crate::fit::{FitOptions, HybridFile, HybridModel, run_fit};
-use crate::model_file::{ModelSpec, read_model};
+use crate::model::{InitialRule, LoadedModel, ModelKind, Observation, judge_free_run};
+use crate::model_file::{ModelSpec, write_model};
 use crate::plot::{Figure, Series};
+
+/// Row label of the model given with `--model` when it is more than its linear part.
+pub const GIVEN_MODEL_ROW: &str = "given model";
+
+/// A model that could not be fitted: it has no row of numbers.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Failure {
+    /// Row label.
+    pub model: String,
+    /// Why.
+    pub reason: String,
+}
 
 /// A model's free-run simulation over a dataset, one prediction per experiment.
 type SimFn<'a> = dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>> + 'a;
@@ -60,9 +80,12 @@ pub struct CompareSummary {
     pub narx_orders: NarxOrders,
     /// Output-error parameters with ±1σ.
     pub oe_parameters: Vec<sysid_baselines::ParameterEstimate>,
-    /// Why the output-error fit failed, when it did (its rows then show the starting
-    /// physics model).
+    /// Why the output-error fit failed, when it did (it then has no row).
     pub oe_error: Option<String>,
+    /// Every model that could not be fitted, with the reason (no row in the tables).
+    pub failures: Vec<Failure>,
+    /// What `--model` was.
+    pub given_model: ModelKind,
     /// How each model gets its initial condition.
     pub initialisation: Vec<(String, String)>,
     /// Residual analysis (free-run) of each model on the validation data (or the
@@ -87,46 +110,92 @@ fn default_free(spec: &ModelSpec) -> Vec<String> {
     free
 }
 
-/// The hybrid model with its initial state fitted to the first samples of `data`'s
-/// first experiment (the same rule `mmenn predict` uses). The records carry the model
-/// file's `intersample`, which this fit and the hybrid model's free runs
-/// (`Model::simulate`) follow, and so do the linear baselines (the assumed model and the
-/// output-error fit are `OeModel`s, simulated and fitted with the exact discretisation of
-/// each record's hold); NARX reads the samples only.
+/// The hybrid model with its initial state from the one free-run judge on `data`'s first
+/// experiment (the rule and numbers of `mmenn predict`: fitted to the first `window`
+/// samples). The records carry the model file's `intersample`, which this fit and the
+/// hybrid model's free runs (`Model::simulate`) follow, and so do the linear baselines
+/// (the assumed model and the output-error fit are `OeModel`s, simulated and fitted with
+/// the exact discretisation of each record's hold); NARX reads the samples only.
 fn hybrid_for(file: &HybridFile, data: &Dataset, window: usize) -> Result<HybridModel> {
-    let mut model = file.model()?;
-    let spec = file.spec()?;
-    let fit = InitialStateFit {
-        window,
-        integrator: model.integrator,
-        ..InitialStateFit::default()
-    };
-    model.x0 = fit_initial_state(
-        &model,
-        spec.linear.c(),
+    let loaded = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), file.clone())?;
+    let judged = judge_free_run(
+        &loaded,
         &data.experiments()[0],
-        &file.x0,
-        &fit,
-    )
-    .map_err(|source| MmennError::Core {
-        context: "fitting the hybrid model's initial state",
-        source,
-    })?;
+        &Observation::outputs(&loaded),
+        &InitialRule::Fit {
+            window: Some(window),
+        },
+    )?;
+    let mut model = file.model()?;
+    model.x0 = judged.x0;
     Ok(model)
+}
+
+/// The models of one comparison (a baseline that could not be fitted is `None`).
+struct Models<'a> {
+    assumed: &'a OeModel,
+    oe: Option<&'a OeModel>,
+    narx: Option<&'a NarxModel>,
+    given: Option<&'a LoadedModel>,
+    window: usize,
+}
+
+/// The given model judged on the first experiment of `data` by the one free-run judge.
+fn judge_given(given: &LoadedModel, data: &Dataset, window: usize) -> Result<Evaluation> {
+    let obs = Observation::outputs(given);
+    let j = judge_free_run(
+        given,
+        &data.experiments()[0],
+        &obs,
+        &InitialRule::Fit {
+            window: Some(window),
+        },
+    )?;
+    Ok(j.evaluation(&obs.names))
+}
+
+/// The given model's free run on the first experiment, as a prediction.
+fn given_prediction(
+    given: &LoadedModel,
+    data: &Dataset,
+    window: usize,
+) -> Result<Vec<sysid_core::Prediction>> {
+    let obs = Observation::outputs(given);
+    let j = judge_free_run(
+        given,
+        &data.experiments()[0],
+        &obs,
+        &InitialRule::Fit {
+            window: Some(window),
+        },
+    )?;
+    Ok(vec![sysid_core::Prediction {
+        horizon: Horizon::FreeRun,
+        outputs: j.outputs,
+        initial_samples: 0,
+    }])
 }
 
 fn table(
     title: &str,
     data: &Dataset,
-    assumed: &OeModel,
-    oe: &OeModel,
-    narx: &NarxModel,
+    models: &Models<'_>,
     hybrid: &HybridModel,
 ) -> Result<EvaluationTable> {
     let mut t = EvaluationTable::new(title, Horizon::FreeRun);
-    t.push("assumed model", evaluate(assumed, data, Horizon::FreeRun)?)?;
-    t.push("linear OE", evaluate(oe, data, Horizon::FreeRun)?)?;
-    t.push("NARX", evaluate(narx, data, Horizon::FreeRun)?)?;
+    t.push(
+        "assumed model",
+        evaluate(models.assumed, data, Horizon::FreeRun)?,
+    )?;
+    if let Some(g) = models.given {
+        t.push(GIVEN_MODEL_ROW, judge_given(g, data, models.window)?)?;
+    }
+    if let Some(oe) = models.oe {
+        t.push("linear OE", evaluate(oe, data, Horizon::FreeRun)?)?;
+    }
+    if let Some(narx) = models.narx {
+        t.push("NARX", evaluate(narx, data, Horizon::FreeRun)?)?;
+    }
     t.push("MME/NN", evaluate(hybrid, data, Horizon::FreeRun)?)?;
     Ok(t)
 }
@@ -241,10 +310,20 @@ pub fn run_compare(
     opts: &CompareOptions,
     out: &Path,
 ) -> Result<CompareSummary> {
-    let spec = read_model(model_path)?;
+    let loaded = LoadedModel::read(model_path)?;
+    let spec = loaded.spec.clone();
     let lin = spec.linear.clone();
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     ensure_dir(out)?;
+    // `fit` reads a model file: a hybrid model's model-file part is written out for it.
+    let fit_model_path = if loaded.kind == ModelKind::Hybrid {
+        let p = out.join("model.toml");
+        write_model(&p, &spec)?;
+        p
+    } else {
+        model_path.to_path_buf()
+    };
+    let given = (loaded.kind != ModelKind::Assumed).then_some(&loaded);
 
     // Both linear models get their initial state the same way as the hybrid model: least
     // squares over the first `x0_window` samples (which their metrics then skip).
@@ -255,14 +334,23 @@ pub fn run_compare(
         free: opts.oe_free.clone().unwrap_or_else(|| default_free(&spec)),
         ..OeConfig::default()
     };
-    // An output-error fit that fails (e.g. a free parameter the data cannot identify) does
-    // not stop the comparison: its row is then the starting physics model, and the summary
-    // says why.
-    let (mut oe_model, oe_parameters, oe_error) = match fit_oe(&lin, &data, &oe_config) {
-        Ok(f) => (f.model, f.parameters, None),
-        Err(e) => (assumed.clone(), Vec::new(), Some(e.to_string())),
+    let mut failures = Vec::new();
+    // A baseline that cannot be fitted (e.g. a free parameter the data cannot identify)
+    // does not stop the comparison: it has no row, and the summary says why.
+    let (oe_model, oe_parameters, oe_error) = match fit_oe(&lin, &data, &oe_config) {
+        Ok(f) => {
+            let mut m = f.model;
+            m.observer_window = window;
+            (Some(m), f.parameters, None)
+        }
+        Err(e) => {
+            failures.push(Failure {
+                model: "linear OE".into(),
+                reason: e.to_string(),
+            });
+            (None, Vec::new(), Some(e.to_string()))
+        }
     };
-    oe_model.observer_window = window;
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
             na: l,
@@ -284,62 +372,88 @@ pub fn run_compare(
             }
         }
     };
-    let narx = fit_narx(
+    let narx = match fit_narx(
         &data,
         &NarxConfig {
             orders,
             seed: opts.fit.seed,
             ..NarxConfig::default()
         },
-    )?
-    .model;
+    ) {
+        Ok(f) => Some(f.model),
+        Err(e) => {
+            failures.push(Failure {
+                model: "NARX".into(),
+                reason: e.to_string(),
+            });
+            None
+        }
+    };
     let fit_dir = out.join("mme_nn");
-    run_fit(data_paths, model_path, val_paths, &opts.fit, &fit_dir)?;
+    run_fit(data_paths, &fit_model_path, val_paths, &opts.fit, &fit_dir)?;
     let text =
         std::fs::read_to_string(fit_dir.join("model.json")).map_err(|source| MmennError::Io {
             path: fit_dir.join("model.json"),
             source,
         })?;
     let file: HybridFile = serde_json::from_str(&text)?;
+    let models = Models {
+        assumed: &assumed,
+        oe: oe_model.as_ref(),
+        narx: narx.as_ref(),
+        given,
+        window: opts.fit.x0_window,
+    };
 
     let mut files = vec!["mme_nn/".to_string()];
+    if loaded.kind == ModelKind::Hybrid {
+        files.push("model.toml".into());
+    }
     let hybrid_est = hybrid_for(&file, &data, opts.fit.x0_window)?;
     let estimation = table(
         "free-run simulation, estimation data",
         &data,
-        &assumed,
-        &oe_model,
-        &narx,
+        &models,
         &hybrid_est,
     )?;
     type Sim<'a> = Box<dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>> + 'a>;
     let sims = |h: &HybridModel| -> Vec<(&'static str, Sim<'_>)> {
         let h = h.clone();
-        vec![
-            (
-                "assumed model",
-                Box::new(|d: &Dataset| Ok(predictions(&assumed, d, Horizon::FreeRun)?)),
-            ),
-            (
+        let mut v: Vec<(&'static str, Sim<'_>)> = vec![(
+            "assumed model",
+            Box::new(|d: &Dataset| Ok(predictions(&assumed, d, Horizon::FreeRun)?)),
+        )];
+        if let Some(g) = given {
+            let w = opts.fit.x0_window;
+            v.push((
+                GIVEN_MODEL_ROW,
+                Box::new(move |d: &Dataset| given_prediction(g, d, w)),
+            ));
+        }
+        if let Some(oe) = &oe_model {
+            v.push((
                 "linear OE",
-                Box::new(|d: &Dataset| Ok(predictions(&oe_model, d, Horizon::FreeRun)?)),
-            ),
-            (
+                Box::new(move |d: &Dataset| Ok(predictions(oe, d, Horizon::FreeRun)?)),
+            ));
+        }
+        if let Some(narx) = &narx {
+            v.push((
                 "NARX",
-                Box::new(|d: &Dataset| Ok(predictions(&narx, d, Horizon::FreeRun)?)),
-            ),
-            (
-                "MME/NN",
-                Box::new(move |d: &Dataset| {
-                    Ok(vec![h.simulate(&d.experiments()[0]).map_err(|source| {
-                        MmennError::Core {
-                            context: "MME/NN free run",
-                            source,
-                        }
-                    })?])
-                }),
-            ),
-        ]
+                Box::new(move |d: &Dataset| Ok(predictions(narx, d, Horizon::FreeRun)?)),
+            ));
+        }
+        v.push((
+            "MME/NN",
+            Box::new(move |d: &Dataset| {
+                Ok(vec![h.simulate(&d.experiments()[0]).map_err(|source| {
+                    MmennError::Core {
+                        context: "MME/NN free run",
+                        source,
+                    }
+                })?])
+            }),
+        ));
+        v
     };
     let est_sims = sims(&hybrid_est);
     let refs: Vec<(&str, &SimFn<'_>)> = est_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
@@ -354,14 +468,7 @@ pub fn run_compare(
     let (validation, hybrid_res, res_data) = match &val {
         Some(v) => {
             let hv = hybrid_for(&file, v, opts.fit.x0_window)?;
-            let tab = table(
-                "free-run simulation, validation data",
-                v,
-                &assumed,
-                &oe_model,
-                &narx,
-                &hv,
-            )?;
+            let tab = table("free-run simulation, validation data", v, &models, &hv)?;
             let val_sims = sims(&hv);
             let refs: Vec<(&str, &SimFn<'_>)> =
                 val_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
@@ -371,53 +478,77 @@ pub fn run_compare(
         None => (None, hybrid_est.clone(), &data),
     };
     let rc = ResidualConfig::default();
-    let residuals = vec![
-        (
-            "assumed model".to_string(),
-            residual_analysis(&assumed, res_data, 0, Horizon::FreeRun, &rc)?,
-        ),
-        (
+    let mut residuals = vec![(
+        "assumed model".to_string(),
+        residual_analysis(&assumed, res_data, 0, Horizon::FreeRun, &rc)?,
+    )];
+    if let Some(oe) = &oe_model {
+        residuals.push((
             "linear OE".to_string(),
-            residual_analysis(&oe_model, res_data, 0, Horizon::FreeRun, &rc)?,
-        ),
-        (
+            residual_analysis(oe, res_data, 0, Horizon::FreeRun, &rc)?,
+        ));
+    }
+    if let Some(narx) = &narx {
+        residuals.push((
             "NARX".to_string(),
-            residual_analysis(&narx, res_data, 0, Horizon::FreeRun, &rc)?,
-        ),
-        (
-            "MME/NN".to_string(),
-            residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc)?,
-        ),
-    ];
+            residual_analysis(narx, res_data, 0, Horizon::FreeRun, &rc)?,
+        ));
+    }
+    residuals.push((
+        "MME/NN".to_string(),
+        residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc)?,
+    ));
     for (label, r) in &residuals {
         files.extend(residual_figure(label, r, out)?);
     }
-    let initialisation = vec![
-        (
-            "assumed model".to_string(),
-            format!(
-                "initial state estimated by least squares from the first {window} samples, which the metrics skip"
-            ),
+    let mut initialisation = vec![(
+        "assumed model".to_string(),
+        format!(
+            "{}initial state estimated by least squares from the first {window} samples, which the metrics skip",
+            if loaded.kind == ModelKind::Assumed {
+                String::new()
+            } else {
+                format!(
+                    "the linear part of the model file (its {} named terms{} are in the '{GIVEN_MODEL_ROW}' row); ",
+                    spec.terms.len(),
+                    if loaded.kind == ModelKind::Hybrid {
+                        " and network"
+                    } else {
+                        ""
+                    }
+                )
+            }
         ),
-        (
-            "linear OE".to_string(),
-            "same as the assumed model".to_string(),
-        ),
-        (
-            "NARX".to_string(),
+    )];
+    if given.is_some() {
+        initialisation.push((
+            GIVEN_MODEL_ROW.to_string(),
             format!(
-                "the first {} measured samples seed the delay line and are skipped (NARX predicts only measured channels)",
-                orders.na.max(orders.nb + orders.nk - 1)
-            ),
-        ),
-        (
-            "MME/NN".to_string(),
-            format!(
-                "initial state fitted to the first {} samples (not skipped); every state is simulated",
+                "{} as read from {}: initial state fitted by least squares to the first {} samples, every sample scored (the rule and numbers of `mmenn predict`)",
+                loaded.kind,
+                model_path.display(),
                 opts.fit.x0_window
             ),
+        ));
+    }
+    initialisation.push((
+        "linear OE".to_string(),
+        "same as the assumed model".to_string(),
+    ));
+    initialisation.push((
+        "NARX".to_string(),
+        format!(
+            "the first {} measured samples seed the delay line and are skipped (NARX predicts only measured channels)",
+            orders.na.max(orders.nb + orders.nk - 1)
         ),
-    ];
+    ));
+    initialisation.push((
+        "MME/NN".to_string(),
+        format!(
+            "initial state fitted to the first {} samples (not skipped), as for the given model and `mmenn predict`; every state is simulated",
+            opts.fit.x0_window
+        ),
+    ));
     files.push("compare.json".into());
     files.push("report.md".into());
     let summary = CompareSummary {
@@ -426,6 +557,8 @@ pub fn run_compare(
         narx_orders: orders,
         oe_parameters,
         oe_error,
+        failures,
+        given_model: loaded.kind,
         initialisation,
         residuals,
         files,
@@ -438,7 +571,7 @@ pub fn run_compare(
     Ok(summary)
 }
 
-fn table_md(t: &EvaluationTable) -> String {
+fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {
     let mut s = format!(
         "### {} ({})\n\n| model | channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|---|\n",
         t.title(),
@@ -453,6 +586,13 @@ fn table_md(t: &EvaluationTable) -> String {
             ));
         }
     }
+    for f in failures {
+        s.push_str(&format!(
+            "| {} | — | not fitted: {} | | | |\n",
+            f.model,
+            f.reason.replace('|', "/").replace('\n', " ")
+        ));
+    }
     s
 }
 
@@ -460,10 +600,16 @@ fn compare_report(s: &CompareSummary) -> String {
     let mut r = String::from(
         "# Model comparison\n\nEvery number below is **free-run simulation** (inputs only after the initial condition).\n\n",
     );
-    r.push_str(&table_md(&s.estimation));
+    r.push_str(&table_md(&s.estimation, &s.failures));
     if let Some(v) = &s.validation {
         r.push('\n');
-        r.push_str(&table_md(v));
+        r.push_str(&table_md(v, &s.failures));
+    }
+    if !s.failures.is_empty() {
+        r.push_str("\n## Models that could not be fitted\n\n");
+        for f in &s.failures {
+            r.push_str(&format!("- **{}**: {}\n", f.model, f.reason));
+        }
     }
     r.push_str("\n## Initial conditions\n\n");
     for (m, how) in &s.initialisation {
@@ -473,6 +619,9 @@ fn compare_report(s: &CompareSummary) -> String {
         "\nNARX delays: na = {}, nb = {}, nk = {}.\n\nOutput-error parameters (±1σ):\n\n",
         s.narx_orders.na, s.narx_orders.nb, s.narx_orders.nk
     ));
+    if s.oe_parameters.is_empty() {
+        r.push_str("- none (the output-error model was not fitted)\n");
+    }
     for p in &s.oe_parameters {
         r.push_str(&format!("- {}: {:.6} ± {:.2e}\n", p.name, p.value, p.std));
     }

@@ -180,6 +180,13 @@ pub enum ModelProblem {
     /// The model is inconsistent (shape, non-finite entry, duplicate name).
     #[error(transparent)]
     Model(#[from] sysid_core::CoreError),
+    /// The file is none of the models mmenn writes (a model-file TOML, with or without
+    /// `[[terms]]`, or `fit`'s `model.json`).
+    #[error("not a model mmenn reads: {why}")]
+    NotAModel {
+        /// What was found instead.
+        why: String,
+    },
 }
 
 impl From<sysid_core::TermError> for ModelProblem {

@@ -13,16 +13,20 @@ use nalgebra::DMatrix;
 use nn::{Mlp, NetCorrection, SweepConfig, SweepRow};
 use serde::{Deserialize, Serialize};
 use sysid_core::{
-    ChannelMetrics, CorrectedModel, Dataset, Experiment, Horizon, InitialStateFit, MmeEstimate,
-    TermModel, channel_metrics, fit_initial_state,
+    ChannelMetrics, CorrectedModel, Dataset, Experiment, Horizon, MmeEstimate, TermModel,
+    channel_metrics,
 };
 
 use crate::atomic::{ensure_dir, write_atomic};
-use crate::data_file::{read_table, table_to_experiment, write_csv};
+use crate::data_file::write_csv;
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
 use crate::plot::{Figure, Series};
+/// `predict` lives in [`crate::predict`]; these names stay reachable from here.
+pub use crate::predict::{
+    InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
+};
 pub use crate::refine::{RefineChoice, RefineSummary};
 use crate::refine::{refine_network, validation_run};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
@@ -791,121 +795,4 @@ fn fit_report(s: &FitSummary) -> String {
         "\nFigures: `compare_*.svg`, `nn_d_*.svg`, `sweep.svg`; the sweep table is `sweep.csv`.\n",
     );
     r
-}
-
-/// How `mmenn predict` gets its initial state.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub enum InitialChoice {
-    /// Fit it to the first samples of the data's measured channels (starting from the
-    /// training `x0`).
-    #[default]
-    Fit,
-    /// Use this state.
-    Given(Vec<f64>),
-}
-
-/// What `mmenn predict` reports.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PredictSummary {
-    /// Always free-run simulation, with the initial state and metrics per channel present
-    /// in the data (states by name, or model outputs).
-    pub free_run: FreeRunReport,
-    /// Files written.
-    pub files: Vec<String>,
-}
-
-/// Load `model.json`, simulate free-run over the data's inputs, compare with every state
-/// or output column the data has, and write `prediction.csv` and `summary.json`.
-pub fn run_predict(
-    model_json: &Path,
-    data_path: &Path,
-    x0: &InitialChoice,
-    window: usize,
-    out: &Path,
-) -> Result<PredictSummary> {
-    let text = std::fs::read_to_string(model_json).map_err(|source| MmennError::Io {
-        path: model_json.to_path_buf(),
-        source,
-    })?;
-    let file = HybridFile::parse(model_json, &text)?;
-    let spec = file.spec()?;
-    let model = file.model()?;
-    let lin = &spec.linear;
-    let table = read_table(data_path)?;
-    // Compare with every state present by name, else with every model output present.
-    let states: Vec<(String, usize)> = lin
-        .state_names()
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| table.column_index(n).is_some())
-        .map(|(i, n)| (n.clone(), i))
-        .collect();
-    let names: Vec<String> = states.iter().map(|(n, _)| n.clone()).collect();
-    // Inputs between samples as the model was fitted with (the model file's `intersample`).
-    let exp =
-        table_to_experiment(&table, lin.input_names(), &names)?.with_intersample(spec.intersample);
-    let sel = DMatrix::from_fn(states.len(), lin.n_states(), |r, c| {
-        if states[r].1 == c { 1.0 } else { 0.0 }
-    });
-    let (x0, source) = match x0 {
-        InitialChoice::Given(v) => (v.clone(), "given by --x0".to_string()),
-        InitialChoice::Fit if !states.is_empty() => {
-            let fit = InitialStateFit {
-                window,
-                integrator: model.integrator,
-                ..InitialStateFit::default()
-            };
-            let v = fit_initial_state(&model, &sel, &exp, &file.x0, &fit).map_err(|source| {
-                MmennError::Core {
-                    context: "fitting the initial state",
-                    source,
-                }
-            })?;
-            (
-                v,
-                format!(
-                    "least-squares fit of the free response to the first {} samples",
-                    window.min(exp.len())
-                ),
-            )
-        }
-        InitialChoice::Fit => (
-            file.x0.clone(),
-            "the training record's x0 (no state columns in the data to fit)".to_string(),
-        ),
-    };
-    if x0.len() != lin.n_states() {
-        return Err(MmennError::Core {
-            context: "--x0",
-            source: sysid_core::CoreError::Length {
-                what: "initial state",
-                found: x0.len(),
-                expected: lin.n_states(),
-            },
-        });
-    }
-    let xs = free_run(&model, &exp, &x0)?;
-    ensure_dir(out)?;
-    let t = exp.times();
-    let mut header = vec!["t".to_string()];
-    header.extend(lin.state_names().iter().cloned());
-    let cols: Vec<Vec<f64>> = (0..xs.nrows()).map(|i| row(&xs, i)).collect();
-    let mut refs: Vec<&[f64]> = vec![&t];
-    refs.extend(cols.iter().map(Vec::as_slice));
-    write_csv(&out.join("prediction.csv"), &header, &refs)?;
-    let free_run = FreeRunReport {
-        horizon: Horizon::FreeRun,
-        x0,
-        x0_source: source,
-        channels: metrics_for(&names, &sel, &xs, &exp)?,
-    };
-    let summary = PredictSummary {
-        free_run,
-        files: vec!["prediction.csv".into(), "summary.json".into()],
-    };
-    write_atomic(
-        &out.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
-    )?;
-    Ok(summary)
 }

@@ -5,6 +5,7 @@ mod compare;
 mod discover;
 mod fit;
 mod hidden_effects;
+mod model;
 mod monitor;
 mod never_panics;
 mod real_data;

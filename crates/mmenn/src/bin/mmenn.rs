@@ -211,8 +211,10 @@ enum Command {
     Estimate(EstimateArgs),
     /// Fit the MME/NN hybrid model: MME, network sizing sweep, free-run validation.
     Fit(FitArgs),
-    /// Free-run prediction of a fitted hybrid model (model.json) on new inputs.
+    /// Free-run (and k-step) prediction of any model mmenn writes on new data.
     Predict(PredictArgs),
+    /// Print any model mmenn writes as equations (names, units, ±σ where known).
+    Show(ShowArgs),
     /// Compare the assumed model, linear OE, NARX and MME/NN on the same data (free-run).
     Compare(CompareArgs),
     /// Find where model and data disagree, name the missing effect, add it, show the gap shrink.
@@ -370,19 +372,30 @@ struct FitArgs {
 }
 
 #[derive(Debug, Args)]
+struct ShowArgs {
+    /// Model: a model file (TOML, with or without [[terms]]), model.discovered.toml, or
+    /// fit's model.json.
+    model: PathBuf,
+}
+
+#[derive(Debug, Args)]
 struct PredictArgs {
-    /// Fitted hybrid model (model.json written by `mmenn fit`).
+    /// Model: a model file (TOML, with or without [[terms]]), model.discovered.toml, or
+    /// fit's model.json (told apart by content).
     #[arg(long)]
     model: PathBuf,
-    /// Data file with the inputs (and, optionally, state columns to compare with).
+    /// Data file with the inputs (and, optionally, state or output columns to compare with).
     #[arg(long)]
     data: PathBuf,
-    /// Initial state, comma-separated (default: fitted to the first samples).
+    /// Initial state, comma-separated (default: fitted to the first samples of this record).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
     x0: Option<Vec<f64>>,
-    /// Samples used to fit the initial state.
+    /// Samples used to fit the initial state (from the start of the record).
     #[arg(long, default_value_t = 200, value_parser = at_least_one)]
     x0_window: usize,
+    /// Also predict k steps ahead (beside the free run, labelled).
+    #[arg(long, value_parser = at_least_one)]
+    horizon: Option<usize>,
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
@@ -678,9 +691,31 @@ fn predict(args: PredictArgs, force: bool) -> Result<()> {
         None => mmenn::fit::InitialChoice::Fit,
     };
     let staged = stage(&args.out, "predict", force, &[&args.model, &args.data])?;
-    let s = mmenn::fit::run_predict(&args.model, &args.data, &x0, args.x0_window, staged.path())?;
+    let opts = mmenn::predict::PredictOptions {
+        x0,
+        x0_window: Some(args.x0_window),
+        horizon: args.horizon,
+    };
+    let s = mmenn::predict::run_predict_with(&args.model, &args.data, &opts, staged.path())?;
     staged.commit()?;
-    print_free_run("prediction", &s.free_run);
+    print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
+    if let Some(k) = &s.k_step {
+        print_free_run(
+            &format!("prediction ({})", s.model_kind),
+            &mmenn::fit::FreeRunReport {
+                horizon: k.horizon,
+                x0: k.x0.clone(),
+                x0_source: k.k_step_rule.clone().unwrap_or_default(),
+                channels: k.channels.clone(),
+            },
+        );
+    }
+    Ok(())
+}
+
+#[allow(clippy::print_stdout)]
+fn show(args: ShowArgs) -> Result<()> {
+    print!("{}", mmenn::show::show_model(&args.model)?);
     Ok(())
 }
 
@@ -716,6 +751,9 @@ fn compare(a: CompareArgs, force: bool) -> Result<()> {
                 })
                 .collect();
             println!("  {:<14} {}", row.label, cells.join("; "));
+        }
+        for f in &s.failures {
+            println!("  {:<14} NOT FITTED: {}", f.model, f.reason);
         }
     }
     println!("wrote {} files into {}", s.files.len(), a.out.display());
@@ -860,6 +898,7 @@ fn main() -> ExitCode {
         Command::Estimate(a) => estimate(a, force, &progress),
         Command::Fit(a) => fit(a, force, &progress),
         Command::Predict(a) => predict(a, force),
+        Command::Show(a) => show(a),
         Command::Compare(a) => compare(a, force),
         Command::Discover(a) => discover(a, force),
         Command::Monitor(c) => monitor(c, force),

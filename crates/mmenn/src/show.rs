@@ -1,0 +1,265 @@
+//! `mmenn show MODEL`: any model mmenn writes printed as equations, with the names and
+//! units of the file and ±σ where they are known, e.g.
+//! `v' = -4.03 x - 0.2 v + 1.01 u - 0.803 (±0.01) v*abs(v)`.
+//!
+//! The model files hold no uncertainties; a discovered model's ±σ come from the
+//! `discovery.json` written beside it by `mmenn discover` (σ = half the 95 % interval of
+//! the free-run calibrated coefficient / 1.96), when that file is there.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::error::Result;
+use crate::model::{LoadedModel, ModelKind};
+
+/// Standard deviations of named-term coefficients by `(equation, expression)`.
+pub type TermSigmas = BTreeMap<(String, String), f64>;
+
+/// A number with 4 significant digits, trailing zeros dropped.
+pub fn number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor() as i32;
+    if (-3..6).contains(&mag) {
+        let decimals = (3 - mag).max(0) as usize;
+        let s = format!("{v:.decimals$}");
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+/// The ±σ of the terms of a discovered model, from `discovery.json` beside it (empty
+/// when there is none or it cannot be read: the equations are then printed without).
+pub fn sigmas_beside(model_path: &Path) -> TermSigmas {
+    let mut out = TermSigmas::new();
+    let Some(dir) = model_path.parent() else {
+        return out;
+    };
+    let Ok(text) = std::fs::read_to_string(dir.join("discovery.json")) else {
+        return out;
+    };
+    let Ok(json) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return out;
+    };
+    for list in ["effects", "unconfirmed"] {
+        for e in json[list].as_array().into_iter().flatten() {
+            let (Some(state), Some(term), Some(ci)) = (
+                e["state"].as_str(),
+                e["term"].as_str(),
+                e["ci95"].as_array(),
+            ) else {
+                continue;
+            };
+            if let (Some(lo), Some(hi)) = (
+                ci.first().and_then(|v| v.as_f64()),
+                ci.get(1).and_then(|v| v.as_f64()),
+            ) && hi >= lo
+            {
+                out.insert(
+                    (state.to_string(), term.to_string()),
+                    (hi - lo) / (2.0 * 1.96),
+                );
+            }
+        }
+    }
+    out
+}
+
+fn push_term(line: &mut String, first: &mut bool, coefficient: f64, body: &str) {
+    let sign = if coefficient < 0.0 { "-" } else { "+" };
+    let mag = number(coefficient.abs());
+    if *first {
+        if coefficient < 0.0 {
+            line.push('-');
+        }
+        *first = false;
+    } else {
+        line.push_str(&format!(" {sign} "));
+    }
+    line.push_str(&mag);
+    if !body.is_empty() {
+        line.push(' ');
+        line.push_str(body);
+    }
+}
+
+fn expression(term: &str) -> String {
+    if term.contains([' ', '+', '-']) {
+        format!("({term})")
+    } else {
+        term.to_string()
+    }
+}
+
+/// The model as lines of text: a header (kind, names with units, hold), one equation per
+/// state, and the outputs when they are not plain measured states.
+pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
+    let spec = &model.spec;
+    let lin = &spec.linear;
+    let unit = |name: &str| {
+        spec.units
+            .get(name)
+            .map(|u| format!(" [{u}]"))
+            .unwrap_or_default()
+    };
+    let mut lines = vec![format!("{} — {}", model.path.display(), model.kind)];
+    let names = |list: &[String]| {
+        list.iter()
+            .map(|n| format!("{n}{}", unit(n)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    lines.push(format!("states: {}", names(lin.state_names())));
+    if lin.n_inputs() > 0 {
+        lines.push(format!(
+            "inputs: {} (between samples: {})",
+            names(lin.input_names()),
+            match model.intersample() {
+                sysid_core::InterSample::Zoh => "held, zoh",
+                sysid_core::InterSample::Foh => "linear, foh",
+            }
+        ));
+    }
+    let corrected = lin.corrected_states().unwrap_or_default();
+    for (i, state) in lin.state_names().iter().enumerate() {
+        let mut line = format!("{state}' = ");
+        let mut first = true;
+        for (j, s) in lin.state_names().iter().enumerate() {
+            let a = lin.a()[(i, j)];
+            if a != 0.0 {
+                push_term(&mut line, &mut first, a, s);
+            }
+        }
+        for (j, u) in lin.input_names().iter().enumerate() {
+            let b = lin.b()[(i, j)];
+            if b != 0.0 {
+                push_term(&mut line, &mut first, b, u);
+            }
+        }
+        for t in &spec.terms {
+            let sign = if t.state == *state {
+                1.0
+            } else if t.into.as_deref() == Some(state.as_str()) {
+                -1.0
+            } else {
+                continue;
+            };
+            let sigma = sigmas
+                .get(&(t.state.clone(), t.term.clone()))
+                .map(|s| format!("(±{}) ", number(*s)))
+                .unwrap_or_default();
+            push_term(
+                &mut line,
+                &mut first,
+                sign * t.coefficient,
+                &format!("{sigma}{}", expression(&t.term)),
+            );
+        }
+        if model.kind == ModelKind::Hybrid && corrected.contains(&i) {
+            if first {
+                line.push_str(&format!("NN_{state}(x, u)"));
+                first = false;
+            } else {
+                line.push_str(&format!(" + NN_{state}(x, u)"));
+            }
+        }
+        if first {
+            line.push('0');
+        }
+        lines.push(line);
+    }
+    let measured = lin.measured_states();
+    let plain = measured.as_ref().is_some_and(|idx| {
+        idx.iter()
+            .zip(lin.output_names())
+            .all(|(&i, o)| &lin.state_names()[i] == o)
+    });
+    if plain {
+        lines.push(format!("measured: {}", lin.output_names().join(", ")));
+    } else {
+        for (i, o) in lin.output_names().iter().enumerate() {
+            let mut line = format!("{o}{} = ", unit(o));
+            let mut first = true;
+            for (j, s) in lin.state_names().iter().enumerate() {
+                let c = lin.c()[(i, j)];
+                if c != 0.0 {
+                    push_term(&mut line, &mut first, c, s);
+                }
+            }
+            if first {
+                line.push('0');
+            }
+            lines.push(line);
+        }
+    }
+    if let Some(h) = &model.hybrid {
+        let net = &h.network;
+        lines.push(format!(
+            "NN: tanh network, inputs (states, inputs) → corrections ({}); hidden units {:?}, {} weights; RK4 with {} sub-steps",
+            lin.correction_names().join(", "),
+            net.hidden(),
+            net.n_weights(),
+            h.substeps
+        ));
+    }
+    if !spec.terms.is_empty() && sigmas.is_empty() {
+        lines.push("(no ±σ: the file holds none and no discovery.json is beside it)".into());
+    }
+    lines
+}
+
+/// Read any model and render it (see [`equations`]).
+pub fn show_model(path: &Path) -> Result<String> {
+    let model = LoadedModel::read(path)?;
+    let sigmas = sigmas_beside(path);
+    let mut text = equations(&model, &sigmas).join("\n");
+    text.push('\n');
+    Ok(text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_and_equations() {
+        assert_eq!(number(-4.03), "-4.03");
+        assert_eq!(number(0.2), "0.2");
+        assert_eq!(number(1.0), "1");
+        assert_eq!(number(0.80312), "0.8031");
+        assert_eq!(number(1.5e-7), "1.500e-7");
+        let text = r#"
+states = ["x", "v"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-4.03, -0.2]]
+B = [[0.0], [1.01]]
+measured = ["x"]
+corrected = ["v"]
+noise_variance = [1e-4]
+units = { x = "m", v = "m/s", u = "N" }
+
+[[terms]]
+state = "v"
+effect = "quadratic_drag"
+term = "v*abs(v)"
+coefficient = -0.803
+"#;
+        let path = Path::new("m.toml");
+        let model = LoadedModel::parse(path, text).unwrap();
+        let mut sig = TermSigmas::new();
+        sig.insert(("v".into(), "v*abs(v)".into()), 0.012);
+        let lines = equations(&model, &sig);
+        assert!(lines.contains(&"x' = 1 v".to_string()), "{lines:?}");
+        assert!(
+            lines.contains(&"v' = -4.03 x - 0.2 v + 1.01 u - 0.803 (±0.012) v*abs(v)".to_string()),
+            "{lines:?}"
+        );
+        assert!(lines.iter().any(|l| l.contains("x [m]")), "{lines:?}");
+    }
+}

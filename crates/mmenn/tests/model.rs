@@ -1,0 +1,293 @@
+//! One model, one judge: simulate → discover → predict on the discovered model → compare
+//! with the discovered model as a row; the discovered model's free-run fit % on the test
+//! record is the same number in `predict` and in `compare`. Also: every model mmenn writes
+//! loads through one loader, and a data file given as a model is a typed error.
+
+use std::path::PathBuf;
+
+use mmenn::compare::{CompareOptions, GIVEN_MODEL_ROW, run_compare};
+use mmenn::discover::{DiscoverOptions, run_discover};
+use mmenn::fit::{FitOptions, HiddenChoice, InitialChoice, RefineChoice, run_predict};
+use mmenn::plants::{Recipe, SimulationRequest};
+use mmenn::simulate::run_simulate;
+use mmenn::{LoadedModel, MmennError, ModelKind, ModelProblem};
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("mmenn-model-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn discovered_model_gets_one_fit_in_predict_and_compare() {
+    let dir = scratch("chain");
+    // Small records: 20 Hz for 10 s (201 samples); initial states fitted to 50 samples.
+    let req = |recipe| SimulationRequest {
+        system: "msd_cubic".into(),
+        recipe,
+        seed: 2,
+        fs: Some(20.0),
+        ..Default::default()
+    };
+    let train = run_simulate(&req(Recipe::Train), &dir.join("train")).unwrap();
+    let test = run_simulate(&req(Recipe::Test), &dir.join("test")).unwrap();
+    let d = run_discover(
+        std::slice::from_ref(&train.data),
+        &train.model,
+        &[],
+        &DiscoverOptions {
+            max_rounds: 1,
+            ..DiscoverOptions::default()
+        },
+        &dir.join("discover"),
+    )
+    .unwrap();
+    let discovered = dir.join("discover").join(&d.model);
+    let loaded = LoadedModel::read(&discovered).unwrap();
+    let text = mmenn::show::show_model(&discovered).unwrap();
+    assert!(text.contains("v' = "), "{text}");
+
+    let p = run_predict(
+        &discovered,
+        &test.data,
+        &InitialChoice::Fit,
+        50,
+        &dir.join("predict"),
+    )
+    .unwrap();
+    assert!(dir.join("predict/prediction.json").exists());
+
+    let opts = CompareOptions {
+        fit: FitOptions {
+            hidden: HiddenChoice::Fixed(1),
+            max_hidden: 1,
+            inits: 1,
+            refine: RefineChoice::None,
+            x0_window: 50,
+            ..FitOptions::default()
+        },
+        narx_lags: Some(2),
+        ..CompareOptions::default()
+    };
+    let c = run_compare(
+        std::slice::from_ref(&train.data),
+        &discovered,
+        std::slice::from_ref(&test.data),
+        &opts,
+        &dir.join("compare"),
+    )
+    .unwrap();
+    let val = c.validation.as_ref().unwrap();
+    // The discovered model names the cubic spring (and damping): it is more than its
+    // linear part, so compare gives it its own row, judged as predict judges it.
+    assert_eq!(loaded.kind, ModelKind::WithTerms, "{:?}", d.effects);
+    assert_eq!(c.given_model, ModelKind::WithTerms);
+    let row = val
+        .rows()
+        .iter()
+        .find(|r| r.label == GIVEN_MODEL_ROW)
+        .unwrap();
+    assert!(!p.free_run.channels.is_empty());
+    for (name, m) in &p.free_run.channels {
+        let cm = row.evaluation.channel(name).unwrap();
+        // Identical to the bit: one judge, one rule, one window.
+        assert_eq!(
+            cm.fit_percent.to_bits(),
+            m.fit_percent.to_bits(),
+            "{name}: compare {} vs predict {}",
+            cm.fit_percent,
+            m.fit_percent
+        );
+        assert_eq!(cm.rmse.to_bits(), m.rmse.to_bits());
+    }
+    // compare's own MME/NN row is judged the same way: predict on its model.json agrees.
+    let ph = run_predict(
+        &dir.join("compare/mme_nn/model.json"),
+        &test.data,
+        &InitialChoice::Fit,
+        50,
+        &dir.join("predict-hybrid"),
+    )
+    .unwrap();
+    let hybrid_row = val.rows().iter().find(|r| r.label == "MME/NN").unwrap();
+    let (a, b) = (
+        hybrid_row.evaluation.channel("x").unwrap().fit_percent,
+        ph.free_run.channels["x"].fit_percent,
+    );
+    assert!(
+        (a - b).abs() <= 1e-9 * a.abs().max(1.0),
+        "MME/NN: compare {a} vs predict {b}"
+    );
+    // The discovered model beats its own linear part on the test record.
+    let assumed = val
+        .rows()
+        .iter()
+        .find(|r| r.label == "assumed model")
+        .unwrap();
+    assert!(
+        row.evaluation.channel("x").unwrap().fit_percent
+            > assumed.evaluation.channel("x").unwrap().fit_percent
+    );
+    // A baseline that cannot be fitted (a free parameter outside the model) has no row of
+    // numbers, and the report and summary say so with the reason.
+    let bad = CompareOptions {
+        oe_free: Some(vec!["A[9,9]".into()]),
+        ..opts.clone()
+    };
+    let c = run_compare(
+        std::slice::from_ref(&train.data),
+        &discovered,
+        std::slice::from_ref(&test.data),
+        &bad,
+        &dir.join("compare-bad"),
+    )
+    .unwrap();
+    assert_eq!(c.failures.len(), 1, "{:?}", c.failures);
+    assert_eq!(c.failures[0].model, "linear OE");
+    assert!(!c.failures[0].reason.is_empty());
+    assert!(c.estimation.rows().iter().all(|r| r.label != "linear OE"));
+    let report = std::fs::read_to_string(dir.join("compare-bad/report.md")).unwrap();
+    assert!(
+        report.contains("| linear OE | — | not fitted: "),
+        "{report}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn one_loader_reads_every_model_and_names_what_is_not_one() {
+    let dir = scratch("loader");
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("data.csv");
+    std::fs::write(&csv, "t,u,x\n0,0,1\n0.1,0,1\n").unwrap();
+    match LoadedModel::read(&csv) {
+        Err(MmennError::Model {
+            problem: ModelProblem::NotAModel { .. },
+            path,
+            ..
+        }) => assert_eq!(path, csv),
+        other => panic!("{other:?}"),
+    }
+    let json = dir.join("model.json");
+    std::fs::write(&json, "{\"format\": \"something else\"}").unwrap();
+    assert!(matches!(
+        LoadedModel::read(&json),
+        Err(MmennError::Model {
+            problem: ModelProblem::Syntax { .. },
+            ..
+        })
+    ));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A model whose output is a combination of states (`C` + `outputs`): `predict` writes the
+/// output column, reports the channel, estimates the initial state from the new record
+/// (the model stores none) and, on the model's own noise-free response, recovers it.
+#[test]
+fn predict_judges_a_general_output_and_estimates_x0_from_the_record() {
+    use mmenn::data_file::{read_table, write_csv};
+    use mmenn::fit::{PredictOptions, run_predict_with};
+    use mmenn::sysid_core::Experiment;
+    use nalgebra::DMatrix;
+
+    let dir = scratch("outputs");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model_path = dir.join("m.toml");
+    std::fs::write(
+        &model_path,
+        r#"
+states = ["x1", "x2"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-2.0, -0.3]]
+B = [[0.0], [1.0]]
+C = [[1.0, 0.5]]
+outputs = ["s"]
+corrected = ["x2"]
+noise_variance = [1e-4]
+units = { x1 = "m", x2 = "m/s", u = "N", s = "m" }
+"#,
+    )
+    .unwrap();
+    let model = LoadedModel::read(&model_path).unwrap();
+    let n = 301;
+    let dt = 0.05;
+    let u = DMatrix::from_fn(1, n, |_, k| (0.7 * k as f64 * dt).sin());
+    let exp = Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, n)).unwrap();
+    let truth_x0 = [0.8, -0.4];
+    let xs = model.simulate_states(&truth_x0, &exp).unwrap();
+    let s: Vec<f64> = (0..n).map(|k| xs[(0, k)] + 0.5 * xs[(1, k)]).collect();
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let uu: Vec<f64> = u.row(0).iter().copied().collect();
+    let data = dir.join("d.csv");
+    write_csv(&data, &["t".into(), "u".into(), "s".into()], &[&t, &uu, &s]).unwrap();
+    let p = run_predict_with(
+        &model_path,
+        &data,
+        &PredictOptions {
+            horizon: Some(3),
+            ..PredictOptions::default()
+        },
+        &dir.join("p"),
+    )
+    .unwrap();
+    assert_eq!(p.model_kind, ModelKind::Assumed);
+    let m = p.free_run.channels["s"];
+    assert!(m.fit_percent > 99.9, "{m:?}");
+    for (a, b) in p.free_run.x0.iter().zip(truth_x0) {
+        assert!((a - b).abs() < 1e-4, "x0 {:?}", p.free_run.x0);
+    }
+    let k = p.k_step.as_ref().unwrap();
+    assert_eq!(k.horizon, mmenn::sysid_core::Horizon::Steps(3));
+    assert_eq!(k.scored.first, 3);
+    let table = read_table(&dir.join("p/prediction.csv")).unwrap();
+    for col in ["x1", "x2", "s", "s_3step"] {
+        assert!(table.column_index(col).is_some(), "no column {col}");
+    }
+    let json = std::fs::read_to_string(dir.join("p/prediction.json")).unwrap();
+    assert!(json.contains("first 200 of 301 samples"), "{json}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The command line: `show` prints a model's equations; `predict` on a data file given as
+/// the model fails with a message naming the file and what it is, without a backtrace.
+#[test]
+fn cli_show_and_a_data_file_as_model() {
+    use std::process::Command;
+
+    let dir = scratch("cli");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model = dir.join("m.toml");
+    std::fs::write(
+        &model,
+        "states = [\"x\", \"v\"]\ninputs = [\"u\"]\nA = [[0.0, 1.0], [-4.03, -0.2]]\nB = [[0.0], [1.01]]\nmeasured = [\"x\"]\ncorrected = [\"v\"]\nnoise_variance = [1e-4]\n\n[[terms]]\nstate = \"v\"\neffect = \"quadratic_drag\"\nterm = \"v*abs(v)\"\ncoefficient = -0.803\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .args(["show", model.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success());
+    assert!(
+        text.contains("v' = -4.03 x - 0.2 v + 1.01 u - 0.803 v*abs(v)"),
+        "{text}"
+    );
+    let csv = dir.join("d.csv");
+    std::fs::write(&csv, "t,u,x\n0,0,1\n0.1,0,1\n0.2,0,1\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .current_dir(&dir)
+        .env_remove("MMENN_BACKTRACE")
+        .args([
+            "predict", "--model", "d.csv", "--data", "d.csv", "--out", "p",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("d.csv") && err.contains("not a model mmenn reads"),
+        "{err}"
+    );
+    assert!(!err.contains("backtrace"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
