@@ -255,15 +255,7 @@ pub fn judge(
             reason: "must be positive and finite",
         });
     }
-    let statistic = protocol_cost(
-        model,
-        new_terms,
-        protocol.cal,
-        protocol.cal_x0,
-        protocol.hold,
-        protocol,
-    )
-    .unwrap_or(f64::INFINITY);
+    let statistic = statistic(model, new_terms, protocol);
     // The model's own initial states on every record: the bootstrap's truth.
     let cal_x0 = fitted_x0(model, protocol.cal, protocol.cal_x0, protocol)?;
     let hold_x0 = match protocol.hold {
