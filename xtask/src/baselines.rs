@@ -5,12 +5,12 @@
 //! recipes.
 
 use anyhow::{Context, Result};
-use mmenn::sysid_core::{LinearModel, Model, ModelNames};
-use nalgebra::DMatrix;
-use sysid_baselines::{
+use mmenn::sysid_baselines::{
     NarxConfig, NarxOrders, NetworkChoice, OeConfig, OeModel, SuggestionConfig, fit_narx, fit_oe,
     suggest_lags,
 };
+use mmenn::sysid_core::{LinearModel, Model, ModelNames};
+use nalgebra::DMatrix;
 
 use crate::data::DataSet;
 use crate::experiments::systems::{OeStart, Trajectories};

@@ -8,7 +8,7 @@
 mod double;
 
 use anyhow::{Context, Result};
-use condmon::{
+use mmenn::condmon::{
     ClassifierSpec, CvConfig, CvScheme, NamedFeatures, Preprocessing, canonical_weights,
     error_table, physical_features, raw_weights, stack,
 };
@@ -126,7 +126,7 @@ fn run(ctx: &Ctx) -> Result<Outcome> {
             features: samples
                 .iter()
                 .map(|s| canonical_weights(&s.nets[i]))
-                .collect::<condmon::Result<Vec<_>>>()?,
+                .collect::<mmenn::condmon::Result<Vec<_>>>()?,
         });
     }
     sets.push(FeatureSet {

@@ -1,12 +1,14 @@
 //! Physics-first grey boxes on the real benchmarks: the published physics written as a
 //! [`TermModel`] (a kinematic linear part plus named terms whose coefficients are the
 //! physical parameters), calibrated by free-run output error with
-//! [`discovery::calibrate`] on the official training record at its full rate, and scored
+//! [`mmenn::discovery::calibrate`] on the official training record at its full rate, and scored
 //! under the official protocol (state estimated from the first `window` test outputs with
 //! the coefficients held, free run over the whole record, RMSE after the window).
 
 use anyhow::{Context, Result};
-use discovery::{CalibrationConfig, InitialState, OutputWeights, calibrate, simulate_outputs};
+use mmenn::discovery::{
+    CalibrationConfig, InitialState, OutputWeights, calibrate, simulate_outputs,
+};
 use mmenn::sysid_core::{
     Channel, Dataset, Experiment, Integrator, InterSample, LinearModel, ModelNames, TermModel,
     TermSpec,

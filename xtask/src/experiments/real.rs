@@ -12,14 +12,14 @@ use mmenn::data_file::{read_table, write_csv};
 use mmenn::fit::{FitOptions, InitialChoice, run_fit, run_predict};
 use mmenn::model_file::{ModelSpec, NoiseVariance, write_model};
 use mmenn::plot::Figure;
+use mmenn::sysid_baselines::{
+    LinearSsConfig, NarxConfig, NetworkChoice, OeConfig, SuggestionConfig, X0Policy, fit_linear_ss,
+    fit_narx, fit_oe, suggest_lags,
+};
 use mmenn::sysid_core::{
     Channel, Dataset, Experiment, InterSample, LinearModel, Model, ModelNames,
 };
 use nalgebra::{DMatrix, DVector};
-use sysid_baselines::{
-    LinearSsConfig, NarxConfig, NetworkChoice, OeConfig, SuggestionConfig, X0Policy, fit_linear_ss,
-    fit_narx, fit_oe, suggest_lags,
-};
 
 use super::{Ctx, FIT_SEED, Job, Mode, Outcome, grey, line, row};
 use crate::table::{Column, Table, Tolerance};
@@ -957,7 +957,7 @@ fn grey_rows(
         .collect();
     table.note(format!(
         "Grey box ({OFFICIAL}): the published physics as named terms, coefficients and the \
-         training initial state calibrated by free-run output error (discovery::calibrate: \
+         training initial state calibrated by free-run output error (mmenn::discovery::calibrate: \
          Levenberg–Marquardt with exact RK4 sensitivities, growing horizons) on all {} \
          training samples at full rate; test state fitted to the first {window} test \
          outputs with the coefficients held. Candidates (training free-run RMSE; the lowest \

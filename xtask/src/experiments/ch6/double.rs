@@ -5,7 +5,7 @@
 //! canonicalised) or the regression update's coefficients are the features.
 
 use anyhow::{Context, Result};
-use condmon::{
+use mmenn::condmon::{
     ComponentSelection, NamedFeatures, Pca, Standardiser, canonical_weights, physical_features,
     raw_weights, stack,
 };
@@ -222,7 +222,7 @@ fn run(ctx: &Ctx) -> Result<Outcome> {
             features: kept
                 .iter()
                 .map(|r| canonical_weights(&r.nets[i].0))
-                .collect::<condmon::Result<Vec<_>>>()?,
+                .collect::<mmenn::condmon::Result<Vec<_>>>()?,
         });
     }
     sets.push(FeatureSet {
