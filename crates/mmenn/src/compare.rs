@@ -140,8 +140,13 @@ struct Models<'a> {
     window: usize,
 }
 
-/// The given model judged on the first experiment of `data` by the one free-run judge.
-fn judge_given(given: &LoadedModel, data: &Dataset, window: usize) -> Result<Evaluation> {
+/// The given model's free run on the first experiment of `data` by the one free-run
+/// judge (initial state fitted to the first `window` samples), with what it observed.
+fn run_given(
+    given: &LoadedModel,
+    data: &Dataset,
+    window: usize,
+) -> Result<(crate::model::Judgement, Observation)> {
     let obs = Observation::outputs(given);
     let j = judge_free_run(
         given,
@@ -151,6 +156,12 @@ fn judge_given(given: &LoadedModel, data: &Dataset, window: usize) -> Result<Eva
             window: Some(window),
         },
     )?;
+    Ok((j, obs))
+}
+
+/// The given model judged on the first experiment of `data` by the one free-run judge.
+fn judge_given(given: &LoadedModel, data: &Dataset, window: usize) -> Result<Evaluation> {
+    let (j, obs) = run_given(given, data, window)?;
     Ok(j.evaluation(&obs.names))
 }
 
@@ -160,15 +171,7 @@ fn given_prediction(
     data: &Dataset,
     window: usize,
 ) -> Result<Vec<sysid_core::Prediction>> {
-    let obs = Observation::outputs(given);
-    let j = judge_free_run(
-        given,
-        &data.experiments()[0],
-        &obs,
-        &InitialRule::Fit {
-            window: Some(window),
-        },
-    )?;
+    let (j, _) = run_given(given, data, window)?;
     Ok(vec![sysid_core::Prediction {
         horizon: Horizon::FreeRun,
         outputs: j.outputs,

@@ -323,16 +323,24 @@ struct JudgeContext {
 }
 
 impl JudgeContext {
-    /// Judge its model by the protocol against the protocol's bootstrap reference.
-    fn judge(&self, seed: u64) -> discovery::Result<discovery::Judgement> {
-        let calibration = RefineConfig::default().calibration;
-        let protocol = discovery::Protocol {
+    /// Its judging protocol, with the free-run search's calibration settings.
+    fn protocol<'a>(
+        &'a self,
+        calibration: &'a discovery::CalibrationConfig,
+    ) -> discovery::Protocol<'a> {
+        discovery::Protocol {
             cal: &self.cal,
             cal_x0: &self.cal_x0,
             hold: self.hold.as_ref().map(|(d, x)| (d, x.as_slice())),
             noise_variance: &self.noise_variance,
-            calibration: &calibration,
-        };
+            calibration,
+        }
+    }
+
+    /// Judge its model by the protocol against the protocol's bootstrap reference.
+    fn judge(&self, seed: u64) -> discovery::Result<discovery::Judgement> {
+        let calibration = RefineConfig::default().calibration;
+        let protocol = self.protocol(&calibration);
         let config = discovery::JudgeConfig {
             seed,
             ..discovery::JudgeConfig::default()
@@ -1036,13 +1044,7 @@ pub fn run_discover(
         && ctx.new_terms.len() > 1
     {
         let calibration = RefineConfig::default().calibration;
-        let protocol = discovery::Protocol {
-            cal: &ctx.cal,
-            cal_x0: &ctx.cal_x0,
-            hold: ctx.hold.as_ref().map(|(d, x)| (d, x.as_slice())),
-            noise_variance: &ctx.noise_variance,
-            calibration: &calibration,
-        };
+        let protocol = ctx.protocol(&calibration);
         let dropped =
             discovery::judge::prune(&ctx.model, &ctx.new_terms, &protocol, j.threshold)?.dropped;
         if !dropped.is_empty() && spec.terms.len() == ctx.model.terms().len() {

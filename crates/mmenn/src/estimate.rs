@@ -63,12 +63,9 @@ pub fn mme_config(spec: &ModelSpec, opts: &EstimateOptions) -> MmeConfig {
     }
 }
 
-/// Run MME with the model file's assumed model: the exact linear sweep, or the
-/// iterated-linearisation estimator when the model has named terms.
-pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Result<MmeOutput> {
-    if spec.terms.is_empty() {
-        return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
-    }
+/// The spec's term model as mme-core's nonlinear model (states, outputs, corrections
+/// named as in the spec).
+fn nonlinear_model(spec: &ModelSpec) -> Result<NonlinearModel<sysid_core::TermModel>> {
     let dynamics = spec.term_model().map_err(|problem| MmennError::Model {
         path: "<model>".into(),
         line: None,
@@ -82,7 +79,21 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
         outputs: lin.output_names().to_vec(),
         corrections: lin.correction_names().to_vec(),
     };
-    let model = NonlinearModel::new(dynamics, lin.c().clone(), lin.e().clone(), names)?;
+    Ok(NonlinearModel::new(
+        dynamics,
+        lin.c().clone(),
+        lin.e().clone(),
+        names,
+    )?)
+}
+
+/// Run MME with the model file's assumed model: the exact linear sweep, or the
+/// iterated-linearisation estimator when the model has named terms.
+pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Result<MmeOutput> {
+    if spec.terms.is_empty() {
+        return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
+    }
+    let model = nonlinear_model(spec)?;
     mme_core::estimate_nonlinear_with_report(&model, data, config).map_err(|e| name_terms(spec, e))
 }
 
@@ -360,20 +371,7 @@ pub fn estimate_spec_robust(
             robust,
         )?);
     }
-    let dynamics = spec.term_model().map_err(|problem| MmennError::Model {
-        path: "<model>".into(),
-        line: None,
-        column: None,
-        problem,
-    })?;
-    let lin = &spec.linear;
-    let names = sysid_core::ModelNames {
-        states: lin.state_names().to_vec(),
-        inputs: lin.input_names().to_vec(),
-        outputs: lin.output_names().to_vec(),
-        corrections: lin.correction_names().to_vec(),
-    };
-    let model = NonlinearModel::new(dynamics, lin.c().clone(), lin.e().clone(), names)?;
+    let model = nonlinear_model(spec)?;
     mme_core::estimate_nonlinear_robust(&model, data, config, robust)
         .map_err(|e| name_terms(spec, e))
 }
