@@ -40,8 +40,8 @@ use sysid_core::{
     TermSpec, Termination, simulate_with,
 };
 
-use crate::discover::FoundEffect;
 use crate::error::{DiscoveryError, Result};
+use crate::propose::FoundEffect;
 
 pub(crate) mod sensitivity;
 

@@ -3,13 +3,13 @@
 pub mod augment;
 pub mod candidates;
 pub mod catalogue;
-pub mod discover;
 pub mod error;
 pub mod floor;
 pub mod gauge;
 mod json;
 pub mod judge;
 pub mod localise;
+pub mod propose;
 pub mod refine;
 pub mod roles;
 pub mod samples;
@@ -19,6 +19,7 @@ pub mod stats;
 #[cfg(test)]
 mod test_support;
 pub mod transfer;
+pub mod workflow;
 
 pub use augment::{
     Calibration, CalibrationConfig, InitialState, OutputWeights, augment, calibrate, free_run_cost,
@@ -26,10 +27,6 @@ pub use augment::{
 };
 pub use candidates::{Candidate, EquationLibrary, LibraryConfig, build_library};
 pub use catalogue::{Effect, Slot, coefficient_unit};
-pub use discover::{
-    Alias, Discovery, DiscoveryConfig, EquationReport, FoundEffect, ScreenedCandidate, StepRecord,
-    Verdict, discover, equation_design,
-};
 pub use error::{DiscoveryError, Result};
 pub use floor::NoiseFloor;
 pub use gauge::{ban_touching, scale_free_states, touches};
@@ -37,6 +34,10 @@ pub use judge::{JudgeConfig, Judgement, Protocol, judge};
 pub use localise::{
     Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
     WindowLength, WindowSource, localise,
+};
+pub use propose::{
+    Alias, Discovery, DiscoveryConfig, EquationReport, FoundEffect, ScreenedCandidate, StepRecord,
+    Verdict, equation_design, propose,
 };
 pub use refine::{
     Holdout, RefineCandidate, RefineConfig, RefineStep, Refinement, Search, refine_by_free_run,

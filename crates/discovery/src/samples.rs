@@ -18,7 +18,7 @@ pub struct Samples {
 impl Samples {
     /// Combine states (`n × N`), inputs (`m × N`) and corrections (`q × N`). Errors when
     /// the sample counts differ or a value is not finite (named by matrix, row and sample;
-    /// the experiment index is reported as 0 — [`crate::discover()`] re-checks with the real
+    /// the experiment index is reported as 0 — [`crate::propose()`] re-checks with the real
     /// index).
     pub fn new(
         states: DMatrix<f64>,

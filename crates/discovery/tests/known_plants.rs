@@ -3,7 +3,7 @@
 //! correction) must name the hidden effect with the true coefficient inside the 95 %
 //! interval — and name nothing else.
 
-use discovery::{Discovery, DiscoveryConfig, FoundEffect, NoiseFloor, Verdict, discover};
+use discovery::{Discovery, DiscoveryConfig, FoundEffect, NoiseFloor, Verdict, propose};
 use plants::Recipe;
 
 use crate::common::{ar1, floor_of, simulate, truth_samples};
@@ -47,7 +47,7 @@ fn msd_names_cubic_stiffness_and_viscous_damping() {
         truth_samples(&test, &ar1(1, test.truth.states.ncols(), rms, phi, 12)),
     ];
     let floor = floor_of(1, len, rms, phi, 13);
-    let d = discover(
+    let d = propose(
         &train.assumed.model,
         &train.assumed.units,
         &samples,
@@ -89,7 +89,7 @@ fn pendulum_names_gravity_and_input_coupling() {
     let (rms, phi) = (0.1, 0.9);
     let samples = [truth_samples(&sim, &ar1(1, len, rms, phi, 21))];
     let floor = floor_of(1, len, rms, phi, 22);
-    let d = discover(
+    let d = propose(
         &sim.assumed.model,
         &sim.assumed.units,
         &samples,
@@ -123,7 +123,7 @@ fn two_tank_names_orifice_outflow() {
     let (rms, phi) = (2e-5, 0.9);
     let samples = [truth_samples(&sim, &ar1(2, len, rms, phi, 31))];
     let floor = floor_of(2, len, rms, phi, 32);
-    let d = discover(
+    let d = propose(
         &sim.assumed.model,
         &sim.assumed.units,
         &samples,
@@ -171,7 +171,7 @@ fn compound_pendulum_names_coulomb_friction() {
     let (rms, phi) = (0.02, 0.9);
     let samples = [truth_samples(&sim, &ar1(1, len, rms, phi, 41))];
     let floor = floor_of(1, len, rms, phi, 42);
-    let d = discover(
+    let d = propose(
         &sim.assumed.model,
         &sim.assumed.units,
         &samples,
@@ -211,7 +211,7 @@ fn noise_free_truth_gives_exact_coefficients() {
     let sim = simulate("msd_cubic", Recipe::Train);
     let len = sim.truth.states.ncols();
     let samples = [truth_samples(&sim, &nalgebra::DMatrix::zeros(1, len))];
-    let d = discover(
+    let d = propose(
         &sim.assumed.model,
         &sim.assumed.units,
         &samples,
@@ -233,7 +233,7 @@ fn van_der_pol_names_amplitude_dependent_damping() {
     let (rms, phi) = (0.05, 0.9);
     let samples = [truth_samples(&sim, &ar1(1, len, rms, phi, 51))];
     let floor = floor_of(1, len, rms, phi, 52);
-    let d = discover(
+    let d = propose(
         &sim.assumed.model,
         &sim.assumed.units,
         &samples,

@@ -1,7 +1,7 @@
 //! Verdicts where nothing must be named: pure coloured noise (`none`) and a disturbance
 //! that no catalogue term can produce (`unexplained`).
 
-use discovery::{DiscoveryConfig, Verdict, discover};
+use discovery::{DiscoveryConfig, Verdict, propose};
 use nalgebra::DMatrix;
 use plants::Recipe;
 
@@ -22,7 +22,7 @@ fn pure_coloured_noise_is_none() {
             ar1(1, len, rms, phi, seed),
         )
         .unwrap_or_else(|e| panic!("{e}"))];
-        let d = discover(
+        let d = propose(
             &sim.assumed.model,
             &sim.assumed.units,
             &samples,
@@ -55,7 +55,7 @@ fn disturbance_outside_the_library_is_unexplained() {
             discovery::Samples::new(sim.truth.states.clone(), sim.truth.inputs.clone(), d_hat)
                 .unwrap_or_else(|e| panic!("{e}")),
         ];
-    let d = discover(
+    let d = propose(
         &sim.assumed.model,
         &sim.assumed.units,
         &samples,

@@ -72,19 +72,20 @@ fn nonlinear_model(spec: &ModelSpec) -> Result<NonlinearModel<sysid_core::TermMo
         column: None,
         problem,
     })?;
-    let lin = &spec.linear;
+    nonlinear_of(dynamics)
+}
+
+/// A term model as mme-core's nonlinear model (names from its linear part).
+fn nonlinear_of(dynamics: sysid_core::TermModel) -> Result<NonlinearModel<sysid_core::TermModel>> {
+    let lin = dynamics.linear();
     let names = sysid_core::ModelNames {
         states: lin.state_names().to_vec(),
         inputs: lin.input_names().to_vec(),
         outputs: lin.output_names().to_vec(),
         corrections: lin.correction_names().to_vec(),
     };
-    Ok(NonlinearModel::new(
-        dynamics,
-        lin.c().clone(),
-        lin.e().clone(),
-        names,
-    )?)
+    let (c, e) = (lin.c().clone(), lin.e().clone());
+    Ok(NonlinearModel::new(dynamics, c, e, names)?)
 }
 
 /// Run MME with the model file's assumed model: the exact linear sweep, or the
@@ -95,6 +96,52 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
     }
     let model = nonlinear_model(spec)?;
     mme_core::estimate_nonlinear_with_report(&model, data, config).map_err(|e| name_terms(spec, e))
+}
+
+/// [`estimate_spec`] for a model already in memory (a linear model with named terms).
+pub fn estimate_term_model(
+    model: &sysid_core::TermModel,
+    data: &Dataset,
+    config: &MmeConfig,
+) -> Result<MmeOutput> {
+    if model.terms().is_empty() {
+        return Ok(mme_core::estimate_with_report(
+            model.linear(),
+            data,
+            config,
+        )?);
+    }
+    let names = model.linear().state_names().to_vec();
+    let described: Vec<(String, Option<String>, String)> = model
+        .terms()
+        .iter()
+        .map(|t| {
+            (
+                names[t.state].clone(),
+                t.into.map(|r| names[r].clone()),
+                format!("{} = {}·({})", t.effect, t.coefficient, t.expr),
+            )
+        })
+        .collect();
+    let nonlinear = nonlinear_of(model.clone())?;
+    mme_core::estimate_nonlinear_with_report(&nonlinear, data, config).map_err(|e| {
+        let terms: Vec<&str> = match &e {
+            mme_core::MmeError::NonFiniteModel { state, .. } => described
+                .iter()
+                .filter(|(s, into, _)| s == state || into.as_deref() == Some(state.as_str()))
+                .map(|(_, _, d)| d.as_str())
+                .collect(),
+            _ => Vec::new(),
+        };
+        if terms.is_empty() {
+            MmennError::Mme(e)
+        } else {
+            MmennError::MmeTerms {
+                source: e,
+                terms: terms.join(", "),
+            }
+        }
+    })
 }
 
 /// A non-finite model error with the named terms of the equation it names attached.

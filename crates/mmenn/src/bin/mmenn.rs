@@ -761,11 +761,12 @@ fn compare(a: CompareArgs, force: bool) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn discover(a: DiscoverArgs, force: bool) -> Result<()> {
+fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
     let opts = mmenn::discover::DiscoverOptions {
         max_rounds: a.max_rounds,
         seed: a.seed,
         holdout_fraction: a.holdout_fraction,
+        progress: !quiet,
         ..Default::default()
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
@@ -900,7 +901,7 @@ fn main() -> ExitCode {
         Command::Predict(a) => predict(a, force),
         Command::Show(a) => show(a),
         Command::Compare(a) => compare(a, force),
-        Command::Discover(a) => discover(a, force),
+        Command::Discover(a) => discover(a, force, cli.quiet),
         Command::Monitor(c) => monitor(c, force),
     };
     match result {

@@ -1,18 +1,16 @@
-//! What judges the free-run search in `mmenn discover`: validation records with fitted
-//! initial states, or the held-out end of every estimation record, and the
-//! recalibration of the chosen terms on the whole estimation records afterwards.
+//! What judges the free-run search of a round: validation records with fitted initial
+//! states, or the held-out end of every estimation record, and the recalibration of the
+//! chosen terms on the whole estimation records afterwards.
 
-use discovery::RefineConfig;
 use sysid_core::{Channel, Dataset, Experiment, InitialStateFit, TermModel, fit_initial_state};
 
-use super::core;
 use crate::error::Result;
-use crate::model_file::ModelSpec;
+use crate::refine::{RefineConfig, Refinement};
+use crate::{CalibrationConfig, OutputWeights, calibrate};
 
 /// Initial states of every record, fitted to its first `window` samples with `model`.
 pub(super) fn holdout_initial_states(
     model: &TermModel,
-    spec: &ModelSpec,
     data: &Dataset,
     guess: &[f64],
     window: usize,
@@ -24,8 +22,13 @@ pub(super) fn holdout_initial_states(
     data.experiments()
         .iter()
         .map(|exp| {
-            fit_initial_state(model, spec.linear.c(), exp, guess, &fit)
-                .map_err(core("fitting a validation record's initial state"))
+            Ok(fit_initial_state(
+                model,
+                model.linear().c(),
+                exp,
+                guess,
+                &fit,
+            )?)
         })
         .collect()
 }
@@ -34,20 +37,20 @@ pub(super) fn holdout_initial_states(
 /// its model, coefficients' standard errors and initial states; unchanged when that
 /// calibration fails.
 pub(super) fn recalibrate_on(
-    mut refined: discovery::Refinement,
+    mut refined: Refinement,
     base: &TermModel,
     data: &Dataset,
     x0: &[Vec<f64>],
     noise: &[f64],
-) -> discovery::Refinement {
+) -> Refinement {
     let first_new = base.terms().len();
     let end = refined.model.terms().len();
-    let config = discovery::CalibrationConfig {
+    let config = CalibrationConfig {
         terms: Some((first_new..end).collect()),
-        weights: discovery::OutputWeights::NoiseVariance(noise.to_vec()),
+        weights: OutputWeights::NoiseVariance(noise.to_vec()),
         ..RefineConfig::default().calibration
     };
-    if let Ok(fit) = discovery::calibrate(&refined.model, data, x0, &config)
+    if let Ok(fit) = calibrate(&refined.model, data, x0, &config)
         && fit.cost_after.is_finite()
     {
         refined.coefficient_std = fit.coefficient_std[first_new..end]
@@ -97,7 +100,6 @@ pub(super) fn split_records(
                 exp.outputs().columns(from, len).into_owned(),
             )
             .map(|part| part.with_intersample(exp.intersample()))
-            .map_err(core("splitting an estimation record"))
         };
         cal.push(part(0, k)?);
         hold.push(part(k, n - k)?);
@@ -105,10 +107,7 @@ pub(super) fn split_records(
         hold_x0.push(e.states.column(k).iter().copied().collect());
     }
     let names = |v: Vec<String>| v.into_iter().map(Channel::new).collect::<Vec<_>>();
-    let dataset = |exps| {
-        Dataset::new(names(data.input_names()), names(data.output_names()), exps)
-            .map_err(core("splitting an estimation record"))
-    };
+    let dataset = |exps| Dataset::new(names(data.input_names()), names(data.output_names()), exps);
     Ok(Some(Split {
         cal: dataset(cal)?,
         cal_x0,

@@ -38,7 +38,7 @@ use crate::samples::Samples;
 use crate::select::{Design, Screened, SelectedTerm, SelectionConfig, StepAction, select};
 use crate::stats::chi2_quantile;
 
-/// Settings of [`discover`].
+/// Settings of [`propose`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct DiscoveryConfig {
     /// Which effects to try and their data-derived parameters.
@@ -255,7 +255,7 @@ pub struct Discovery {
 ///
 /// Errors: invalid config, `E` not a selection, shapes or non-finite values in
 /// `samples`, a floor of the wrong length, fewer than 3 samples.
-pub fn discover(
+pub fn propose(
     model: &LinearModel,
     units: &BTreeMap<String, String>,
     samples: &[Samples],
@@ -285,7 +285,7 @@ pub fn discover(
     let library = build_library(model, &roles, units, samples, &config.library)?;
     let mut equations = Vec::with_capacity(library.len());
     for eq in &library {
-        equations.push(discover_equation(eq, samples, floor, config)?);
+        equations.push(propose_equation(eq, samples, floor, config)?);
     }
     let effects = equations
         .iter()
@@ -342,7 +342,7 @@ pub fn equation_design(eq: &EquationLibrary, samples: &[Samples]) -> Design {
     }
 }
 
-fn discover_equation(
+fn propose_equation(
     eq: &EquationLibrary,
     samples: &[Samples],
     floor: &NoiseFloor,
