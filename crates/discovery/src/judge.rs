@@ -139,11 +139,8 @@ fn protocol_cost(
     let Some((hold, hold_x0)) = hold else {
         return Some(fitted.cost_after);
     };
-    let hold_config = CalibrationConfig {
-        terms: Some(vec![]),
-        ..cal_config
-    };
-    let judged = calibrate(&fitted.model, hold, hold_x0, &hold_config).ok()?;
+    let judged =
+        crate::augment::fit_initial_states(&fitted.model, hold, &[hold_x0], &cal_config).ok()?;
     judged.cost_after.is_finite().then_some(judged.cost_after)
 }
 
@@ -155,12 +152,10 @@ fn fitted_x0(
     protocol: &Protocol<'_>,
 ) -> Result<Vec<Vec<f64>>> {
     let config = CalibrationConfig {
-        terms: Some(vec![]),
-        initial_state: InitialState::Estimate,
         weights: OutputWeights::NoiseVariance(protocol.noise_variance.to_vec()),
         ..protocol.calibration.clone()
     };
-    Ok(calibrate(model, data, x0, &config)?.x0)
+    Ok(crate::augment::fit_initial_states(model, data, &[x0], &config)?.x0)
 }
 
 /// One bootstrap copy of `data`: `model` simulated from `x0` by `integrator`, plus

@@ -239,12 +239,10 @@ fn evaluate(
 /// simulation diverges.
 fn holdout_score(ctx: &Search<'_>, h: Holdout<'_>, mut eval: Eval) -> Result<Option<Eval>> {
     let cal = CalibrationConfig {
-        terms: Some(vec![]),
-        initial_state: InitialState::Estimate,
         weights: OutputWeights::NoiseVariance(ctx.noise_variance.to_vec()),
         ..ctx.config.calibration.clone()
     };
-    let Ok(fit) = calibrate(&eval.model, h.data, h.x0, &cal) else {
+    let Ok(fit) = crate::augment::fit_initial_states(&eval.model, h.data, &[h.x0], &cal) else {
         return Ok(None);
     };
     if !fit.cost_after.is_finite() {

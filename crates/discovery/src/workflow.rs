@@ -66,17 +66,26 @@ pub trait Mme {
     type Error: From<DiscoveryError> + std::fmt::Display;
 
     /// MME with `model` on `data`, `W` and the noise variance as the caller configured
-    /// them (given, or estimated).
-    fn estimate(&self, model: &TermModel, data: &Dataset) -> Result<MmeEstimate, Self::Error>;
+    /// them (given, or estimated). `start`: initial states (one per record) whose
+    /// open-loop run starts the solver instead of its default data-based start — the
+    /// workflow retries with them when the default start fails (a term like `√|h|` on an
+    /// unmeasured state is singular where the data-based start puts that state, at 0).
+    fn estimate(
+        &self,
+        model: &TermModel,
+        data: &Dataset,
+        start: Option<&[Vec<f64>]>,
+    ) -> Result<MmeEstimate, Self::Error>;
 
     /// MME with `model` on `data` at a fixed weight `w` and noise variance `noise`
-    /// (the noise floor's run).
+    /// (the noise floor's run); `start` as in [`Mme::estimate`].
     fn estimate_fixed(
         &self,
         model: &TermModel,
         data: &Dataset,
         w: &DMatrix<f64>,
         noise: &[f64],
+        start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate, Self::Error>;
 }
 
@@ -369,7 +378,13 @@ fn noise_floor<M: Mme>(
         experiments,
     )
     .map_err(DiscoveryError::from)?;
-    let out = mme.estimate_fixed(model, &sim, &est.w, &est.noise_variance)?;
+    let out = match mme.estimate_fixed(model, &sim, &est.w, &est.noise_variance, None) {
+        Ok(out) => out,
+        Err(_) => {
+            let x0s = x0_of(est);
+            mme.estimate_fixed(model, &sim, &est.w, &est.noise_variance, Some(&x0s))?
+        }
+    };
     Ok(NoiseFloor::from_estimate(&out)?)
 }
 
@@ -510,7 +525,7 @@ pub fn run<M: Mme>(
     observer: &dyn Observer,
 ) -> Result<Outcome, M::Error> {
     observer.stage(0, "MME with the assumed model");
-    let first = mme.estimate(model, data)?;
+    let first = mme.estimate(model, data, None)?;
     let x0_guess: Vec<f64> = first.experiments[0]
         .states
         .column(0)
@@ -817,7 +832,10 @@ pub fn run<M: Mme>(
         // (total d̂ mean square, relative to the floor, down by at least `min_d_drop`), and,
         // when validation data are given, simulate them free-run no worse than before.
         observer.stage(round_no, "MME with the augmented model (proof)");
-        let new_result = match mme.estimate(&augmented, data) {
+        let new_result = match mme
+            .estimate(&augmented, data, None)
+            .or_else(|_| mme.estimate(&augmented, data, Some(&x0_of(&result))))
+        {
             Ok(r) => r,
             Err(e) => {
                 rounds.push(round(

@@ -141,8 +141,16 @@ struct MmeCore<'a> {
 impl workflow::Mme for MmeCore<'_> {
     type Error = MmennError;
 
-    fn estimate(&self, model: &TermModel, data: &Dataset) -> Result<MmeEstimate> {
-        let config = mme_config(self.spec, self.options);
+    fn estimate(
+        &self,
+        model: &TermModel,
+        data: &Dataset,
+        start: Option<&[Vec<f64>]>,
+    ) -> Result<MmeEstimate> {
+        let mut config = mme_config(self.spec, self.options);
+        if let Some(x0s) = start {
+            config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
+        }
         Ok(estimate_term_model(model, data, &config)?.estimate)
     }
 
@@ -152,8 +160,12 @@ impl workflow::Mme for MmeCore<'_> {
         data: &Dataset,
         w: &DMatrix<f64>,
         noise: &[f64],
+        start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate> {
         let mut config = mme_config(self.spec, self.options);
+        if let Some(x0s) = start {
+            config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
+        }
         config.w = mme_core::WeightSpec::Matrix(w.clone());
         config.noise_variance = mme_core::NoiseSpec::Given(noise.to_vec());
         Ok(estimate_term_model(model, data, &config)?.estimate)
