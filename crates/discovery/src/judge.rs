@@ -21,6 +21,15 @@
 //! The threshold is the `level` quantile of a scaled χ² matched to the draws' mean and
 //! variance (Satterthwaite), which is smoother than an order statistic of ~24 draws and
 //! keeps the right skew of a sum of squares.
+//!
+//! A second statistic looks at what remains rather than how much: the *structure* of the
+//! judged free-run residual, a portmanteau (Ljung–Box) sum of its squared
+//! autocorrelations at lags `1..=L` per channel and record. A stand-in that matches the
+//! residual's size but not its shape (an effect outside the catalogue imitated by
+//! catalogue terms) leaves it coloured. Its reference comes from the same draws — the
+//! free-run residual of a right model is not white either (estimated initial states and
+//! coefficients leave slow components), and the bootstrap carries that. A model is
+//! accepted only when both statistics lie within their references.
 
 use nalgebra::DMatrix;
 use rand::SeedableRng;
@@ -103,13 +112,93 @@ pub struct Judgement {
     pub level: f64,
     /// Upper-tail probability of `statistic` under the matched scaled χ².
     pub p_value: f64,
+    /// The structure left in the judged free-run residual and its reference; `None`
+    /// when too few draws gave one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub structure: Option<Structure>,
+}
+
+/// The residual-structure statistic (see the module documentation) and its reference.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Structure {
+    /// Ljung–Box `Q = N(N+2) Σ_{l=1..L} ρ_l²/(N−l)` of the judged free-run residual,
+    /// summed over channels and records.
+    pub statistic: f64,
+    /// Lags `L` per channel and record.
+    pub lags: usize,
+    /// `Q` on every bootstrap draw that completed.
+    pub reference: Vec<f64>,
+    /// The `level` quantile of the scaled χ² matched to `reference`.
+    pub threshold: f64,
+    /// Upper-tail probability of `statistic` under that scaled χ².
+    pub p_value: f64,
 }
 
 impl Judgement {
-    /// Whether the statistic lies within the reference distribution.
+    /// Whether the statistic — and the residual's structure, when measured — lies
+    /// within its reference distribution.
     pub fn accepts(&self) -> bool {
-        self.statistic.is_finite() && self.statistic <= self.threshold
+        self.statistic.is_finite()
+            && self.statistic <= self.threshold
+            && self
+                .structure
+                .as_ref()
+                .is_none_or(|s| s.statistic.is_finite() && s.statistic <= s.threshold)
     }
+}
+
+/// Lags of the structure statistic: 20, fewer on records shorter than 200 samples.
+fn structure_lags(len: usize) -> usize {
+    (len / 10).clamp(1, 20)
+}
+
+/// Ljung–Box `Q` over lags `1..=L` of every output channel of every record: residuals
+/// `y − C x_sim` (missing samples skipped pairwise), each channel's autocorrelation
+/// normalised by its own variance.
+fn structure_of(
+    model: &TermModel,
+    data: &Dataset,
+    x0: &[Vec<f64>],
+    integrator: &Integrator,
+) -> Option<f64> {
+    let c = model.linear().c();
+    let mut q = 0.0;
+    for (exp, x0e) in data.experiments().iter().zip(x0) {
+        let sim = crate::augment::simulate_outputs(model, c, x0e, exp, integrator).ok()?;
+        let lags = structure_lags(exp.len());
+        for ch in 0..sim.nrows() {
+            let r: Vec<f64> = (0..exp.len())
+                .map(|k| exp.outputs()[(ch, k)] - sim[(ch, k)])
+                .collect();
+            let valid: Vec<f64> = r.iter().copied().filter(|v| v.is_finite()).collect();
+            let n = valid.len();
+            if n <= lags + 2 {
+                continue;
+            }
+            let mean = valid.iter().sum::<f64>() / n as f64;
+            let var = valid.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+            if var.is_nan() || var <= 0.0 {
+                continue;
+            }
+            let nf = n as f64;
+            for l in 1..=lags {
+                let (mut acc, mut pairs) = (0.0, 0usize);
+                for k in l..r.len() {
+                    let (a, b) = (r[k], r[k - l]);
+                    if a.is_finite() && b.is_finite() {
+                        acc += (a - mean) * (b - mean);
+                        pairs += 1;
+                    }
+                }
+                if pairs == 0 {
+                    continue;
+                }
+                let rho = acc / nf / var;
+                q += nf * (nf + 2.0) * rho * rho / (nf - l as f64);
+            }
+        }
+    }
+    q.is_finite().then_some(q)
 }
 
 /// The protocol's cost of `model` on the records of `protocol` (whose outputs may be
@@ -124,7 +213,7 @@ fn protocol_cost(
     cal_x0: &[Vec<f64>],
     hold: Option<(&Dataset, &[Vec<f64>])>,
     protocol: &Protocol<'_>,
-) -> Option<f64> {
+) -> Option<(f64, Option<f64>)> {
     let weights = OutputWeights::NoiseVariance(protocol.noise_variance.to_vec());
     let cal_config = CalibrationConfig {
         terms: Some(new_terms.to_vec()),
@@ -136,12 +225,18 @@ fn protocol_cost(
     if !fitted.cost_after.is_finite() {
         return None;
     }
+    let integrator = &protocol.calibration.integrator;
     let Some((hold, hold_x0)) = hold else {
-        return Some(fitted.cost_after);
+        let structure = structure_of(&fitted.model, cal, &fitted.x0, integrator);
+        return Some((fitted.cost_after, structure));
     };
     let judged =
         crate::augment::fit_initial_states(&fitted.model, hold, &[hold_x0], &cal_config).ok()?;
-    judged.cost_after.is_finite().then_some(judged.cost_after)
+    if !judged.cost_after.is_finite() {
+        return None;
+    }
+    let structure = structure_of(&judged.model, hold, &judged.x0, integrator);
+    Some((judged.cost_after, structure))
 }
 
 /// Initial states of `model` fitted on every record of `data` (coefficients fixed).
@@ -250,7 +345,15 @@ pub fn judge(
             reason: "must be positive and finite",
         });
     }
-    let statistic = statistic(model, new_terms, protocol);
+    let (statistic, structure_statistic) = protocol_cost(
+        model,
+        new_terms,
+        protocol.cal,
+        protocol.cal_x0,
+        protocol.hold,
+        protocol,
+    )
+    .map_or((f64::INFINITY, None), |(j, q)| (j, q));
     // The model's own initial states on every record: the bootstrap's truth.
     let cal_x0 = fitted_x0(model, protocol.cal, protocol.cal_x0, protocol)?;
     let hold_x0 = match protocol.hold {
@@ -258,9 +361,9 @@ pub fn judge(
         None => None,
     };
     let n_cal = protocol.cal.experiments().len() as u64;
-    let costs: Vec<Option<f64>> = (0..config.draws)
+    let costs: Vec<Option<(f64, Option<f64>)>> = (0..config.draws)
         .into_par_iter()
-        .map(|b| -> Result<Option<f64>> {
+        .map(|b| -> Result<Option<(f64, Option<f64>)>> {
             let stream = (b as u64) << 20;
             let cal = draw(
                 model,
@@ -292,7 +395,8 @@ pub fn judge(
             ))
         })
         .collect::<Result<Vec<_>>>()?;
-    let reference: Vec<f64> = costs.iter().flatten().copied().collect();
+    let reference: Vec<f64> = costs.iter().flatten().map(|c| c.0).collect();
+    let structure_reference: Vec<f64> = costs.iter().flatten().filter_map(|c| c.1).collect();
     let failed = config.draws - reference.len();
     if reference.len() * 2 < config.draws {
         return Err(DiscoveryError::TooFewSamples {
@@ -306,6 +410,35 @@ pub fn judge(
     let var = reference.iter().map(|j| (j - mean).powi(2)).sum::<f64>() / (n - 1.0);
     let sd = var.sqrt();
     let (threshold, p_value) = scaled_chi2(mean, var, config.level, statistic);
+    let structure = match structure_statistic {
+        Some(q) if structure_reference.len() * 2 >= config.draws => {
+            let m = structure_reference.len() as f64;
+            let mean = structure_reference.iter().sum::<f64>() / m;
+            let var = structure_reference
+                .iter()
+                .map(|v| (v - mean).powi(2))
+                .sum::<f64>()
+                / (m - 1.0);
+            let (threshold, p_value) = scaled_chi2(mean, var, config.level, q);
+            Some(Structure {
+                statistic: q,
+                lags: structure_lags(
+                    protocol
+                        .hold
+                        .map_or(protocol.cal, |h| h.0)
+                        .experiments()
+                        .iter()
+                        .map(Experiment::len)
+                        .max()
+                        .unwrap_or(0),
+                ),
+                reference: structure_reference,
+                threshold,
+                p_value,
+            })
+        }
+        _ => None,
+    };
     Ok(Judgement {
         statistic,
         reference,
@@ -316,6 +449,7 @@ pub fn judge(
         threshold,
         level: config.level,
         p_value,
+        structure,
     })
 }
 
@@ -348,7 +482,7 @@ pub fn statistic(model: &TermModel, new_terms: &[usize], protocol: &Protocol<'_>
         protocol.hold,
         protocol,
     )
-    .unwrap_or(f64::INFINITY)
+    .map_or(f64::INFINITY, |(j, _)| j)
 }
 
 /// Backward elimination by the judge's own test: while the set `new_terms` has more than
@@ -544,6 +678,13 @@ mod tests {
         let right = judge(&truth, &[0], &protocol, &config).unwrap_or_else(|e| panic!("{e}"));
         assert!(right.accepts(), "{right:?}");
         assert!(right.mean > 0.9 && right.mean < 1.2, "{right:?}");
+        let structure = right
+            .structure
+            .as_ref()
+            .unwrap_or_else(|| panic!("{right:?}"));
+        // Ljung–Box over 20 lags of a nearly white residual: mean near 20.
+        let m = structure.reference.iter().sum::<f64>() / structure.reference.len() as f64;
+        assert!(m > 10.0 && m < 40.0, "{structure:?}");
         let off = oscillator(&[("cubic_stiffness", "x^3", -2.3)]);
         let wrong = judge(&off, &[], &protocol, &config).unwrap_or_else(|e| panic!("{e}"));
         assert!(!wrong.accepts(), "{wrong:?}");
@@ -565,6 +706,30 @@ mod tests {
         assert_eq!(idx, vec![0]);
         assert_eq!(kept.terms().len(), 1);
         assert_eq!(kept.terms()[0].effect, "cubic_stiffness");
+    }
+
+    /// The structure statistic: about `L` for a right model's residual (white noise),
+    /// above the χ²_L 0.999 quantile for a model whose coefficient is 1 % off.
+    #[test]
+    fn structure_separates_white_from_coloured_residuals() {
+        let truth = oscillator(&[("cubic_stiffness", "x^3", -2.0)]);
+        let r = 1e-4;
+        let data = record(&truth, 2000, r, 9);
+        let x0 = vec![vec![0.3, 0.0]];
+        let rk = Integrator::Rk4 { substeps: 4 };
+        let dp = JudgeConfig::default().truth_integrator;
+        let white = structure_of(&truth, &data, &x0, &dp).unwrap_or(f64::NAN);
+        let white_rk = structure_of(&truth, &data, &x0, &rk).unwrap_or(f64::NAN);
+        assert!(
+            (white - white_rk).abs() < 0.01 * white,
+            "{white} vs {white_rk}"
+        );
+        // χ²_20 has mean 20, sd 6.3 (its 0.999 quantile is 45.3).
+        assert!(white > 5.0 && white < 45.3, "{white}");
+        // A cubic coefficient 1 % off leaves a slow, coloured free-run error.
+        let off = oscillator(&[("cubic_stiffness", "x^3", -2.02)]);
+        let coloured = structure_of(&off, &data, &x0, &rk).unwrap_or(f64::NAN);
+        assert!(coloured > 45.3, "{coloured}");
     }
 
     #[test]

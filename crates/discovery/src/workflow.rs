@@ -13,10 +13,7 @@
 use std::collections::BTreeMap;
 
 use nalgebra::DMatrix;
-use sysid_core::{
-    Channel, Dataset, Experiment, InitialStateFit, MmeEstimate, TermModel, channel_metrics,
-    fit_initial_state,
-};
+use sysid_core::{Channel, Dataset, Experiment, MmeEstimate, TermModel};
 
 use crate::error::DiscoveryError;
 use crate::floor::NoiseFloor;
@@ -268,48 +265,20 @@ fn free_run_states(
     )
 }
 
-/// `Σ RMSE²/R` of the free run of `model` over the first record of `data`, from an
-/// initial state fitted to its first `window` samples (starting from `guess`); infinite
-/// when the fit or the simulation fails.
-fn first_record_cost(
-    model: &TermModel,
-    data: &Dataset,
-    guess: &[f64],
-    window: usize,
-    noise: &[f64],
-) -> crate::Result<f64> {
-    let exp = &data.experiments()[0];
-    let c = model.linear().c();
-    let fit = InitialStateFit {
-        window,
-        ..InitialStateFit::default()
+/// Free-run cost `(1/M) Σ r²/R` of `model` over every record of `data`, with initial
+/// states fitted by free-run error on each record (from `guesses` and from the data, the
+/// lowest cost wins, see [`crate::augment::fit_initial_states`]); infinite when every
+/// fit fails or diverges.
+fn validation_cost(model: &TermModel, data: &Dataset, guesses: &[Vec<f64>], noise: &[f64]) -> f64 {
+    let config = CalibrationConfig {
+        weights: OutputWeights::NoiseVariance(noise.to_vec()),
+        ..RefineConfig::default().calibration
     };
-    let Ok(x0) = fit_initial_state(model, c, exp, guess, &fit) else {
-        return Ok(f64::INFINITY);
-    };
-    let Ok(xs) = sysid_core::simulate_with(
-        model,
-        &x0,
-        exp.t0(),
-        exp.dt(),
-        exp.inputs(),
-        exp.intersample(),
-        &fit.integrator,
-        fit.blow_up,
-    ) else {
-        return Ok(f64::INFINITY);
-    };
-    let y = c * xs;
-    let mut cost = 0.0;
-    for (i, r) in noise.iter().enumerate().take(y.nrows()) {
-        let meas: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
-        let sim: Vec<f64> = y.row(i).iter().copied().collect();
-        let Ok(m) = channel_metrics(&meas, &sim) else {
-            return Ok(f64::INFINITY);
-        };
-        cost += m.rmse * m.rmse / r;
-    }
-    Ok(cost)
+    crate::augment::fit_initial_states(model, data, &[guesses], &config)
+        .ok()
+        .map(|fit| fit.cost_after)
+        .filter(|c| c.is_finite())
+        .unwrap_or(f64::INFINITY)
 }
 
 /// RMS of MME's `d̂` per corrected equation, by name.
@@ -864,13 +833,15 @@ pub fn run<M: Mme>(
             rejection = Some(format!(
                 "d̂ did not shrink: mean square / floor² {ms_before:.4e} → {ms_after:.4e}"
             ));
-        } else if let Some(v) = validation {
+        } else if let (Some(v), Some(guesses)) = (validation, &val_x0) {
+            // Both models judged alike: initial states of every validation record fitted
+            // by free-run error from the same starts.
             let r = &result.noise_variance;
-            let vb = first_record_cost(&current, v, &x0_guess, config.x0_window, r)?;
-            let va = first_record_cost(&augmented, v, &x0_guess, config.x0_window, r)?;
+            let vb = validation_cost(&current, v, guesses, r);
+            let va = validation_cost(&augmented, v, guesses, r);
             if va >= vb {
                 rejection = Some(format!(
-                    "validation free-run error did not fall: Σ RMSE²/R {vb:.4e} → {va:.4e}"
+                    "validation free-run error did not fall: (1/M) Σ r²/R {vb:.4e} → {va:.4e}"
                 ));
             }
         }

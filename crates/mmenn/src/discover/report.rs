@@ -252,7 +252,36 @@ fn judgement_section(s: &DiscoverSummary) -> String {
                 j.sd,
                 j.threshold,
                 j.p_value,
-                if j.accepts() { "yes" } else { "no" },
+                if j.statistic <= j.threshold { "yes" } else { "no" },
+            ));
+            if let Some(q) = &j.structure {
+                r.push_str(&format!(
+                    "
+What remains must also look like noise: the **structure** of the judged free-run residual, the Ljung–Box statistic Q (squared autocorrelations at lags 1–{} per channel and record; about {} for white noise), compared with Q on the same draws (a right model's free-run residual is not exactly white either). An effect the catalogue terms only imitate leaves its shape in the residual even when J is small.
+
+| statistic Q | reference mean | threshold ({:.0} % quantile, scaled χ²) | p-value | accepted |
+|---|---|---|---|---|
+| {:.2} | {:.2} | {:.2} | {:.3} | {} |
+",
+                    q.lags,
+                    q.lags,
+                    100.0 * j.level,
+                    q.statistic,
+                    q.reference.iter().sum::<f64>() / q.reference.len().max(1) as f64,
+                    q.threshold,
+                    q.p_value,
+                    if q.statistic <= q.threshold { "yes" } else { "no" },
+                ));
+            }
+            r.push_str(&format!(
+                "
+Verdict test: {}.
+",
+                if j.accepts() {
+                    "both within their references"
+                } else {
+                    "not within the reference (what remains is more, or other, than noise)"
+                }
             ));
         }
         None => {
