@@ -51,6 +51,22 @@ impl std::str::FromStr for FeatureKind {
     }
 }
 
+impl FeatureKind {
+    /// What the features are, in words (for reports and the terminal).
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Raw => "the networks' raw weights",
+            Self::Canonical => {
+                "the networks' weights in canonical form (tanh sign and hidden-unit order fixed)"
+            }
+            Self::Physical => "the regression coefficients of d̂ on the states and inputs",
+            Self::CanonicalAndPhysical => {
+                "canonical network weights and the regression coefficients of d̂ together"
+            }
+        }
+    }
+}
+
 /// Options of [`train_monitor`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct MonitorOptions {
@@ -250,17 +266,17 @@ pub fn train_monitor(
         &out.join("monitor.json"),
         serde_json::to_string_pretty(&file)?.as_bytes(),
     )?;
-    write_atomic(&out.join("report.md"), monitor_report(&file).as_bytes())?;
+    crate::html::write_report(out, &monitor_report(&file))?;
     Ok(file)
 }
 
 fn monitor_report(m: &MonitorFile) -> String {
     let mut r = format!(
-        "# Condition monitor\n\n{} records in {} classes ({}); features: {:?} ({} values per record; networks with {} hidden units).\n\n",
+        "# Condition monitor\n\n{} records in {} classes ({}); features: {} ({} values per record; networks with {} hidden units).\n\n",
         m.rows.len(),
         m.classes.len(),
         m.classes.join(", "),
-        m.features,
+        m.features.describe(),
         m.feature_names.len(),
         m.hidden
     );
@@ -345,7 +361,7 @@ pub fn classify(monitor_dir: &Path, data: &Path) -> Result<Classification> {
     Ok(Classification {
         condition: m.classes[p.labels[0]].clone(),
         scores,
-        score_kind: format!("{:?}", p.kind),
+        score_kind: crate::words::score_kind(p.kind).to_string(),
         classifier: m.classifier.label(),
     })
 }

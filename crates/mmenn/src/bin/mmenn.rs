@@ -609,8 +609,10 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
 #[allow(clippy::print_stdout)]
 fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
     println!(
-        "{label} — {} from x0 = {:?} ({}):",
-        r.horizon, r.x0, r.x0_source
+        "{label} — {} from x0 = {} ({}):",
+        r.horizon,
+        mmenn::words::numbers(&r.x0),
+        r.x0_source
     );
     for (name, m) in &r.channels {
         println!(
@@ -720,7 +722,7 @@ fn show(args: ShowArgs) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn compare(a: CompareArgs, force: bool) -> Result<()> {
+fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     let opts = mmenn::compare::CompareOptions {
         fit: mmenn::fit::FitOptions {
             max_hidden: a.max_hidden,
@@ -734,7 +736,14 @@ fn compare(a: CompareArgs, force: bool) -> Result<()> {
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
     let staged = stage(&a.out, "compare", force, &inputs)?;
-    let s = mmenn::compare::run_compare(&a.data, &a.model, &a.val, &opts, staged.path())?;
+    let s = mmenn::compare::run_compare_with_progress(
+        &a.data,
+        &a.model,
+        &a.val,
+        &opts,
+        staged.path(),
+        progress,
+    )?;
     staged.commit()?;
     for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
         println!("{} — {}:", t.title(), t.horizon());
@@ -899,7 +908,7 @@ fn main() -> ExitCode {
         Command::Fit(a) => fit(a, force, &progress),
         Command::Predict(a) => predict(a, force),
         Command::Show(a) => show(a),
-        Command::Compare(a) => compare(a, force),
+        Command::Compare(a) => compare(a, force, &progress),
         Command::Discover(a) => discover(a, force),
         Command::Monitor(c) => monitor(c, force),
     };
