@@ -649,10 +649,15 @@ pub fn run_compare_with_progress(
 }
 
 fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {
+    // The title names the horizon already ("free-run simulation, …").
+    let horizon = t.horizon().to_string();
+    let heading = if t.title().contains(&horizon) {
+        t.title().to_string()
+    } else {
+        format!("{} ({horizon})", t.title())
+    };
     let mut s = format!(
-        "### {} ({})\n\n| model | channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|---|\n",
-        t.title(),
-        t.horizon()
+        "### {heading}\n\n| model | channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|---|\n"
     );
     for row in t.rows() {
         for ch in &row.evaluation.channels {

@@ -295,6 +295,7 @@ pub fn read_with_validation(
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
 /// Numbers use Rust's shortest round-trip formatting, so reading back gives the same bits.
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
+    use std::fmt::Write as _;
     let rows = columns.first().map_or(0, |c| c.len());
     let mut s = String::with_capacity(rows * columns.len() * 12);
     s.push_str(&header.join(","));
@@ -306,7 +307,8 @@ pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
             }
             let v = c[k];
             if !v.is_nan() {
-                s.push_str(&format!("{v}"));
+                // Formatted straight into the buffer (no string per value).
+                let _ = write!(s, "{v}");
             }
         }
         s.push('\n');

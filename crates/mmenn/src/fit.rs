@@ -32,6 +32,7 @@ use crate::refine::{refine_network, validation_run};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
 
 mod choices;
+mod d_figures;
 
 /// Format tag of `model.json`.
 pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
@@ -590,6 +591,21 @@ pub fn run_fit_with_progress(
         };
         fig.write(&out.join(format!("nn_d_{name}.svg")))?;
         files.push(format!("nn_d_{name}.svg"));
+        let variables: Vec<String> = lin
+            .state_names()
+            .iter()
+            .chain(lin.input_names())
+            .cloned()
+            .collect();
+        files.extend(d_figures::d_against_variables(
+            name,
+            &row(&d_train, i),
+            &row(&pred, i),
+            &x_train,
+            &variables,
+            &spec.units,
+            out,
+        )?);
     }
     write_sweep(&out.join("sweep.csv"), &sweep.rows)?;
     files.push("sweep.csv".into());
@@ -816,7 +832,8 @@ fn fit_report(s: &FitSummary) -> String {
     }
     r.push_str(
         "\nFigures: `compare_*.svg` (measured output and the hybrid model's free run), \
-         `nn_d_*.svg` (MME's d̂ and the network's fit of it), `sweep.svg` (MSE of d̂ per \
+         `nn_d_*.svg` (MME's d̂ and the network's fit of it, over the training pairs and \
+         against each state and input), `sweep.svg` (MSE of d̂ per \
          network size, the chosen network ringed); the sweep table is `sweep.csv`.\n",
     );
     r.push_str(&crate::html::figures_section(&s.files));

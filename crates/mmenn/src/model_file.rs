@@ -1,6 +1,6 @@
 //! The TOML model file of SPEC §5. Its keys are a contract (extend, never rename):
 //! `states`, `inputs`, `A`, `B`, `measured` or `C` + `outputs`, `corrected`,
-//! `noise_variance` (list or `"auto"`), `units`, `intersample` (`"zoh"`, the default,
+//! `noise_variance` (list or `"auto"`; `"auto"` when the key is left out), `units`, `intersample` (`"zoh"`, the default,
 //! or `"foh"`: how the inputs behave between samples in MME and in free-run simulation,
 //! for `mmenn estimate` and `mmenn discover`), and `[[terms]]` (`state`, `effect`, `term`, `coefficient`, and for a
 //! transfer between two equations `into`).
@@ -103,6 +103,7 @@ struct ModelToml {
     outputs: Option<Vec<String>>,
     #[serde(default)]
     corrected: Vec<String>,
+    #[serde(default = "auto_noise")]
     noise_variance: NoiseToml,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     units: BTreeMap<String, String>,
@@ -110,6 +111,11 @@ struct ModelToml {
     intersample: InterSample,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
+}
+
+/// A model file without `noise_variance` estimates it.
+fn auto_noise() -> NoiseToml {
+    NoiseToml::Word("auto".into())
 }
 
 fn matrix(
@@ -547,6 +553,9 @@ noise_variance = "auto"
         let spec = parse_model(Path::new("m.toml"), text).unwrap();
         assert_eq!(spec.noise_variance, NoiseVariance::Auto);
         assert_eq!(spec.linear.n_inputs(), 0);
+        // Leaving the key out means the same.
+        let omitted = text.replace("noise_variance = \"auto\"\n", "");
+        assert_eq!(parse_model(Path::new("m.toml"), &omitted).unwrap(), spec);
         let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
         assert_eq!(spec, again);
     }

@@ -257,12 +257,15 @@ struct CompareArgs {
 
 #[derive(Debug, Args)]
 struct DiscoverArgs {
+    /// List the catalogue of named effects (term, where it may enter) and exit.
+    #[arg(long)]
+    list_effects: bool,
     /// Estimation data file(s) (CSV).
-    #[arg(long, required = true, num_args = 1..)]
+    #[arg(long, required_unless_present = "list_effects", num_args = 1..)]
     data: Vec<PathBuf>,
     /// Model file (TOML).
-    #[arg(long)]
-    model: PathBuf,
+    #[arg(long, required_unless_present = "list_effects")]
+    model: Option<PathBuf>,
     /// Validation data file(s): they judge the free-run search's candidate sets and get
     /// their own before/after gap.
     #[arg(long, num_args = 1..)]
@@ -278,8 +281,52 @@ struct DiscoverArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Output directory.
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "list_effects")]
+    out: Option<PathBuf>,
+}
+
+/// Print the catalogue of named effects: name, label, term over placeholder variables,
+/// and the equations it may enter.
+#[allow(clippy::print_stdout)]
+fn list_effects() {
+    use mmenn::discovery::{Effect, EquationKind, Role, Slot};
+    println!(
+        "Named effects discover tries (term written over placeholders: x position, theta \
+         angle, v velocity, h level, x_j any state, u input):"
+    );
+    for e in Effect::ALL.into_iter().filter(|e| e.is_candidate()) {
+        let vars: Vec<&str> = e
+            .slots()
+            .iter()
+            .map(|s| match s {
+                Slot::Input => "u",
+                Slot::AnyState => "x_j",
+                Slot::State(roles) => match roles.first() {
+                    Some(Role::Velocity) => "v",
+                    Some(Role::Angle) => "theta",
+                    Some(Role::Level) => "h",
+                    _ => "x",
+                },
+            })
+            .collect();
+        // Sentinel values mark where each named parameter goes.
+        let sentinels = [0.111, 0.222];
+        let mut term = e.template(&vars, &sentinels[..e.parameters().len()]);
+        for (p, v) in e.parameters().iter().zip(["0.111", "0.222"]) {
+            term = term.replace(v, p);
+        }
+        let enters: Vec<&str> = e
+            .enters()
+            .iter()
+            .map(|k| match k {
+                EquationKind::Acceleration => "a velocity's equation (acceleration)",
+                EquationKind::Flow => "a level's equation (flow)",
+                _ => "any other equation",
+            })
+            .collect();
+        println!("  {:<28} {:<30} {term}", e.name(), e.label());
+        println!("  {:<28} enters {}", "", enters.join(", "));
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -771,15 +818,22 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
 
 #[allow(clippy::print_stdout)]
 fn discover(a: DiscoverArgs, force: bool) -> Result<()> {
+    if a.list_effects {
+        list_effects();
+        return Ok(());
+    }
+    let (Some(model), Some(out)) = (&a.model, &a.out) else {
+        bail!("--data, --model and --out are required");
+    };
     let opts = mmenn::discover::DiscoverOptions {
         max_rounds: a.max_rounds,
         seed: a.seed,
         holdout_fraction: a.holdout_fraction,
         ..Default::default()
     };
-    let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
-    let staged = stage(&a.out, "discover", force, &inputs)?;
-    let s = mmenn::discover::run_discover(&a.data, &a.model, &a.val, &opts, staged.path())?;
+    let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([model]).collect();
+    let staged = stage(out, "discover", force, &inputs)?;
+    let s = mmenn::discover::run_discover(&a.data, model, &a.val, &opts, staged.path())?;
     staged.commit()?;
     println!("verdict: {:?}", s.verdict);
     for e in &s.effects {
@@ -819,7 +873,7 @@ fn discover(a: DiscoverArgs, force: bool) -> Result<()> {
     if let Some(v) = &s.validation_gap {
         show("validation", v);
     }
-    println!("wrote {}", a.out.join(&s.model).display());
+    println!("wrote {}", out.join(&s.model).display());
     Ok(())
 }
 
