@@ -210,7 +210,7 @@ fn table(channels: &BTreeMap<String, ChannelMetrics>) -> String {
 fn report(s: &PredictSummary) -> String {
     let mut r = format!("# Prediction on new data\n\nModel: {}.\n\n", s.model_kind);
     r.push_str(&format!(
-        "## {} — samples {}..{} (t = {} … {} s)\n\nInitial state ({}): {}.\n\n",
+        "## {} — samples {}..{} (t = {} … {} s)\n\nInitial state x0 = {}: {}.\n\n",
         s.free_run.horizon,
         s.scored.first,
         s.scored.end,
