@@ -209,8 +209,7 @@ pub fn estimate_figures_with_target(
     let (e, exp) = (&est.experiments[0], &data.experiments()[0]);
     let t: Vec<f64> = exp.times();
     let unit = |n: &str| {
-        spec.units
-            .get(n)
+        spec.unit_of(n)
             .map(|u| format!("{n} ({u})"))
             .unwrap_or_else(|| n.to_string())
     };
@@ -504,7 +503,7 @@ pub fn run_estimate_with(
 fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
     let mut r = String::from("# MME estimate\n\n");
     r.push_str(&format!(
-        "Assumed model: {} states ({}), corrected equations: {}; {} named terms. {} samples, {} sub-steps per sample interval.\n\n",
+        "Assumed model: {} states ({}), corrected equations: {}; {} named terms. {} samples, sub-steps per sample interval: {}.\n\n",
         spec.linear.n_states(),
         spec.linear.state_names().join(", "),
         spec.linear.correction_names().join(", "),

@@ -570,7 +570,7 @@ pub fn run_fit_with_progress(
         let fig = Figure {
             title: format!("d_{name}: MME estimate and network"),
             x_label: "training pair".into(),
-            y_label: match spec.units.get(&format!("d_{name}")) {
+            y_label: match spec.unit_of(&format!("d_{name}")) {
                 Some(u) => format!("d_{name} ({u})"),
                 None => format!("d_{name}"),
             },
@@ -603,7 +603,7 @@ pub fn run_fit_with_progress(
             &row(&pred, i),
             &x_train,
             &variables,
-            &spec.units,
+            &spec,
             out,
         )?);
     }

@@ -2,17 +2,17 @@
 //! the same training pairs overlaid: where the learnt correction follows MME's estimate
 //! and where it does not, in the variables a reader thinks in.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::DMatrix;
 
 use crate::error::Result;
+use crate::model_file::ModelSpec;
 use crate::plot::{Figure, Series};
 
 /// `name (unit)`, or the name alone without a unit.
-fn with_unit(name: &str, units: &BTreeMap<String, String>) -> String {
-    match units.get(name) {
+fn with_unit(name: &str, spec: &ModelSpec) -> String {
+    match spec.unit_of(name) {
         Some(u) => format!("{name} ({u})"),
         None => name.to_string(),
     }
@@ -27,7 +27,7 @@ pub(crate) fn d_against_variables(
     pred: &[f64],
     x: &DMatrix<f64>,
     variables: &[String],
-    units: &BTreeMap<String, String>,
+    spec: &ModelSpec,
     out: &Path,
 ) -> Result<Vec<String>> {
     let mut files = Vec::new();
@@ -36,8 +36,8 @@ pub(crate) fn d_against_variables(
         let xs: Vec<f64> = x.row(j).iter().copied().collect();
         let fig = Figure {
             title: format!("{d_name} against {var}: MME estimate and network"),
-            x_label: with_unit(var, units),
-            y_label: with_unit(&d_name, units),
+            x_label: with_unit(var, spec),
+            y_label: with_unit(&d_name, spec),
             series: vec![
                 Series::points("MME d̂", xs.clone(), d.to_vec()),
                 Series::points("NN(x̂, u) at the same samples", xs, pred.to_vec()),
