@@ -74,6 +74,9 @@ struct ReproduceArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     jobs: Option<usize>,
+    /// Print no progress (a bar on a terminal, a line per experiment otherwise).
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 fn workspace_root() -> PathBuf {
@@ -126,7 +129,7 @@ fn reproduce(args: ReproduceArgs) -> Result<()> {
     ] {
         std::fs::create_dir_all(&d).with_context(|| format!("creating {}", d.display()))?;
     }
-    let progress = Progress::start(false);
+    let progress = Progress::start(args.quiet);
     let mut seeds = BTreeMap::new();
     seeds.insert("measurement noise".to_string(), data::NOISE_SEED);
     seeds.insert("network initialisations and splits".to_string(), FIT_SEED);
@@ -351,6 +354,8 @@ fn run_jobs(
     let mut order: Vec<usize> = (0..jobs.len()).collect();
     order.sort_by_key(|&i| std::cmp::Reverse(jobs[i].cost));
     let next = AtomicUsize::new(0);
+    ctx.progress
+        .begin_jobs(&jobs.iter().map(|j| f64::from(j.cost)).collect::<Vec<_>>());
     let slots: Vec<Mutex<Option<Finished>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
     std::thread::scope(|scope| {
         for _ in 0..workers.min(jobs.len()) {
@@ -359,18 +364,17 @@ fn run_jobs(
                     let k = next.fetch_add(1, Ordering::SeqCst);
                     let Some(&i) = order.get(k) else { break };
                     let job = &jobs[i];
-                    ctx.progress.line(&job.name, "started");
+                    ctx.progress.job_started(&job.name);
                     let clock = Instant::now();
                     let r = (job.run)(ctx);
                     let seconds = clock.elapsed().as_secs_f64();
-                    match &r {
-                        Ok(_) => ctx
-                            .progress
-                            .line(&job.name, &format!("done in {seconds:.1} s")),
-                        Err(e) => ctx
-                            .progress
-                            .line(&job.name, &format!("FAILED after {seconds:.1} s: {e:#}")),
-                    }
+                    let failure = r.as_ref().err().map(|e| format!("{e:#}"));
+                    ctx.progress.job_finished(
+                        &job.name,
+                        f64::from(job.cost),
+                        seconds,
+                        failure.as_deref(),
+                    );
                     let time = JobTime {
                         name: job.name.clone(),
                         seconds,
@@ -383,6 +387,7 @@ fn run_jobs(
             });
         }
     });
+    ctx.progress.end_jobs();
     slots
         .into_iter()
         .zip(jobs)

@@ -446,7 +446,7 @@ pub fn readme(
     s.push_str(
         "Options: `--data-dir DIR` (real benchmarks; default `$MMENN_DATA_DIR`, then \
          `../shared/data`), `--out DIR` (root for `fixtures/data` and `docs/results`), \
-         `--only ch2,ch4,ch6,real`, `--jobs N`.\n\n",
+         `--only ch2,ch4,ch6,real`, `--jobs N`, `--quiet`.\n\n",
     );
     s.push_str(&format!(
         "## Time of this run ({} mode)\n\nTotal **{:.0} s** on `{}` ({} cores; other work may share them): data generation {:.1} s, then the experiments in parallel:\n\n| experiment | wall time (s) | ok |\n|---|---|---|\n",

@@ -23,10 +23,14 @@ use sysid_core::{Dataset, Horizon, Model};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
-use crate::fit::{FitOptions, HybridFile, HybridModel, run_fit};
+use crate::fit::{FitOptions, HybridFile, HybridModel};
 use crate::model::{InitialRule, LoadedModel, ModelKind, Observation, judge_free_run};
 use crate::model_file::{ModelSpec, write_model};
-use crate::plot::{Figure, Series};
+use crate::plot::{Figure, Panels, Series};
+use crate::progress::{NoProgress, ProgressSink, stage};
+
+/// Progress task of the free-run evaluation, residual analysis and figures.
+const EVALUATION: &str = "free-run evaluation and figures";
 
 /// Row label of the model given with `--model` when it is more than its linear part.
 pub const GIVEN_MODEL_ROW: &str = "given model";
@@ -208,6 +212,7 @@ fn compare_figures(
     data: &Dataset,
     models: &[(&str, &SimFn<'_>)],
     tab: &EvaluationTable,
+    units: &std::collections::BTreeMap<String, String>,
     out: &Path,
 ) -> Result<Vec<String>> {
     let exp = &data.experiments()[0];
@@ -218,11 +223,31 @@ fn compare_figures(
         .collect::<Result<_>>()?;
     let mut files = Vec::new();
     for (i, name) in data.output_names().iter().enumerate() {
+        let measured: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
         let mut series = vec![Series::points(
             format!("{name} measured"),
             t.clone(),
-            exp.outputs().row(i).iter().copied().collect(),
+            measured.clone(),
         )];
+        // Measured − simulated per model (NaN where the record has no sample or the
+        // model no prediction yet, e.g. NARX's delay line).
+        let residuals: Vec<Series> = preds
+            .iter()
+            .enumerate()
+            .map(|(k, (label, p))| {
+                Series::line(
+                    *label,
+                    t.clone(),
+                    measured
+                        .iter()
+                        .zip(p.outputs.row(i).iter())
+                        .map(|(m, s)| m - s)
+                        .collect(),
+                )
+                // The colour of the model's line above (the measurement is entry 0).
+                .coloured(k + 1)
+            })
+            .collect();
         for (label, p) in &preds {
             let fit = tab
                 .rows()
@@ -236,12 +261,25 @@ fn compare_figures(
                 p.outputs.row(i).iter().copied().collect(),
             ));
         }
-        let fig = Figure {
-            title: format!("{name}: free-run simulation, {which} data"),
-            x_label: "t (s)".into(),
-            y_label: name.clone(),
-            series,
-            bands: vec![],
+        let y_label = match units.get(name) {
+            Some(u) => format!("{name} ({u})"),
+            None => name.clone(),
+        };
+        let fig = Panels {
+            top: Figure {
+                title: format!("{name}: free-run simulation, {which} data"),
+                x_label: "t (s)".into(),
+                y_label: y_label.clone(),
+                series,
+                bands: vec![],
+            },
+            bottom: Figure {
+                title: "residual: measured − simulated".into(),
+                x_label: "t (s)".into(),
+                y_label,
+                series: residuals,
+                bands: vec![],
+            },
         };
         let file = format!("compare_{which}_{name}.svg");
         fig.write(&out.join(&file))?;
@@ -313,6 +351,20 @@ pub fn run_compare(
     opts: &CompareOptions,
     out: &Path,
 ) -> Result<CompareSummary> {
+    run_compare_with_progress(data_paths, model_path, val_paths, opts, out, &NoProgress)
+}
+
+/// [`run_compare`], reporting each baseline's fit, the MME/NN fit (its sweep and
+/// refinement step by step) and the evaluation to `progress`. The results do not depend
+/// on the sink.
+pub fn run_compare_with_progress(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &CompareOptions,
+    out: &Path,
+    progress: &dyn ProgressSink,
+) -> Result<CompareSummary> {
     let loaded = LoadedModel::read(model_path)?;
     let spec = loaded.spec.clone();
     let lin = spec.linear.clone();
@@ -340,7 +392,9 @@ pub fn run_compare(
     let mut failures = Vec::new();
     // A baseline that cannot be fitted (e.g. a free parameter the data cannot identify)
     // does not stop the comparison: it has no row, and the summary says why.
-    let (oe_model, oe_parameters, oe_error) = match fit_oe(&lin, &data, &oe_config) {
+    let (oe_model, oe_parameters, oe_error) = match stage(progress, "linear OE fit", || {
+        fit_oe(&lin, &data, &oe_config)
+    }) {
         Ok(f) => {
             let mut m = f.model;
             m.observer_window = window;
@@ -375,14 +429,16 @@ pub fn run_compare(
             }
         }
     };
-    let narx = match fit_narx(
-        &data,
-        &NarxConfig {
-            orders,
-            seed: opts.fit.seed,
-            ..NarxConfig::default()
-        },
-    ) {
+    let narx = match stage(progress, "NARX fit", || {
+        fit_narx(
+            &data,
+            &NarxConfig {
+                orders,
+                seed: opts.fit.seed,
+                ..NarxConfig::default()
+            },
+        )
+    }) {
         Ok(f) => Some(f.model),
         Err(e) => {
             failures.push(Failure {
@@ -393,7 +449,15 @@ pub fn run_compare(
         }
     };
     let fit_dir = out.join("mme_nn");
-    run_fit(data_paths, &fit_model_path, val_paths, &opts.fit, &fit_dir)?;
+    crate::fit::run_fit_with_progress(
+        data_paths,
+        &fit_model_path,
+        val_paths,
+        &opts.fit,
+        &fit_dir,
+        progress,
+    )?;
+    progress.report(&crate::progress::Progress::new(EVALUATION, 0, None));
     let text =
         std::fs::read_to_string(fit_dir.join("model.json")).map_err(|source| MmennError::Io {
             path: fit_dir.join("model.json"),
@@ -465,6 +529,7 @@ pub fn run_compare(
         &data,
         &refs,
         &estimation,
+        &spec.units,
         out,
     )?);
 
@@ -475,7 +540,14 @@ pub fn run_compare(
             let val_sims = sims(&hv);
             let refs: Vec<(&str, &SimFn<'_>)> =
                 val_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
-            files.extend(compare_figures("validation", v, &refs, &tab, out)?);
+            files.extend(compare_figures(
+                "validation",
+                v,
+                &refs,
+                &tab,
+                &spec.units,
+                out,
+            )?);
             (Some(tab), hv, v)
         }
         None => (None, hybrid_est.clone(), &data),
@@ -554,6 +626,7 @@ pub fn run_compare(
     ));
     files.push("compare.json".into());
     files.push("report.md".into());
+    files.push("report.html".into());
     let summary = CompareSummary {
         estimation,
         validation,
@@ -570,15 +643,21 @@ pub fn run_compare(
         &out.join("compare.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    write_atomic(&out.join("report.md"), compare_report(&summary).as_bytes())?;
+    crate::html::write_report(out, &compare_report(&summary))?;
+    progress.finish(EVALUATION);
     Ok(summary)
 }
 
 fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {
+    // The title names the horizon already ("free-run simulation, …").
+    let horizon = t.horizon().to_string();
+    let heading = if t.title().contains(&horizon) {
+        t.title().to_string()
+    } else {
+        format!("{} ({horizon})", t.title())
+    };
     let mut s = format!(
-        "### {} ({})\n\n| model | channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|---|\n",
-        t.title(),
-        t.horizon()
+        "### {heading}\n\n| model | channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|---|\n"
     );
     for row in t.rows() {
         for ch in &row.evaluation.channels {
@@ -628,5 +707,16 @@ fn compare_report(s: &CompareSummary) -> String {
     for p in &s.oe_parameters {
         r.push_str(&format!("- {}: {:.6} ± {:.2e}\n", p.name, p.value, p.std));
     }
+    r.push_str(crate::words::METRICS_MEANING);
+    r.push_str(
+        "\nFigures: `compare_*.svg` show the measured output, every model's free run (fit % \
+         in the legend) and, below, each model's residual (measured − simulated); \
+         `residual_acf_*.svg` and `residual_xcf_*.svg` show the free-run residual's \
+         autocorrelation and its cross-correlation with each input, with the 99 % band \
+         ±2.58/√N of white noise: values outside the band mean the residual still holds \
+         dynamics the model misses (expected for the assumed model, a warning for the \
+         others).\n",
+    );
+    r.push_str(&crate::html::figures_section(&s.files));
     r
 }

@@ -293,10 +293,12 @@ pub fn read_with_validation(
 }
 
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
-/// Numbers use Rust's shortest round-trip formatting, so reading back gives the same bits.
+/// Numbers are the shortest text that reads back to the same bits (ryu).
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
     let rows = columns.first().map_or(0, |c| c.len());
-    let mut s = String::with_capacity(rows * columns.len() * 12);
+    // A shortest round-trip number is at most 24 characters; most are about 20.
+    let mut s = String::with_capacity(rows * columns.len() * 21 + 64);
+    let mut buf = ryu::Buffer::new();
     s.push_str(&header.join(","));
     s.push('\n');
     for k in 0..rows {
@@ -306,7 +308,9 @@ pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
             }
             let v = c[k];
             if !v.is_nan() {
-                s.push_str(&format!("{v}"));
+                // The shortest text that reads back to the same bits (ryu; `inf`, `-inf`
+                // for infinities), formatted without a string per value.
+                s.push_str(buf.format(v));
             }
         }
         s.push('\n');

@@ -326,11 +326,12 @@ pub fn run_discover(
         model: "model.discovered.toml".into(),
         rounds: outcome.rounds,
     };
-    figures(&summary, &data, &spec, &y_before, &y_after, out)?;
+    let files = figures(&summary, &data, &spec, &y_before, &y_after, out)?;
     write_atomic(
         &out.join("discovery.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    write_atomic(&out.join("report.md"), report(&summary).as_bytes())?;
+    let markdown = report(&summary) + &crate::html::figures_section(&files);
+    crate::html::write_report(out, &markdown)?;
     Ok(summary)
 }

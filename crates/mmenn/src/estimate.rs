@@ -256,8 +256,7 @@ pub fn estimate_figures_with_target(
     let (e, exp) = (&est.experiments[0], &data.experiments()[0]);
     let t: Vec<f64> = exp.times();
     let unit = |n: &str| {
-        spec.units
-            .get(n)
+        spec.unit_of(n)
             .map(|u| format!("{n} ({u})"))
             .unwrap_or_else(|| n.to_string())
     };
@@ -517,6 +516,7 @@ pub fn run_estimate_with(
         .collect();
     files.push("summary.json".into());
     files.push("report.md".into());
+    files.push("report.html".into());
     let mut summary = EstimateSummary {
         w: (0..est.w.nrows()).map(|i| row(&est.w, i)).collect(),
         w_by_correction: by_name(&est.correction_names, &w_diag),
@@ -536,10 +536,7 @@ pub fn run_estimate_with(
         robust_passes,
         files,
     };
-    write_atomic(
-        &out.join("report.md"),
-        estimate_report(&summary, &spec).as_bytes(),
-    )?;
+    crate::html::write_report(out, &estimate_report(&summary, &spec))?;
     summary
         .phase_seconds
         .insert("write".to_string(), clock.elapsed().as_secs_f64());
@@ -553,7 +550,7 @@ pub fn run_estimate_with(
 fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
     let mut r = String::from("# MME estimate\n\n");
     r.push_str(&format!(
-        "Assumed model: {} states ({}), corrected equations: {}; {} named terms. {} samples, {} sub-steps per sample interval.\n\n",
+        "Assumed model: {} states ({}), corrected equations: {}; {} named terms. {} samples, sub-steps per sample interval: {}.\n\n",
         spec.linear.n_states(),
         spec.linear.state_names().join(", "),
         spec.linear.correction_names().join(", "),
@@ -626,6 +623,11 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
             ));
         }
     }
-    r.push_str("\nFigures: `measured_*.svg` (measurement vs estimate), `states.svg`, `d_vs_time.svg`, `d_*_vs_*.svg` (d̂ against each state and input), `w_curve.svg`.\n");
+    r.push_str(
+        "\nFigures: `measured_*.svg` (measurement vs estimate), `states.svg`, \
+         `d_vs_time.svg`, `d_*_vs_*.svg` (d̂ against each state and input), `w_curve.svg` \
+         (residual-to-noise ratio against W; the chosen W where it crosses the target).\n",
+    );
+    r.push_str(&crate::html::figures_section(&s.files));
     r
 }

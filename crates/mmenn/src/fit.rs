@@ -32,6 +32,7 @@ use crate::refine::{refine_network, validation_run};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
 
 mod choices;
+mod d_figures;
 
 /// Format tag of `model.json`.
 pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
@@ -569,7 +570,7 @@ pub fn run_fit_with_progress(
         let fig = Figure {
             title: format!("d_{name}: MME estimate and network"),
             x_label: "training pair".into(),
-            y_label: match spec.units.get(&format!("d_{name}")) {
+            y_label: match spec.unit_of(&format!("d_{name}")) {
                 Some(u) => format!("d_{name} ({u})"),
                 None => format!("d_{name}"),
             },
@@ -590,6 +591,21 @@ pub fn run_fit_with_progress(
         };
         fig.write(&out.join(format!("nn_d_{name}.svg")))?;
         files.push(format!("nn_d_{name}.svg"));
+        let variables: Vec<String> = lin
+            .state_names()
+            .iter()
+            .chain(lin.input_names())
+            .cloned()
+            .collect();
+        files.extend(d_figures::d_against_variables(
+            name,
+            &row(&d_train, i),
+            &row(&pred, i),
+            &x_train,
+            &variables,
+            &spec,
+            out,
+        )?);
     }
     write_sweep(&out.join("sweep.csv"), &sweep.rows)?;
     files.push("sweep.csv".into());
@@ -611,6 +627,7 @@ pub fn run_fit_with_progress(
     files.push("model.json".into());
     files.push("summary.json".into());
     files.push("report.md".into());
+    files.push("report.html".into());
     let w_by_correction = lin
         .correction_names()
         .iter()
@@ -636,7 +653,7 @@ pub fn run_fit_with_progress(
         &out.join("summary.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    write_atomic(&out.join("report.md"), fit_report(&summary).as_bytes())?;
+    crate::html::write_report(out, &fit_report(&summary))?;
     Ok(summary)
 }
 
@@ -646,10 +663,11 @@ fn compare_figure(
     xs: &DMatrix<f64>,
     rep: &FreeRunReport,
     which: &str,
-) -> Result<Figure> {
+) -> Result<crate::plot::Panels> {
     let t = exp.times();
     let y = spec.linear.c() * xs;
     let mut series = Vec::new();
+    let mut residuals = Vec::new();
     let outputs = spec.linear.output_names();
     let with_unit = |n: &str| match spec.units.get(n) {
         Some(u) => format!("{n} ({u})"),
@@ -671,13 +689,34 @@ fn compare_figure(
             t.clone(),
             row(&y, i),
         ));
+        residuals.push(
+            Series::line(
+                format!("{name} measured − simulated"),
+                t.clone(),
+                row(exp.outputs(), i)
+                    .iter()
+                    .zip(row(&y, i))
+                    .map(|(m, s)| m - s)
+                    .collect(),
+            )
+            .coloured(2 * i + 1),
+        );
     }
-    Ok(Figure {
-        title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
-        x_label: "t (s)".into(),
-        y_label,
-        series,
-        bands: vec![],
+    Ok(crate::plot::Panels {
+        top: Figure {
+            title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
+            x_label: "t (s)".into(),
+            y_label: y_label.clone(),
+            series,
+            bands: vec![],
+        },
+        bottom: Figure {
+            title: "residual: measured − simulated".into(),
+            x_label: "t (s)".into(),
+            y_label,
+            series: residuals,
+            bands: vec![],
+        },
     })
 }
 
@@ -792,7 +831,11 @@ fn fit_report(s: &FitSummary) -> String {
         r.push_str(&refine.markdown());
     }
     r.push_str(
-        "\nFigures: `compare_*.svg`, `nn_d_*.svg`, `sweep.svg`; the sweep table is `sweep.csv`.\n",
+        "\nFigures: `compare_*.svg` (measured output and the hybrid model's free run), \
+         `nn_d_*.svg` (MME's d̂ and the network's fit of it, over the training pairs and \
+         against each state and input), `sweep.svg` (MSE of d̂ per \
+         network size, the chosen network ringed); the sweep table is `sweep.csv`.\n",
     );
+    r.push_str(&crate::html::figures_section(&s.files));
     r
 }

@@ -1,6 +1,6 @@
 //! The TOML model file of SPEC §5. Its keys are a contract (extend, never rename):
 //! `states`, `inputs`, `A`, `B`, `measured` or `C` + `outputs`, `corrected`,
-//! `noise_variance` (list or `"auto"`), `units`, `intersample` (`"zoh"`, the default,
+//! `noise_variance` (list or `"auto"`; `"auto"` when the key is left out), `units`, `intersample` (`"zoh"`, the default,
 //! or `"foh"`: how the inputs behave between samples in MME and in free-run simulation,
 //! for `mmenn estimate` and `mmenn discover`), and `[[terms]]` (`state`, `effect`, `term`, `coefficient`, and for a
 //! transfer between two equations `into`).
@@ -16,6 +16,17 @@ use crate::atomic::write_atomic;
 use crate::error::{MmennError, ModelProblem, Result};
 
 impl ModelSpec {
+    /// The unit of a state, input, output or correction `d_<state>`: as the `[units]`
+    /// table gives it, or for a correction without one, its state's unit per second
+    /// (`rad/s` → `rad/s^2`, `m` → `m/s`).
+    pub fn unit_of(&self, name: &str) -> Option<String> {
+        if let Some(u) = self.units.get(name) {
+            return Some(u.clone());
+        }
+        let state_unit = self.units.get(name.strip_prefix("d_")?)?;
+        Some(per_second(state_unit))
+    }
+
     /// The assumed model with its named terms, as `Dynamics` (the linear model alone when
     /// there are no terms). Errors name the term and, for expressions, the column.
     pub fn term_model(&self) -> Result<TermModel, ModelProblem> {
@@ -103,6 +114,7 @@ struct ModelToml {
     outputs: Option<Vec<String>>,
     #[serde(default)]
     corrected: Vec<String>,
+    #[serde(default = "auto_noise")]
     noise_variance: NoiseToml,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     units: BTreeMap<String, String>,
@@ -110,6 +122,24 @@ struct ModelToml {
     intersample: InterSample,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
+}
+
+/// `unit` divided by seconds: `…/s` → `…/s^2`, `…/s^k` → `…/s^(k+1)`, else `…/s`.
+fn per_second(unit: &str) -> String {
+    if let Some(base) = unit.strip_suffix("/s") {
+        return format!("{base}/s^2");
+    }
+    if let Some((base, k)) = unit.rsplit_once("/s^")
+        && let Ok(k) = k.parse::<u32>()
+    {
+        return format!("{base}/s^{}", k + 1);
+    }
+    format!("{unit}/s")
+}
+
+/// A model file without `noise_variance` estimates it.
+fn auto_noise() -> NoiseToml {
+    NoiseToml::Word("auto".into())
 }
 
 fn matrix(
@@ -535,6 +565,22 @@ coefficient = -0.3
     }
 
     #[test]
+    fn correction_units_follow_their_state() {
+        let mut spec = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+        spec.units = [("x", "m"), ("v", "m/s"), ("w", "rad/s^2"), ("d_x", "given")]
+            .into_iter()
+            .map(|(a, b)| (a.to_string(), b.to_string()))
+            .collect();
+        assert_eq!(spec.unit_of("v").as_deref(), Some("m/s"));
+        assert_eq!(spec.unit_of("d_v").as_deref(), Some("m/s^2"));
+        assert_eq!(spec.unit_of("d_w").as_deref(), Some("rad/s^3"));
+        assert_eq!(spec.unit_of("d_x").as_deref(), Some("given"));
+        assert_eq!(spec.unit_of("d_q"), None);
+        assert_eq!(spec.unit_of("u"), None);
+        assert_eq!(per_second("N"), "N/s");
+    }
+
+    #[test]
     fn general_c_and_auto_noise_round_trip() {
         let text = r#"
 states = ["x1", "x2"]
@@ -547,6 +593,9 @@ noise_variance = "auto"
         let spec = parse_model(Path::new("m.toml"), text).unwrap();
         assert_eq!(spec.noise_variance, NoiseVariance::Auto);
         assert_eq!(spec.linear.n_inputs(), 0);
+        // Leaving the key out means the same.
+        let omitted = text.replace("noise_variance = \"auto\"\n", "");
+        assert_eq!(parse_model(Path::new("m.toml"), &omitted).unwrap(), spec);
         let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
         assert_eq!(spec, again);
     }

@@ -39,9 +39,17 @@ pub struct Series {
     pub y: Vec<f64>,
     /// How it is drawn.
     pub mark: Mark,
+    /// Palette entry (default: the series' position in the figure), so that one model
+    /// keeps its colour across the panels of a figure.
+    pub colour: Option<usize>,
 }
 
 impl Series {
+    /// The same series drawn in palette entry `k`.
+    pub fn coloured(mut self, k: usize) -> Self {
+        self.colour = Some(k);
+        self
+    }
     /// A line series.
     pub fn line(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
         Self {
@@ -49,6 +57,7 @@ impl Series {
             x,
             y,
             mark: Mark::Line,
+            colour: None,
         }
     }
     /// A dashed reference line through the given points.
@@ -58,6 +67,7 @@ impl Series {
             x,
             y,
             mark: Mark::Dashed,
+            colour: None,
         }
     }
     /// Rings around chosen points.
@@ -67,6 +77,7 @@ impl Series {
             x,
             y,
             mark: Mark::Highlight,
+            colour: None,
         }
     }
     /// A point series.
@@ -76,6 +87,7 @@ impl Series {
             x,
             y,
             mark: Mark::Points,
+            colour: None,
         }
     }
 }
@@ -258,7 +270,28 @@ impl Figure {
         {
             let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
             root.fill(&WHITE).map_err(draw_err)?;
-            let (x0, x1) = range(self.series.iter().flat_map(|s| s.x.iter().copied()));
+            self.draw_on(&root, None)?;
+            root.present().map_err(draw_err)?;
+        }
+        Ok(svg)
+    }
+
+    /// The x range the figure draws: its data's, padded.
+    fn x_range(&self) -> (f64, f64) {
+        range(self.series.iter().flat_map(|s| s.x.iter().copied()))
+    }
+
+    /// Draw the figure on `root` (already filled), over `x_range` when given.
+    fn draw_on<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, plotters::coord::Shift>,
+        x_range: Option<(f64, f64)>,
+    ) -> Result<()>
+    where
+        DB::ErrorType: 'static,
+    {
+        {
+            let (x0, x1) = x_range.unwrap_or_else(|| self.x_range());
             let band_max = self.bands.iter().map(|b| b.1.abs()).fold(0.0, f64::max);
             let (y0, y1) = range(
                 self.series
@@ -266,7 +299,7 @@ impl Figure {
                     .flat_map(|s| s.y.iter().copied())
                     .chain([band_max, -band_max].into_iter().filter(|_| band_max > 0.0)),
             );
-            let mut chart = ChartBuilder::on(&root)
+            let mut chart = ChartBuilder::on(root)
                 .caption(&self.title, ("sans-serif", 22))
                 .margin(12)
                 .x_label_area_size(40)
@@ -306,7 +339,7 @@ impl Figure {
             );
             let mut thinned = thinned.into_iter();
             for (i, (s, pts)) in self.series.iter().zip(finite).enumerate() {
-                let color = PALETTE[i % PALETTE.len()];
+                let color = PALETTE[s.colour.unwrap_or(i) % PALETTE.len()];
                 match s.mark {
                     Mark::Line => chart
                         .draw_series(LineSeries::new(
@@ -373,6 +406,43 @@ impl Figure {
                 .position(SeriesLabelPosition::UpperRight)
                 .draw()
                 .map_err(draw_err)?;
+        }
+        Ok(())
+    }
+
+    /// Render and write atomically to `path`.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        write_atomic(path, self.to_svg()?.as_bytes())
+    }
+}
+
+/// Two figures on one canvas sharing the x axis: a main panel above a lower one of
+/// about a third of the height (e.g. measured − simulated under a compare plot).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Panels {
+    /// The main panel.
+    pub top: Figure,
+    /// The lower panel.
+    pub bottom: Figure,
+}
+
+/// Size in pixels of a two-panel figure, and the height of its upper panel.
+const PANELS_SIZE: (u32, u32) = (900, 720);
+const PANELS_SPLIT: u32 = 470;
+
+impl Panels {
+    /// Render to SVG text: both panels over the union of their x ranges.
+    pub fn to_svg(&self) -> Result<String> {
+        let (a0, a1) = self.top.x_range();
+        let (b0, b1) = self.bottom.x_range();
+        let x = (a0.min(b0), a1.max(b1));
+        let mut svg = String::new();
+        {
+            let root = SVGBackend::with_string(&mut svg, PANELS_SIZE).into_drawing_area();
+            root.fill(&WHITE).map_err(draw_err)?;
+            let (upper, lower) = root.split_vertically(PANELS_SPLIT);
+            self.top.draw_on(&upper, Some(x))?;
+            self.bottom.draw_on(&lower, Some(x))?;
             root.present().map_err(draw_err)?;
         }
         Ok(svg)
@@ -514,5 +584,46 @@ mod tests {
             a,
             thin_points(&[pts], (0.0, 3.0), (0.0, 3.0), (800, 400), DOT_BUDGET)
         );
+    }
+
+    #[test]
+    fn panels_share_the_x_range_and_show_both_titles() {
+        let x: Vec<f64> = (0..200).map(|k| k as f64).collect();
+        let top = Figure {
+            title: "upper title".into(),
+            x_label: "t (s)".into(),
+            y_label: "y".into(),
+            series: vec![Series::line(
+                "model",
+                x.clone(),
+                x.iter().map(|t| t.sin()).collect(),
+            )],
+            bands: vec![],
+        };
+        // The lower panel covers only half the time: its axis must still span all of it.
+        let bottom = Figure {
+            title: "lower title".into(),
+            x_label: "t (s)".into(),
+            y_label: "residual".into(),
+            series: vec![Series::line("r", x[..100].to_vec(), vec![0.5; 100])],
+            bands: vec![],
+        };
+        let top_alone = top.to_svg().unwrap();
+        let svg = Panels { top, bottom }.to_svg().unwrap();
+        assert!(svg.starts_with("<svg width=\"900\" height=\"720\""));
+        for needle in ["upper title", "lower title", "residual", "model"] {
+            assert!(svg.contains(needle), "missing {needle}");
+        }
+        // Tick labels beyond 150 can only be on an x axis (|y| ≤ 1 above, 0.5 below):
+        // the lower panel, whose data end at 99, has them too when the axis is shared.
+        let far_ticks = |svg: &str| {
+            svg.split("</text>")
+                .filter_map(|chunk| chunk.rsplit('>').next())
+                .filter_map(|t| t.trim().parse::<f64>().ok())
+                .filter(|v| *v >= 150.0)
+                .count()
+        };
+        assert!(far_ticks(&top_alone) >= 1);
+        assert_eq!(far_ticks(&svg), 2 * far_ticks(&top_alone));
     }
 }

@@ -173,6 +173,7 @@ pub fn run_predict_with(
     }
     files.push("prediction.json".into());
     files.push("report.md".into());
+    files.push("report.html".into());
     let summary = PredictSummary {
         model_kind: model.kind,
         free_run: FreeRunReport {
@@ -189,7 +190,7 @@ pub fn run_predict_with(
         &out.join("prediction.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
-    write_atomic(&out.join("report.md"), report(&summary).as_bytes())?;
+    crate::html::write_report(out, &report(&summary))?;
     Ok(summary)
 }
 
@@ -209,13 +210,13 @@ fn table(channels: &BTreeMap<String, ChannelMetrics>) -> String {
 fn report(s: &PredictSummary) -> String {
     let mut r = format!("# Prediction on new data\n\nModel: {}.\n\n", s.model_kind);
     r.push_str(&format!(
-        "## {} — samples {}..{} (t = {} … {} s)\n\nInitial state {:?}: {}.\n\n",
+        "## {} — samples {}..{} (t = {} … {} s)\n\nInitial state x0 = {}: {}.\n\n",
         s.free_run.horizon,
         s.scored.first,
         s.scored.end,
         s.scored.t_first,
         s.scored.t_last,
-        s.free_run.x0,
+        crate::words::numbers(&s.free_run.x0),
         s.free_run.x0_source
     ));
     if s.free_run.channels.is_empty() {
@@ -235,5 +236,7 @@ fn report(s: &PredictSummary) -> String {
         ));
         r.push_str(&table(&k.channels));
     }
+    r.push_str(crate::words::METRICS_MEANING);
+    r.push_str(&crate::html::figures_section(&s.files));
     r
 }

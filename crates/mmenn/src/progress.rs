@@ -3,8 +3,51 @@
 //! and library users pass [`NoProgress`] or a closure.
 //!
 //! Reporting only observes a job: it never changes what the job computes. Any workflow
-//! of this crate (fit's sizing sweep and trajectory refinement, estimate's phases, and
-//! discovery later) takes a `&dyn ProgressSink`.
+//! of this crate (fit's sizing sweep and trajectory refinement, compare's baselines,
+//! estimate's phases, and discovery later) takes a `&dyn ProgressSink`.
+//!
+//! # Reporting from a library function
+//!
+//! Take `progress: &dyn ProgressSink` as the last argument and keep the old entry point
+//! as a wrapper passing [`NoProgress`], so callers that do not care change nothing. Name
+//! each task in words a user understands, report `done` of `total` when the number of
+//! steps is known (the terminal then shows a bar with ETA) and `total: None` otherwise (a
+//! spinner), and call [`ProgressSink::finish`] when the task ends, or wrap a step that
+//! has no inner steps in [`stage`]. The sink is `Sync`: worker threads (rayon) may report
+//! through the same reference. A generic `P: ProgressSink` passes on as `&dyn` unchanged.
+//!
+//! For `discover` (the lead's module), the plan is: a stage per phase
+//! ("MME estimate", "localisation"), one task per round, `"discovery round {r} of
+//! {max}"`, advanced once per candidate term judged (`total` = candidates in the
+//! round, note = the candidate's name and its cost), and the free-run refinement
+//! reporting each calibration as a step.
+//!
+//! ```
+//! use mmenn::progress::{NoProgress, Progress, ProgressSink, stage};
+//!
+//! /// A library job reporting each of its steps.
+//! fn search(candidates: &[&str], progress: &dyn ProgressSink) -> usize {
+//!     let task = "candidate search";
+//!     for (k, c) in candidates.iter().enumerate() {
+//!         // … judge candidate c …
+//!         progress.report(&Progress::new(task, k + 1, Some(candidates.len())).with_note(*c));
+//!     }
+//!     progress.finish(task);
+//!     candidates.len()
+//! }
+//!
+//! /// A generic caller hands its sink on as `&dyn`.
+//! fn outer<P: ProgressSink>(progress: &P) -> usize {
+//!     stage(progress, "preparation", || ());
+//!     search(&["cubic stiffness", "Coulomb friction"], progress)
+//! }
+//!
+//! let lines = std::sync::Mutex::new(Vec::new());
+//! let log = |p: &Progress| lines.lock().unwrap().push(format!("{} {}", p.task, p.done));
+//! assert_eq!(outer(&log), 2);
+//! assert_eq!(search(&["x"], &NoProgress), 1);
+//! assert_eq!(lines.into_inner().unwrap().last().unwrap(), "candidate search 2");
+//! ```
 
 /// One report: `done` of `total` steps of `task` finished.
 #[derive(Debug, Clone, PartialEq)]
@@ -89,5 +132,24 @@ mod tests {
             seen,
             vec![("job".into(), 0, None), ("job".into(), 1, Some(2))]
         );
+    }
+
+    #[test]
+    fn one_sink_takes_reports_from_several_threads() {
+        let count = std::sync::atomic::AtomicUsize::new(0);
+        let sink = |_: &Progress| {
+            count.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        };
+        let dyn_sink: &dyn ProgressSink = &sink;
+        std::thread::scope(|s| {
+            for t in 0..4 {
+                s.spawn(move || {
+                    for k in 0..25 {
+                        dyn_sink.report(&Progress::new(format!("worker {t}"), k, Some(25)));
+                    }
+                });
+            }
+        });
+        assert_eq!(count.load(std::sync::atomic::Ordering::SeqCst), 100);
     }
 }

@@ -201,9 +201,13 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
     if let Some(h) = &model.hybrid {
         let net = &h.network;
         lines.push(format!(
-            "NN: tanh network, inputs (states, inputs) → corrections ({}); hidden units {:?}, {} weights; RK4 with {} sub-steps",
+            "NN: tanh network, inputs (states, inputs) → corrections ({}); hidden units per layer {}, {} weights; RK4 with {} sub-steps",
             lin.correction_names().join(", "),
-            net.hidden(),
+            net.hidden()
+                .iter()
+                .map(|h| h.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
             net.n_weights(),
             h.substeps
         ));

@@ -35,6 +35,30 @@ pub fn noise_method(m: NoiseMethod) -> &'static str {
     }
 }
 
+/// What a classifier's per-class scores are, in words.
+pub fn score_kind(k: condmon::ScoreKind) -> &'static str {
+    match k {
+        condmon::ScoreKind::Posterior => "posterior probability of each condition",
+        condmon::ScoreKind::VoteShare => {
+            "share of the nearest neighbours voting for each condition"
+        }
+    }
+}
+
+/// Numbers as `[1.2346e0, -3.0000e-1]` (four significant digits).
+pub fn numbers(values: &[f64]) -> String {
+    let v: Vec<String> = values.iter().map(|x| format!("{x:.4e}")).collect();
+    format!("[{}]", v.join(", "))
+}
+
+/// What the free-run metrics of a report mean (Markdown paragraph).
+pub const METRICS_MEANING: &str = "\n*Fit %* = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖): 100 is a \
+perfect match, 0 is no better than the record's mean, negative is worse. *R²* = 1 − \
+Σ(y − ŷ)² / Σ(y − mean y)². *RMSE*: root mean square of y − ŷ, in the channel's unit. \
+*Error variance*: variance of y − ŷ. ŷ is the model's simulation from the inputs (free run: \
+no measurement used after the initial state; k-step: restarted from the measurements k \
+samples back).\n";
+
 /// `a = 1.2345e0, b = …` with four significant digits.
 pub fn named_values(values: &BTreeMap<String, f64>) -> String {
     values
@@ -42,6 +66,21 @@ pub fn named_values(values: &BTreeMap<String, f64>) -> String {
         .map(|(k, v)| format!("{k} = {v:.4e}"))
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// A discovery verdict as `discovery.json` spells it, with what it means.
+pub fn verdict(v: discovery::Verdict) -> &'static str {
+    match v {
+        discovery::Verdict::Found => {
+            "found (named effects bring the model to the noise level; claimed)"
+        }
+        discovery::Verdict::None => {
+            "none (the model already simulates the data to the noise level)"
+        }
+        discovery::Verdict::Unexplained => {
+            "unexplained (something remains that no claimed set of catalogue terms explains)"
+        }
+    }
 }
 
 #[cfg(test)]
@@ -55,5 +94,7 @@ mod tests {
         assert!(!noise_method(NoiseMethod::Given).contains("Given"));
         let m: BTreeMap<String, f64> = [("v".to_string(), 5.25)].into_iter().collect();
         assert_eq!(named_values(&m), "v = 5.2500e0");
+        assert_eq!(numbers(&[1.0, -0.5]), "[1.0000e0, -5.0000e-1]");
+        assert!(!score_kind(condmon::ScoreKind::VoteShare).contains("Vote"));
     }
 }

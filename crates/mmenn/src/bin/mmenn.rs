@@ -257,12 +257,15 @@ struct CompareArgs {
 
 #[derive(Debug, Args)]
 struct DiscoverArgs {
+    /// List the catalogue of named effects (term, where it may enter) and exit.
+    #[arg(long)]
+    list_effects: bool,
     /// Estimation data file(s) (CSV).
-    #[arg(long, required = true, num_args = 1..)]
+    #[arg(long, required_unless_present = "list_effects", num_args = 1..)]
     data: Vec<PathBuf>,
     /// Model file (TOML).
-    #[arg(long)]
-    model: PathBuf,
+    #[arg(long, required_unless_present = "list_effects")]
+    model: Option<PathBuf>,
     /// Validation data file(s): they judge the free-run search's candidate sets and get
     /// their own before/after gap.
     #[arg(long, num_args = 1..)]
@@ -278,8 +281,52 @@ struct DiscoverArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Output directory.
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "list_effects")]
+    out: Option<PathBuf>,
+}
+
+/// Print the catalogue of named effects: name, label, term over placeholder variables,
+/// and the equations it may enter.
+#[allow(clippy::print_stdout)]
+fn list_effects() {
+    use mmenn::discovery::{Effect, EquationKind, Role, Slot};
+    println!(
+        "Named effects discover tries (term written over placeholders: x position, theta \
+         angle, v velocity, h level, x_j any state, u input):"
+    );
+    for e in Effect::ALL.into_iter().filter(|e| e.is_candidate()) {
+        let vars: Vec<&str> = e
+            .slots()
+            .iter()
+            .map(|s| match s {
+                Slot::Input => "u",
+                Slot::AnyState => "x_j",
+                Slot::State(roles) => match roles.first() {
+                    Some(Role::Velocity) => "v",
+                    Some(Role::Angle) => "theta",
+                    Some(Role::Level) => "h",
+                    _ => "x",
+                },
+            })
+            .collect();
+        // Sentinel values mark where each named parameter goes.
+        let sentinels = [0.111, 0.222];
+        let mut term = e.template(&vars, &sentinels[..e.parameters().len()]);
+        for (p, v) in e.parameters().iter().zip(["0.111", "0.222"]) {
+            term = term.replace(v, p);
+        }
+        let enters: Vec<&str> = e
+            .enters()
+            .iter()
+            .map(|k| match k {
+                EquationKind::Acceleration => "a velocity's equation (acceleration)",
+                EquationKind::Flow => "a level's equation (flow)",
+                _ => "any other equation",
+            })
+            .collect();
+        println!("  {:<28} {:<30} {term}", e.name(), e.label());
+        println!("  {:<28} enters {}", "", enters.join(", "));
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -609,8 +656,10 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
 #[allow(clippy::print_stdout)]
 fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
     println!(
-        "{label} — {} from x0 = {:?} ({}):",
-        r.horizon, r.x0, r.x0_source
+        "{label} — {} from x0 = {} ({}):",
+        r.horizon,
+        mmenn::words::numbers(&r.x0),
+        r.x0_source
     );
     for (name, m) in &r.channels {
         println!(
@@ -720,7 +769,7 @@ fn show(args: ShowArgs) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn compare(a: CompareArgs, force: bool) -> Result<()> {
+fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     let opts = mmenn::compare::CompareOptions {
         fit: mmenn::fit::FitOptions {
             max_hidden: a.max_hidden,
@@ -734,7 +783,14 @@ fn compare(a: CompareArgs, force: bool) -> Result<()> {
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
     let staged = stage(&a.out, "compare", force, &inputs)?;
-    let s = mmenn::compare::run_compare(&a.data, &a.model, &a.val, &opts, staged.path())?;
+    let s = mmenn::compare::run_compare_with_progress(
+        &a.data,
+        &a.model,
+        &a.val,
+        &opts,
+        staged.path(),
+        progress,
+    )?;
     staged.commit()?;
     for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
         println!("{} — {}:", t.title(), t.horizon());
@@ -762,6 +818,13 @@ fn compare(a: CompareArgs, force: bool) -> Result<()> {
 
 #[allow(clippy::print_stdout)]
 fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
+    if a.list_effects {
+        list_effects();
+        return Ok(());
+    }
+    let (Some(model), Some(out)) = (&a.model, &a.out) else {
+        bail!("--data, --model and --out are required");
+    };
     let opts = mmenn::discover::DiscoverOptions {
         max_rounds: a.max_rounds,
         seed: a.seed,
@@ -769,11 +832,11 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
         progress: !quiet,
         ..Default::default()
     };
-    let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
-    let staged = stage(&a.out, "discover", force, &inputs)?;
-    let s = mmenn::discover::run_discover(&a.data, &a.model, &a.val, &opts, staged.path())?;
+    let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([model]).collect();
+    let staged = stage(out, "discover", force, &inputs)?;
+    let s = mmenn::discover::run_discover(&a.data, model, &a.val, &opts, staged.path())?;
     staged.commit()?;
-    println!("verdict: {:?}", s.verdict);
+    println!("verdict: {}", mmenn::words::verdict(s.verdict));
     for e in &s.effects {
         println!(
             "  {} in {}: {} × {:.6} (free-run calibrated; {})",
@@ -811,7 +874,7 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
     if let Some(v) = &s.validation_gap {
         show("validation", v);
     }
-    println!("wrote {}", a.out.join(&s.model).display());
+    println!("wrote {}", out.join(&s.model).display());
     Ok(())
 }
 
@@ -900,7 +963,7 @@ fn main() -> ExitCode {
         Command::Fit(a) => fit(a, force, &progress),
         Command::Predict(a) => predict(a, force),
         Command::Show(a) => show(a),
-        Command::Compare(a) => compare(a, force),
+        Command::Compare(a) => compare(a, force, &progress),
         Command::Discover(a) => discover(a, force, cli.quiet),
         Command::Monitor(c) => monitor(c, force),
     };

@@ -19,7 +19,8 @@ pub(super) fn figures(
     y_before: &DMatrix<f64>,
     y_after: &DMatrix<f64>,
     out: &Path,
-) -> Result<()> {
+) -> Result<Vec<String>> {
+    let mut files = Vec::new();
     let exp = &data.experiments()[0];
     let t = exp.times();
     for (i, name) in spec.linear.output_names().iter().enumerate() {
@@ -61,6 +62,7 @@ pub(super) fn figures(
             bands: vec![],
         }
         .write(&out.join(format!("gap_{name}.svg")))?;
+        files.push(format!("gap_{name}.svg"));
     }
     if let Some(round) = s.rounds.first() {
         for p in &round.localisation.profiles {
@@ -81,9 +83,10 @@ pub(super) fn figures(
                     .collect(),
             }
             .write(&out.join(format!("d_{}_vs_{}.svg", p.equation, p.variable)))?;
+            files.push(format!("d_{}_vs_{}.svg", p.equation, p.variable));
         }
     }
-    Ok(())
+    Ok(files)
 }
 
 fn gap_table(g: &GapPair) -> String {
