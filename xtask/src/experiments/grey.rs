@@ -565,44 +565,92 @@ pub enum SilverboxExtra {
     QuadraticSpring,
     /// `−c2·y²·y'`: damping growing with the displacement (van der Pol-like).
     DisplacementDamping,
+    /// A first-order input stage of this held time constant (s), `w' = (u − w)/τ`, with
+    /// calibrated paths from `u` and from `w` into both the oscillator's acceleration and the
+    /// measured voltage: the input reaches the output through a zero (a relative degree
+    /// below two: direct coupling of the input into the measured voltage, and a drive
+    /// with a lead term `≈ −τ·u'`). Integrated with 4 RK4 sub-steps (`h/τ` ≈ 2, inside
+    /// the stability bound 2.8).
+    Feedthrough(f64),
 }
 
 /// [`silverbox_spec`] with extra terms (started at zero, calibrated with the others).
 pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Result<GreySpec> {
-    let linear = linear2(["y", "v"], 0, "v")?;
-    let mut a = DMatrix::zeros(2, 2);
+    let lag = extra.iter().find_map(|e| match e {
+        SilverboxExtra::Feedthrough(tau) => Some(*tau),
+        _ => None,
+    });
+    let n = if lag.is_some() { 3 } else { 2 };
+    let mut a = DMatrix::zeros(n, n);
     a[(0, 1)] = 1.0;
-    let linear = linear.with_ab(a, DMatrix::zeros(2, 1))?;
+    let mut names = vec!["y".to_string(), "v".to_string()];
+    if let Some(tau) = lag {
+        names.push("w".into());
+        a[(2, 2)] = -1.0 / tau;
+    }
+    let linear = LinearModel::with_names(
+        a,
+        DMatrix::from_fn(n, 1, |i, _| match (i, lag) {
+            (2, Some(tau)) => 1.0 / tau,
+            _ => 0.0,
+        }),
+        DMatrix::from_fn(1, n, |_, j| if j == 0 { 1.0 } else { 0.0 }),
+        DMatrix::from_fn(n, 1, |i, _| if i == 1 { 1.0 } else { 0.0 }),
+        ModelNames {
+            states: names,
+            inputs: vec!["u".into()],
+            outputs: vec!["y".into()],
+            corrections: vec!["v".into()],
+        },
+    )?;
     let mut specs = vec![
-        ("input_gain", "u", b),
-        ("input_offset", "1", 0.0),
-        ("linear_spring", "y", -k),
-        ("damping", "v", -c),
-        ("cubic_spring", "y^3", 0.0),
+        ("v", "input_gain", "u", b),
+        ("v", "input_offset", "1", 0.0),
+        ("v", "linear_spring", "y", -k),
+        ("v", "damping", "v", -c),
+        ("v", "cubic_spring", "y^3", 0.0),
     ];
     for e in extra {
         specs.push(match e {
-            SilverboxExtra::QuadraticSpring => ("quadratic_spring", "y^2", 0.0),
-            SilverboxExtra::DisplacementDamping => ("displacement_damping", "y^2*v", 0.0),
+            SilverboxExtra::QuadraticSpring => ("v", "quadratic_spring", "y^2", 0.0),
+            SilverboxExtra::DisplacementDamping => ("v", "displacement_damping", "y^2*v", 0.0),
+            SilverboxExtra::Feedthrough(_) => continue,
         });
+    }
+    if lag.is_some() {
+        specs.push(("y", "feedthrough_in", "u", 0.0));
+        specs.push(("y", "feedthrough_out", "w", 0.0));
+        specs.push(("v", "feedthrough_spring", "w", 0.0));
     }
     let free = (0..specs.len()).collect();
     let model = TermModel::from_specs(
         linear,
-        specs.iter().map(|(effect, term, coefficient)| TermSpec {
-            state: "v",
-            into: None,
-            effect,
-            term,
-            coefficient: *coefficient,
-        }),
+        specs
+            .iter()
+            .map(|(state, effect, term, coefficient)| TermSpec {
+                state,
+                into: None,
+                effect,
+                term,
+                coefficient: *coefficient,
+            }),
     )?;
     Ok(GreySpec {
         model,
         free,
         intersample: InterSample::Foh,
-        integrator: Integrator::Rk4 { substeps: 2 },
-        x0_guess: oscillator_x0,
+        integrator: Integrator::Rk4 {
+            substeps: if lag.is_some() { 4 } else { 2 },
+        },
+        x0_guess: if lag.is_some() {
+            |e| {
+                let mut x = oscillator_x0(e);
+                x.push(e.inputs()[(0, 0)]);
+                x
+            }
+        } else {
+            oscillator_x0
+        },
         horizons: vec![0.02, 0.1, 0.3, 1.0],
         test_from_training_x0: false,
     })
@@ -747,6 +795,7 @@ mod explore {
                 match key.as_str() {
                     "q" => extra.push(SilverboxExtra::QuadraticSpring),
                     "dd" => extra.push(SilverboxExtra::DisplacementDamping),
+                    "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
                     "sub" => substeps = v as usize,
                     _ => panic!("unknown key {key}"),
                 }

@@ -847,7 +847,7 @@ fn grey_candidates(
         Benchmark::CascadedTanks => {
             let base = grey::TanksOptions::default();
             let mut v = vec![(
-                "Torricelli outflows, overflows, pump threshold".to_string(),
+                "Torricelli outflows, overflows, pump offset".to_string(),
                 grey::tanks_model(&grey::TanksOptions {
                     linear_outflow: false,
                     ..base
@@ -867,16 +867,21 @@ fn grey_candidates(
                 ));
             }
             (
-                "physics-first grey box (√h outflows, both overflows, pump threshold)".into(),
+                "physics-first grey box (√h outflows, both overflows, pump offset)".into(),
                 v,
             )
         }
         Benchmark::Silverbox => {
             let (k, c, b) = oscillator_guess(&data.estimation.experiments()[0])?;
-            use grey::SilverboxExtra::{DisplacementDamping, QuadraticSpring};
+            use grey::SilverboxExtra::{DisplacementDamping, Feedthrough, QuadraticSpring};
             let mut v = vec![(
-                "cubic + quadratic spring, y²·y' damping".to_string(),
-                grey::silverbox_model(k, c, b, &[QuadraticSpring, DisplacementDamping])?,
+                "cubic + quadratic spring, y²·y' damping, input stage τ = 0.2 ms".to_string(),
+                grey::silverbox_model(
+                    k,
+                    c,
+                    b,
+                    &[QuadraticSpring, DisplacementDamping, Feedthrough(2e-4)],
+                )?,
             )];
             if mode == Mode::Full {
                 v.push(("cubic spring".into(), grey::silverbox_spec(k, c, b)?));
@@ -884,9 +889,14 @@ fn grey_candidates(
                     "cubic + quadratic spring".into(),
                     grey::silverbox_model(k, c, b, &[QuadraticSpring])?,
                 ));
+                v.push((
+                    "cubic + quadratic spring, y²·y' damping".into(),
+                    grey::silverbox_model(k, c, b, &[QuadraticSpring, DisplacementDamping])?,
+                ));
             }
             (
-                "physics-first grey box (polynomial spring and damping, input offset)".into(),
+                "physics-first grey box (polynomial spring and damping, input stage, input offset)"
+                    .into(),
                 v,
             )
         }
