@@ -659,8 +659,13 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
 #[cfg(test)]
 #[allow(clippy::print_stdout)]
 mod explore {
-    //! Exploration harness (ignored): `GREY_TANKS="rate=0.06 k2=1 smooth=0.2 sensor=2
-    //! lin=1 h1=10 h2=10 trainx0=1;…" cargo test --release -p xtask explore_tanks --
+    //! Exploration harness (ignored; reads /work/shared/data; prints training and test
+    //! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
+    //! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 trainx0 sub hz
+    //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
+    //! rates); `GREY_EMPS` keys eps asym g fv fc off sub full; `GREY_SB` keys q dd ft sub.
+    //! `GREY_DUMP=/tmp/prefix` writes the training and first test run as CSV. E.g.
+    //! `GREY_TANKS="pump0=1 lin=1 c=1" cargo test --release -p xtask explore_tanks --
     //! --ignored --nocapture`.
     use super::*;
     use mmenn::benchmarks::{Benchmark, load};
