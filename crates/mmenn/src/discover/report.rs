@@ -268,7 +268,7 @@ What remains must also look like noise: the **structure** of the judged free-run
 ",
                     q.lags,
                     q.lags,
-                    100.0 * j.level,
+                    100.0 * q.level,
                     q.statistic,
                     q.reference.iter().sum::<f64>() / q.reference.len().max(1) as f64,
                     q.threshold,
