@@ -609,8 +609,8 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
 #[allow(clippy::print_stdout)]
 fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
     println!(
-        "{label} — {} from x0 = {:?} ({}):",
-        r.horizon, r.x0, r.x0_source
+        "{label} — {}, {} scored, from x0 = {:?} ({}):",
+        r.horizon, r.scored, r.x0, r.x0_source
     );
     for (name, m) in &r.channels {
         println!(
@@ -706,6 +706,7 @@ fn predict(args: PredictArgs, force: bool) -> Result<()> {
                 horizon: k.horizon,
                 x0: k.x0.clone(),
                 x0_source: k.k_step_rule.clone().unwrap_or_default(),
+                scored: k.scored,
                 channels: k.channels.clone(),
             },
         );
