@@ -1,7 +1,9 @@
 //! `fit` then `predict` as library calls, in memory: MME/NN on the cubic
-//! mass–spring–damper's training record, then the hybrid model and the linear assumed
-//! model predicted free-run on the test record by the one judge (initial state fitted to
-//! the first 50 samples, every sample scored).
+//! mass–spring–damper's training record (the test record as validation data: MME on it
+//! gives the sweep's test set, as `mmenn fit --val`), then the hybrid model and the
+//! linear assumed model predicted free-run on the test record by the one judge (initial
+//! state fitted to the first 50 samples, every sample scored). `mmenn compare` with the
+//! same options gets the same two numbers (see `examples/compare.rs`).
 //!
 //! `cargo run --release -p mmenn --example fit_predict`
 
@@ -43,7 +45,7 @@ pub fn run() -> mmenn::Result<FitPredictExample> {
         x0_window: 50,
         ..FitOptions::default()
     };
-    let fit = compute_fit(&train.data, &spec, None, &opts, &NoProgress)?;
+    let fit = compute_fit(&train.data, &spec, Some(&test.data), &opts, &NoProgress)?;
     let hybrid = LoadedModel::from_hybrid(Path::new("model.json"), fit.model)?;
     let assumed = LoadedModel::from_spec(Path::new("model.toml"), spec)?;
     let popts = PredictOptions {
