@@ -218,20 +218,34 @@ pub fn score(
     predicted: &DMatrix<f64>,
     first: usize,
 ) -> Result<BTreeMap<String, ChannelMetrics>> {
-    if predicted.nrows() != names.len() || predicted.ncols() != exp.len() {
+    score_rows(names, exp.outputs(), predicted, first)
+}
+
+/// [`score`] on measured rows given as a matrix (`p × N`, NaN = missing), e.g. several
+/// records' scored samples side by side.
+pub fn score_rows(
+    names: &[String],
+    measured: &DMatrix<f64>,
+    predicted: &DMatrix<f64>,
+    first: usize,
+) -> Result<BTreeMap<String, ChannelMetrics>> {
+    if predicted.nrows() != names.len()
+        || measured.nrows() != names.len()
+        || predicted.ncols() != measured.ncols()
+    {
         return Err(CoreError::Shape {
             matrix: "predicted channels",
             rows: predicted.nrows(),
             cols: predicted.ncols(),
             expected_rows: names.len(),
-            expected_cols: exp.len(),
+            expected_cols: measured.ncols(),
         });
     }
     let mut out = BTreeMap::new();
     for (i, name) in names.iter().enumerate() {
-        let measured: Vec<f64> = exp.outputs().row(i).iter().skip(first).copied().collect();
+        let y: Vec<f64> = measured.row(i).iter().skip(first).copied().collect();
         let sim: Vec<f64> = predicted.row(i).iter().skip(first).copied().collect();
-        out.insert(name.clone(), channel_metrics(&measured, &sim)?);
+        out.insert(name.clone(), channel_metrics(&y, &sim)?);
     }
     Ok(out)
 }

@@ -25,7 +25,7 @@ pub use initial::{InitialStateFit, fit_initial_state};
 pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with};
 pub use judge::{
     DEFAULT_X0_WINDOW, InitialRule, JudgeOptions, Judgement, Observation, ScoredWindow,
-    judge_free_run, judge_k_step, score,
+    judge_free_run, judge_k_step, score, score_rows,
 };
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};
