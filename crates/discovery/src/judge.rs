@@ -339,14 +339,17 @@ pub fn judge(
             reason: "at least 8",
         });
     }
-    if !(config.level > 0.5 && config.level < 1.0)
-        || !(config.structure_level > 0.5 && config.structure_level < 1.0)
-    {
-        return Err(DiscoveryError::InvalidConfig {
-            field: "level",
-            value: config.level,
-            reason: "must lie in (0.5, 1)",
-        });
+    for (field, value) in [
+        ("level", config.level),
+        ("structure_level", config.structure_level),
+    ] {
+        if !(value > 0.5 && value < 1.0) {
+            return Err(DiscoveryError::InvalidConfig {
+                field,
+                value,
+                reason: "must lie in (0.5, 1)",
+            });
+        }
     }
     if let Some(&v) = protocol
         .noise_variance

@@ -10,27 +10,37 @@
 //! free-run judge ([`crate::model::judge_free_run`]: the numbers `mmenn predict` gives on
 //! the same record); the baselines start from its linear part. A baseline that cannot be
 //! fitted has no numbers: the table, the report and the terminal say so, with the reason.
+//!
+//! Every state-space row (assumed model, given model, linear OE, MME/NN) is judged by the
+//! one free-run judge of `sysid-core` on the first record of each dataset: initial state
+//! fitted to the first `x0_window` samples, every sample scored; each table's title states
+//! the record length and the window. NARX starts from its first measured delay window,
+//! which it does not score. [`compute_compare`] returns everything as values;
+//! [`write_compare`] writes the files.
 
 use std::path::{Path, PathBuf};
 
+use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_baselines::{
-    Evaluation, EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel,
-    ResidualAnalysis, ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions,
-    residual_analysis, suggest_lags,
+    EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel, ResidualAnalysis,
+    ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions, residual_analysis,
+    suggest_lags,
 };
-use sysid_core::{Dataset, Horizon, Model};
+use sysid_core::{
+    Dataset, Experiment, Horizon, InitialRule, JudgeOptions, Judgement, LinearModel, Observation,
+};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
-use crate::fit::{FitOptions, HybridFile, HybridModel};
-use crate::model::{InitialRule, LoadedModel, ModelKind, Observation, judge_free_run};
-use crate::model_file::{ModelSpec, write_model};
+use crate::fit::{FitOptions, FitOutcome, HybridModel, compute_fit, judge_outputs, write_fit};
+use crate::model::{LoadedModel, ModelKind, evaluation, judge_free_run};
+use crate::model_file::ModelSpec;
 use crate::plot::{Figure, Panels, Series};
 use crate::progress::{NoProgress, ProgressSink, stage};
 
-/// Progress task of the free-run evaluation, residual analysis and figures.
-const EVALUATION: &str = "free-run evaluation and figures";
+/// Progress task of the figures and reports.
+const EVALUATION: &str = "figures and report";
 
 /// Row label of the model given with `--model` when it is more than its linear part.
 pub const GIVEN_MODEL_ROW: &str = "given model";
@@ -43,9 +53,6 @@ pub struct Failure {
     /// Why.
     pub reason: String,
 }
-
-/// A model's free-run simulation over a dataset, one prediction per experiment.
-type SimFn<'a> = dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>> + 'a;
 
 /// Options of [`run_compare`].
 #[derive(Debug, Clone, PartialEq)]
@@ -114,115 +121,113 @@ fn default_free(spec: &ModelSpec) -> Vec<String> {
     free
 }
 
-/// The hybrid model with its initial state from the one free-run judge on `data`'s first
-/// experiment (the rule and numbers of `mmenn predict`: fitted to the first `window`
-/// samples). The records carry the model file's `intersample`, which this fit and the
-/// hybrid model's free runs (`Model::simulate`) follow, and so do the linear baselines
-/// (the assumed model and the output-error fit are `OeModel`s, simulated and fitted with
-/// the exact discretisation of each record's hold); NARX reads the samples only.
-fn hybrid_for(file: &HybridFile, data: &Dataset, window: usize) -> Result<HybridModel> {
-    let loaded = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), file.clone())?;
-    let judged = judge_free_run(
-        &loaded,
+/// A state-space model judged by the one free-run judge on the first record of `data`,
+/// on its outputs, the initial state fitted to the first `window` samples (every sample
+/// scored): for a model file, the rule and numbers of `mmenn predict`.
+fn judge_linear(lin: &LinearModel, data: &Dataset, window: usize) -> Result<Judgement> {
+    sysid_core::judge_free_run(
+        lin,
         &data.experiments()[0],
-        &Observation::outputs(&loaded),
+        &Observation::outputs(lin),
         &InitialRule::Fit {
             window: Some(window),
         },
-    )?;
-    let mut model = file.model()?;
-    model.x0 = judged.x0;
-    Ok(model)
+        &JudgeOptions::default(),
+    )
+    .map_err(|source| MmennError::Core {
+        context: "judging a linear model free-run",
+        source,
+    })
+}
+
+/// Every model of one comparison judged on one dataset: the table and each model's
+/// predicted outputs on the first record (for the figures).
+struct Judged {
+    table: EvaluationTable,
+    runs: Vec<(String, DMatrix<f64>)>,
+    /// The hybrid model with the initial state its judgement found (residual analysis).
+    hybrid: HybridModel,
 }
 
 /// The models of one comparison (a baseline that could not be fitted is `None`).
 struct Models<'a> {
-    assumed: &'a OeModel,
+    assumed: &'a LinearModel,
     oe: Option<&'a OeModel>,
     narx: Option<&'a NarxModel>,
     given: Option<&'a LoadedModel>,
+    hybrid: &'a LoadedModel,
     window: usize,
 }
 
-/// The given model's free run on the first experiment of `data` by the one free-run
-/// judge (initial state fitted to the first `window` samples), with what it observed.
-fn run_given(
-    given: &LoadedModel,
-    data: &Dataset,
-    window: usize,
-) -> Result<(crate::model::Judgement, Observation)> {
-    let obs = Observation::outputs(given);
-    let j = judge_free_run(
-        given,
-        &data.experiments()[0],
-        &obs,
-        &InitialRule::Fit {
-            window: Some(window),
-        },
-    )?;
-    Ok((j, obs))
-}
-
-/// The given model judged on the first experiment of `data` by the one free-run judge.
-fn judge_given(given: &LoadedModel, data: &Dataset, window: usize) -> Result<Evaluation> {
-    let (j, obs) = run_given(given, data, window)?;
-    Ok(j.evaluation(&obs.names))
-}
-
-/// The given model's free run on the first experiment, as a prediction.
-fn given_prediction(
-    given: &LoadedModel,
-    data: &Dataset,
-    window: usize,
-) -> Result<Vec<sysid_core::Prediction>> {
-    let (j, _) = run_given(given, data, window)?;
-    Ok(vec![sysid_core::Prediction {
-        horizon: Horizon::FreeRun,
-        outputs: j.outputs,
-        initial_samples: 0,
-    }])
-}
-
-fn table(
-    title: &str,
-    data: &Dataset,
-    models: &Models<'_>,
-    hybrid: &HybridModel,
-) -> Result<EvaluationTable> {
-    let mut t = EvaluationTable::new(title, Horizon::FreeRun);
-    t.push(
-        "assumed model",
-        evaluate(models.assumed, data, Horizon::FreeRun)?,
-    )?;
+fn judge_all(title: &str, data: &Dataset, models: &Models<'_>) -> Result<Judged> {
+    let mut table = EvaluationTable::new(title, Horizon::FreeRun);
+    let mut runs = Vec::new();
+    let names = data.output_names();
+    let mut push = |label: &str, j: &Judgement, runs: &mut Vec<(String, DMatrix<f64>)>| {
+        runs.push((label.to_string(), j.outputs.clone()));
+        table.push(label, evaluation(j, &names))
+    };
+    let j = judge_linear(models.assumed, data, models.window)?;
+    push("assumed model", &j, &mut runs)?;
     if let Some(g) = models.given {
-        t.push(GIVEN_MODEL_ROW, judge_given(g, data, models.window)?)?;
+        let j = judge_free_run(
+            g,
+            &data.experiments()[0],
+            &g.outputs(),
+            &InitialRule::Fit {
+                window: Some(models.window),
+            },
+        )?;
+        push(GIVEN_MODEL_ROW, &j, &mut runs)?;
     }
     if let Some(oe) = models.oe {
-        t.push("linear OE", evaluate(oe, data, Horizon::FreeRun)?)?;
+        let j = judge_linear(&oe.model, data, models.window)?;
+        push("linear OE", &j, &mut runs)?;
     }
     if let Some(narx) = models.narx {
-        t.push("NARX", evaluate(narx, data, Horizon::FreeRun)?)?;
+        let ev = evaluate(narx, data, Horizon::FreeRun)?;
+        let mut p = predictions(narx, data, Horizon::FreeRun)?;
+        runs.push(("NARX".to_string(), p.swap_remove(0).outputs));
+        table.push("NARX", ev)?;
     }
-    t.push("MME/NN", evaluate(hybrid, data, Horizon::FreeRun)?)?;
-    Ok(t)
+    let j = judge_outputs(models.hybrid, data, models.window)?;
+    let mut hybrid = match &models.hybrid.hybrid {
+        Some(file) => file.model()?,
+        None => unreachable_hybrid()?,
+    };
+    hybrid.x0 = j.x0.clone();
+    table.push("MME/NN", evaluation(&j, &names))?;
+    runs.push(("MME/NN".to_string(), j.outputs));
+    Ok(Judged {
+        table,
+        runs,
+        hybrid,
+    })
+}
+
+/// `fit` always returns a hybrid model; this names the impossible case as an error.
+fn unreachable_hybrid() -> Result<HybridModel> {
+    Err(MmennError::Core {
+        context: "the MME/NN model of the comparison",
+        source: sysid_core::CoreError::InvalidArgument {
+            name: "model kind",
+            value: 0.0,
+            reason: "fit did not return a hybrid model",
+        },
+    })
 }
 
 fn compare_figures(
     which: &str,
-    data: &Dataset,
-    models: &[(&str, &SimFn<'_>)],
+    exp: &Experiment,
+    names: &[String],
+    runs: &[(String, DMatrix<f64>)],
     tab: &EvaluationTable,
     units: &std::collections::BTreeMap<String, String>,
     out: &Path,
-) -> Result<Vec<String>> {
-    let exp = &data.experiments()[0];
+) -> Result<()> {
     let t = exp.times();
-    let preds: Vec<(&str, sysid_core::Prediction)> = models
-        .iter()
-        .map(|(n, f)| f(data).map(|mut p| (*n, p.swap_remove(0))))
-        .collect::<Result<_>>()?;
-    let mut files = Vec::new();
-    for (i, name) in data.output_names().iter().enumerate() {
+    for (i, name) in names.iter().enumerate() {
         let measured: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
         let mut series = vec![Series::points(
             format!("{name} measured"),
@@ -230,35 +235,35 @@ fn compare_figures(
             measured.clone(),
         )];
         // Measured − simulated per model (NaN where the record has no sample or the
-        // model no prediction yet, e.g. NARX's delay line).
-        let residuals: Vec<Series> = preds
+        // model no prediction yet, e.g. NARX's delay line), in the colour of the model's
+        // line above (the measurement is entry 0).
+        let residuals: Vec<Series> = runs
             .iter()
             .enumerate()
-            .map(|(k, (label, p))| {
+            .map(|(k, (label, y))| {
                 Series::line(
-                    *label,
+                    label.clone(),
                     t.clone(),
                     measured
                         .iter()
-                        .zip(p.outputs.row(i).iter())
+                        .zip(y.row(i).iter())
                         .map(|(m, s)| m - s)
                         .collect(),
                 )
-                // The colour of the model's line above (the measurement is entry 0).
                 .coloured(k + 1)
             })
             .collect();
-        for (label, p) in &preds {
+        for (label, y) in runs {
             let fit = tab
                 .rows()
                 .iter()
-                .find(|r| r.label == *label)
+                .find(|r| &r.label == label)
                 .and_then(|r| r.evaluation.channel(name))
                 .map_or(f64::NAN, |m| m.fit_percent);
             series.push(Series::line(
                 format!("{label} (fit {fit:.1} %)"),
                 t.clone(),
-                p.outputs.row(i).iter().copied().collect(),
+                y.row(i).iter().copied().collect(),
             ));
         }
         let y_label = match units.get(name) {
@@ -281,11 +286,25 @@ fn compare_figures(
                 bands: vec![],
             },
         };
-        let file = format!("compare_{which}_{name}.svg");
-        fig.write(&out.join(&file))?;
-        files.push(file);
+        fig.write(&out.join(compare_figure_file(which, name)))?;
     }
-    Ok(files)
+    Ok(())
+}
+
+fn compare_figure_file(which: &str, name: &str) -> String {
+    format!("compare_{which}_{name}.svg")
+}
+
+fn residual_files(label: &str, r: &ResidualAnalysis) -> Vec<String> {
+    let tag = label.replace(['/', ' '], "_");
+    let mut files = Vec::new();
+    for ch in &r.channels {
+        files.push(format!("residual_acf_{tag}_{}.svg", ch.output));
+        for x in &ch.cross {
+            files.push(format!("residual_xcf_{tag}_{}_{}.svg", ch.output, x.input));
+        }
+    }
+    files
 }
 
 fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<String>> {
@@ -343,7 +362,8 @@ fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<
 }
 
 /// Fit every model on the estimation data and compare them free-run on it and on the
-/// validation data; write the table, figures and `compare.json` into `out`.
+/// validation data; write the table, figures and `compare.json` into `out`: reads the
+/// files, [`compute_compare`], [`write_compare`].
 pub fn run_compare(
     data_paths: &[PathBuf],
     model_path: &Path,
@@ -366,25 +386,65 @@ pub fn run_compare_with_progress(
     progress: &dyn ProgressSink,
 ) -> Result<CompareSummary> {
     let loaded = LoadedModel::read(model_path)?;
+    let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &loaded.spec)?;
+    let outcome = compute_compare_with_progress(&data, &loaded, val.as_ref(), opts, progress)?;
+    progress.report(&crate::progress::Progress::new(EVALUATION, 0, None));
+    write_compare(&outcome, out)?;
+    progress.finish(EVALUATION);
+    Ok(outcome.summary)
+}
+
+/// Each model's predicted outputs on one record (`p × N`), by row label.
+pub type Runs = Vec<(String, DMatrix<f64>)>;
+
+/// Everything `mmenn compare` computes, as values ([`write_compare`] writes it).
+#[derive(Debug, Clone)]
+pub struct CompareOutcome {
+    /// What `compare.json` holds.
+    pub summary: CompareSummary,
+    /// The MME/NN fit (written into `mme_nn/`).
+    pub fit: FitOutcome,
+    /// The first estimation record.
+    pub estimation_record: Experiment,
+    /// Each model's predicted outputs on it (`p × N`), by row label.
+    pub estimation_runs: Runs,
+    /// The first validation record and each model's predicted outputs on it.
+    pub validation_runs: Option<(Experiment, Runs)>,
+    /// The output channels, in order.
+    pub outputs: Vec<String>,
+    /// Units by channel name (the model file's).
+    pub units: std::collections::BTreeMap<String, String>,
+}
+
+/// `mmenn compare` without files: fit every model on `data` and judge each free-run on
+/// the first record of `data` and of `val`. State-space models (the assumed model, the
+/// given model, the output-error fit, MME/NN) are judged by the one judge (initial state
+/// fitted to the first `x0_window` samples, every sample scored); NARX starts from its
+/// first measured delay window, which it does not score.
+pub fn compute_compare(
+    data: &Dataset,
+    loaded: &LoadedModel,
+    val: Option<&Dataset>,
+    opts: &CompareOptions,
+) -> Result<CompareOutcome> {
+    compute_compare_with_progress(data, loaded, val, opts, &NoProgress)
+}
+
+/// [`compute_compare`], reporting each baseline's fit and the MME/NN fit (its sweep and
+/// refinement step by step) to `progress`. The results do not depend on the sink.
+pub fn compute_compare_with_progress(
+    data: &Dataset,
+    loaded: &LoadedModel,
+    val: Option<&Dataset>,
+    opts: &CompareOptions,
+    progress: &dyn ProgressSink,
+) -> Result<CompareOutcome> {
     let spec = loaded.spec.clone();
     let lin = spec.linear.clone();
-    let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
-    ensure_dir(out)?;
-    // `fit` reads a model file: a hybrid model's model-file part is written out for it.
-    let fit_model_path = if loaded.kind == ModelKind::Hybrid {
-        let p = out.join("model.toml");
-        write_model(&p, &spec)?;
-        p
-    } else {
-        model_path.to_path_buf()
-    };
-    let given = (loaded.kind != ModelKind::Assumed).then_some(&loaded);
-
-    // Both linear models get their initial state the same way as the hybrid model: least
-    // squares over the first `x0_window` samples (which their metrics then skip).
-    let window = opts.fit.x0_window.max(10 * lin.n_states());
-    let mut assumed = OeModel::new(lin.clone());
-    assumed.observer_window = window;
+    let data = &data.clone().with_intersample(spec.intersample);
+    let val = val.map(|v| v.clone().with_intersample(spec.intersample));
+    let given = (loaded.kind != ModelKind::Assumed).then_some(loaded);
+    let window = opts.fit.x0_window;
     let oe_config = OeConfig {
         free: opts.oe_free.clone().unwrap_or_else(|| default_free(&spec)),
         ..OeConfig::default()
@@ -392,22 +452,21 @@ pub fn run_compare_with_progress(
     let mut failures = Vec::new();
     // A baseline that cannot be fitted (e.g. a free parameter the data cannot identify)
     // does not stop the comparison: it has no row, and the summary says why.
-    let (oe_model, oe_parameters, oe_error) = match stage(progress, "linear OE fit", || {
-        fit_oe(&lin, &data, &oe_config)
-    }) {
-        Ok(f) => {
-            let mut m = f.model;
-            m.observer_window = window;
-            (Some(m), f.parameters, None)
-        }
-        Err(e) => {
-            failures.push(Failure {
-                model: "linear OE".into(),
-                reason: e.to_string(),
-            });
-            (None, Vec::new(), Some(e.to_string()))
-        }
-    };
+    let (oe_model, oe_parameters, oe_error) =
+        match stage(progress, "linear OE fit", || fit_oe(&lin, data, &oe_config)) {
+            Ok(f) => {
+                let mut m = f.model;
+                m.observer_window = window.max(10 * lin.n_states());
+                (Some(m), f.parameters, None)
+            }
+            Err(e) => {
+                failures.push(Failure {
+                    model: "linear OE".into(),
+                    reason: e.to_string(),
+                });
+                (None, Vec::new(), Some(e.to_string()))
+            }
+        };
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
             na: l,
@@ -416,7 +475,7 @@ pub fn run_compare_with_progress(
         },
         None => {
             let s = suggest_lags(
-                &data,
+                data,
                 &SuggestionConfig {
                     max_lag: opts.max_narx_lag,
                     ..SuggestionConfig::default()
@@ -431,7 +490,7 @@ pub fn run_compare_with_progress(
     };
     let narx = match stage(progress, "NARX fit", || {
         fit_narx(
-            &data,
+            data,
             &NarxConfig {
                 orders,
                 seed: opts.fit.seed,
@@ -448,114 +507,43 @@ pub fn run_compare_with_progress(
             None
         }
     };
-    let fit_dir = out.join("mme_nn");
-    crate::fit::run_fit_with_progress(
-        data_paths,
-        &fit_model_path,
-        val_paths,
-        &opts.fit,
-        &fit_dir,
-        progress,
-    )?;
-    progress.report(&crate::progress::Progress::new(EVALUATION, 0, None));
-    let text =
-        std::fs::read_to_string(fit_dir.join("model.json")).map_err(|source| MmennError::Io {
-            path: fit_dir.join("model.json"),
-            source,
-        })?;
-    let file: HybridFile = serde_json::from_str(&text)?;
+    let fit = compute_fit(data, &spec, val.as_ref(), &opts.fit, progress)?;
+    let hybrid = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), fit.model.clone())?;
     let models = Models {
-        assumed: &assumed,
+        assumed: &lin,
         oe: oe_model.as_ref(),
         narx: narx.as_ref(),
         given,
-        window: opts.fit.x0_window,
+        hybrid: &hybrid,
+        window,
     };
-
-    let mut files = vec!["mme_nn/".to_string()];
-    if loaded.kind == ModelKind::Hybrid {
-        files.push("model.toml".into());
-    }
-    let hybrid_est = hybrid_for(&file, &data, opts.fit.x0_window)?;
-    let estimation = table(
-        "free-run simulation, estimation data",
-        &data,
-        &models,
-        &hybrid_est,
-    )?;
-    type Sim<'a> = Box<dyn Fn(&Dataset) -> Result<Vec<sysid_core::Prediction>> + 'a>;
-    let sims = |h: &HybridModel| -> Vec<(&'static str, Sim<'_>)> {
-        let h = h.clone();
-        let mut v: Vec<(&'static str, Sim<'_>)> = vec![(
-            "assumed model",
-            Box::new(|d: &Dataset| Ok(predictions(&assumed, d, Horizon::FreeRun)?)),
-        )];
-        if let Some(g) = given {
-            let w = opts.fit.x0_window;
-            v.push((
-                GIVEN_MODEL_ROW,
-                Box::new(move |d: &Dataset| given_prediction(g, d, w)),
-            ));
-        }
-        if let Some(oe) = &oe_model {
-            v.push((
-                "linear OE",
-                Box::new(move |d: &Dataset| Ok(predictions(oe, d, Horizon::FreeRun)?)),
-            ));
-        }
-        if let Some(narx) = &narx {
-            v.push((
-                "NARX",
-                Box::new(move |d: &Dataset| Ok(predictions(narx, d, Horizon::FreeRun)?)),
-            ));
-        }
-        v.push((
-            "MME/NN",
-            Box::new(move |d: &Dataset| {
-                Ok(vec![h.simulate(&d.experiments()[0]).map_err(|source| {
-                    MmennError::Core {
-                        context: "MME/NN free run",
-                        source,
-                    }
-                })?])
-            }),
-        ));
-        v
+    let scope = |which: &str, d: &Dataset| {
+        let exp = &d.experiments()[0];
+        format!(
+            "free-run simulation, {which} data, first record ({} samples; state-space models: initial state fitted to the first {} samples, every sample scored)",
+            exp.len(),
+            window.min(exp.len())
+        )
     };
-    let est_sims = sims(&hybrid_est);
-    let refs: Vec<(&str, &SimFn<'_>)> = est_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
-    files.extend(compare_figures(
-        "estimation",
-        &data,
-        &refs,
-        &estimation,
-        &spec.units,
-        out,
-    )?);
-
-    let (validation, hybrid_res, res_data) = match &val {
+    let est = judge_all(&scope("estimation", data), data, &models)?;
+    let (validation, validation_runs, hybrid_res, res_data) = match &val {
         Some(v) => {
-            let hv = hybrid_for(&file, v, opts.fit.x0_window)?;
-            let tab = table("free-run simulation, validation data", v, &models, &hv)?;
-            let val_sims = sims(&hv);
-            let refs: Vec<(&str, &SimFn<'_>)> =
-                val_sims.iter().map(|(n, f)| (*n, f.as_ref())).collect();
-            files.extend(compare_figures(
-                "validation",
+            let j = judge_all(&scope("validation", v), v, &models)?;
+            (
+                Some(j.table),
+                Some((v.experiments()[0].clone(), j.runs)),
+                j.hybrid,
                 v,
-                &refs,
-                &tab,
-                &spec.units,
-                out,
-            )?);
-            (Some(tab), hv, v)
+            )
         }
-        None => (None, hybrid_est.clone(), &data),
+        None => (None, None, est.hybrid.clone(), data),
     };
     let rc = ResidualConfig::default();
+    let mut assumed_oe = OeModel::new(lin.clone());
+    assumed_oe.observer_window = window.max(10 * lin.n_states());
     let mut residuals = vec![(
         "assumed model".to_string(),
-        residual_analysis(&assumed, res_data, 0, Horizon::FreeRun, &rc)?,
+        residual_analysis(&assumed_oe, res_data, 0, Horizon::FreeRun, &rc)?,
     )];
     if let Some(oe) = &oe_model {
         residuals.push((
@@ -573,13 +561,13 @@ pub fn run_compare_with_progress(
         "MME/NN".to_string(),
         residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc)?,
     ));
-    for (label, r) in &residuals {
-        files.extend(residual_figure(label, r, out)?);
-    }
+    let judge_rule = format!(
+        "the one free-run judge: initial state fitted by least squares to the first {window} samples (from the minimum-norm solution of C x = y(t0)), every sample scored (the rule and numbers of `mmenn predict`)"
+    );
     let mut initialisation = vec![(
         "assumed model".to_string(),
         format!(
-            "{}initial state estimated by least squares from the first {window} samples, which the metrics skip",
+            "{}{judge_rule}",
             if loaded.kind == ModelKind::Assumed {
                 String::new()
             } else {
@@ -599,17 +587,18 @@ pub fn run_compare_with_progress(
         initialisation.push((
             GIVEN_MODEL_ROW.to_string(),
             format!(
-                "{} as read from {}: initial state fitted by least squares to the first {} samples, every sample scored (the rule and numbers of `mmenn predict`)",
+                "{} as read from {}: {judge_rule}{}",
                 loaded.kind,
-                model_path.display(),
-                opts.fit.x0_window
+                loaded.path.display(),
+                if loaded.stored_state().is_some() {
+                    "; the state stored in the model is a second start of the fit"
+                } else {
+                    ""
+                }
             ),
         ));
     }
-    initialisation.push((
-        "linear OE".to_string(),
-        "same as the assumed model".to_string(),
-    ));
+    initialisation.push(("linear OE".to_string(), judge_rule.clone()));
     initialisation.push((
         "NARX".to_string(),
         format!(
@@ -619,16 +608,34 @@ pub fn run_compare_with_progress(
     ));
     initialisation.push((
         "MME/NN".to_string(),
+        format!("{judge_rule}; MME's x̂(t0) of the training record (stored in mme_nn/model.json) is a second start of the fit"),
+    ));
+    initialisation.push((
+        "residual analysis".to_string(),
         format!(
-            "initial state fitted to the first {} samples (not skipped), as for the given model and `mmenn predict`; every state is simulated",
-            opts.fit.x0_window
+            "the assumed model and linear OE start from a least-squares state over the first {} samples, which the residuals skip; NARX as above; MME/NN from its judged initial state",
+            window.max(10 * lin.n_states())
         ),
     ));
+    let outputs = data.output_names();
+    let mut files = vec!["mme_nn/".to_string()];
+    let mut figure_files = |which: &str| {
+        for name in &outputs {
+            files.push(compare_figure_file(which, name));
+        }
+    };
+    figure_files("estimation");
+    if val.is_some() {
+        figure_files("validation");
+    }
+    for (label, r) in &residuals {
+        files.extend(residual_files(label, r));
+    }
     files.push("compare.json".into());
     files.push("report.md".into());
     files.push("report.html".into());
     let summary = CompareSummary {
-        estimation,
+        estimation: est.table,
         validation,
         narx_orders: orders,
         oe_parameters,
@@ -639,13 +646,44 @@ pub fn run_compare_with_progress(
         residuals,
         files,
     };
+    Ok(CompareOutcome {
+        summary,
+        fit,
+        estimation_record: data.experiments()[0].clone(),
+        estimation_runs: est.runs,
+        validation_runs,
+        outputs,
+        units: spec.units.clone(),
+    })
+}
+
+/// Write what [`compute_compare`] computed into `out`: `mme_nn/` (the fit), the compare
+/// and residual figures, `compare.json` and `report.md`.
+pub fn write_compare(o: &CompareOutcome, out: &Path) -> Result<()> {
+    ensure_dir(out)?;
+    write_fit(&o.fit, &out.join("mme_nn"))?;
+    let s = &o.summary;
+    compare_figures(
+        "estimation",
+        &o.estimation_record,
+        &o.outputs,
+        &o.estimation_runs,
+        &s.estimation,
+        &o.units,
+        out,
+    )?;
+    if let (Some((exp, runs)), Some(tab)) = (&o.validation_runs, &s.validation) {
+        compare_figures("validation", exp, &o.outputs, runs, tab, &o.units, out)?;
+    }
+    for (label, r) in &s.residuals {
+        residual_figure(label, r, out)?;
+    }
     write_atomic(
         &out.join("compare.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
+        serde_json::to_string_pretty(s)?.as_bytes(),
     )?;
-    crate::html::write_report(out, &compare_report(&summary))?;
-    progress.finish(EVALUATION);
-    Ok(summary)
+    crate::html::write_report(out, &compare_report(s))?;
+    Ok(())
 }
 
 fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {

@@ -11,9 +11,7 @@ use discovery::Verdict;
 use discovery::workflow::{self, Observer, WorkflowConfig};
 use nalgebra::DMatrix;
 use serde::Serialize;
-use sysid_core::{
-    Dataset, InitialStateFit, MmeEstimate, TermModel, channel_metrics, fit_initial_state,
-};
+use sysid_core::{Dataset, MmeEstimate, TermModel};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
@@ -194,44 +192,28 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
     move |source| MmennError::Core { context, source }
 }
 
-/// Free-run of a model over the first experiment, from an initial state fitted to its first
-/// samples (starting from `guess`); fit % and RMSE per output.
-fn free_run_gap(
-    model: &TermModel,
-    spec: &ModelSpec,
-    data: &Dataset,
-    guess: &[f64],
-    window: usize,
-) -> Result<(Gap, DMatrix<f64>)> {
+/// Free run of a model over the first record of `data`, judged by the one judge
+/// (`sysid_core::judge_free_run`: initial state fitted to the first `window` samples,
+/// every sample scored — the numbers `predict` and `compare` give for the same model);
+/// fit % and RMSE per output, and the simulated outputs.
+fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap, DMatrix<f64>)> {
     let exp = &data.experiments()[0];
-    let c = spec.linear.c();
-    let fit = InitialStateFit {
-        window,
-        ..InitialStateFit::default()
-    };
-    let x0 = fit_initial_state(model, c, exp, guess, &fit)
-        .map_err(core("fitting the free-run initial state"))?;
-    let xs = sysid_core::simulate_with(
+    let judged = sysid_core::judge_free_run(
         model,
-        &x0,
-        exp.t0(),
-        exp.dt(),
-        exp.inputs(),
-        exp.intersample(),
-        &fit.integrator,
-        fit.blow_up,
+        exp,
+        &sysid_core::judge::Observation::outputs(model.linear()),
+        &sysid_core::judge::InitialRule::Fit {
+            window: Some(window),
+        },
+        &sysid_core::judge::JudgeOptions::default(),
     )
-    .map_err(core("free-run simulation"))?;
-    let y = c * xs;
+    .map_err(core("judging the free run"))?;
     let mut gap = Gap::default();
-    for (i, name) in spec.linear.output_names().iter().enumerate() {
-        let meas: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
-        let sim: Vec<f64> = y.row(i).iter().copied().collect();
-        let m = channel_metrics(&meas, &sim).map_err(core("free-run metrics"))?;
+    for (name, m) in &judged.channels {
         gap.fit_percent.insert(name.clone(), m.fit_percent);
         gap.rmse.insert(name.clone(), m.rmse);
     }
-    Ok((gap, y))
+    Ok((gap, judged.outputs))
 }
 
 /// Run the discovery workflow and write `discovery.json`, `model.discovered.toml`,
@@ -278,14 +260,7 @@ pub fn run_discover(
         &observer,
     )?;
 
-    let x0_guess: Vec<f64> = outcome.first_estimate.experiments[0]
-        .states
-        .column(0)
-        .iter()
-        .copied()
-        .collect();
-    let (mut before, y_before) =
-        free_run_gap(&base_model, &original, &data, &x0_guess, opts.x0_window)?;
+    let (mut before, y_before) = free_run_gap(&base_model, &data, opts.x0_window)?;
     before.d_rms = workflow::d_rms(&outcome.first_estimate);
     let mut spec = original.clone();
     spec.terms.extend(outcome.added.iter().map(|t| TermEntry {
@@ -296,14 +271,14 @@ pub fn run_discover(
         coefficient: t.coefficient,
     }));
     let final_model = &outcome.model;
-    let (mut after, y_after) = free_run_gap(final_model, &spec, &data, &x0_guess, opts.x0_window)?;
+    let (mut after, y_after) = free_run_gap(final_model, &data, opts.x0_window)?;
     if let Some(est) = &outcome.final_estimate {
         after.d_rms = workflow::d_rms(est);
     }
     let validation_gap = match &val {
         Some(v) => Some(GapPair {
-            before: free_run_gap(&base_model, &original, v, &x0_guess, opts.x0_window)?.0,
-            after: free_run_gap(final_model, &spec, v, &x0_guess, opts.x0_window)?.0,
+            before: free_run_gap(&base_model, v, opts.x0_window)?.0,
+            after: free_run_gap(final_model, v, opts.x0_window)?.0,
         }),
         None => None,
     };

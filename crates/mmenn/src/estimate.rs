@@ -12,7 +12,7 @@ use sysid_core::{Dataset, MmeEstimate};
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::{read_dataset, write_csv};
 use crate::error::{MmennError, Result};
-use crate::model_file::{ModelSpec, NoiseVariance, read_model};
+use crate::model_file::{ModelSpec, NoiseVariance};
 use crate::plot::{Figure, Series};
 
 /// How `W` is chosen on the command line.
@@ -438,7 +438,8 @@ pub fn run_estimate(
 
 /// [`run_estimate`], robust when `robust` is given: outliers are then reported against
 /// the Huber estimate; otherwise by a running-median screen
-/// ([`OUTLIER_SCREEN_SIGMA`]).
+/// ([`OUTLIER_SCREEN_SIGMA`]). Reads the files, [`compute_estimate`], [`write_estimate`].
+/// The model may be any model file or a hybrid `model.json` (its model-file part).
 pub fn run_estimate_with(
     data_paths: &[PathBuf],
     model_path: &Path,
@@ -446,28 +447,59 @@ pub fn run_estimate_with(
     robust: Option<&mme_core::RobustConfig>,
     out: &Path,
 ) -> Result<EstimateSummary> {
-    let mut phases = BTreeMap::new();
     let clock = Instant::now();
-    let spec = read_model(model_path)?;
-    // MME follows the model file's inputs-between-samples setting.
+    let spec = crate::model::LoadedModel::read(model_path)?.spec;
     let data = read_dataset(
         data_paths,
         spec.linear.input_names(),
         spec.linear.output_names(),
         &spec.units,
-    )?
-    .with_intersample(spec.intersample);
-    phases.insert("read".to_string(), clock.elapsed().as_secs_f64());
+    )?;
+    let read = clock.elapsed().as_secs_f64();
+    let mut outcome = compute_estimate(&data, &spec, opts, robust)?;
+    outcome
+        .summary
+        .phase_seconds
+        .insert("read".to_string(), read);
+    write_estimate(&outcome, out)
+}
 
+/// Everything `mmenn estimate` computes, as values ([`write_estimate`] writes it).
+#[derive(Debug, Clone)]
+pub struct EstimateOutcome {
+    /// What `summary.json` holds (its file list without the figures, which
+    /// [`write_estimate`] adds).
+    pub summary: EstimateSummary,
+    /// MME's result: `x̂`, `d̂`, `W`, noise, the `W` curve.
+    pub output: MmeOutput,
+    /// The data estimated on (inputs held as the model says).
+    pub data: Dataset,
+    /// The model.
+    pub spec: ModelSpec,
+    /// Residual-to-noise ratio the `W` search aims at (1, or the Huber variance factor).
+    pub target_ratio: f64,
+}
+
+/// `mmenn estimate` without files: MME on `data` (robust when `robust` is given), the
+/// outlier report and the summary.
+pub fn compute_estimate(
+    data: &Dataset,
+    spec: &ModelSpec,
+    opts: &EstimateOptions,
+    robust: Option<&mme_core::RobustConfig>,
+) -> Result<EstimateOutcome> {
+    let mut phases = BTreeMap::new();
+    // MME follows the model file's inputs-between-samples setting.
+    let data = data.clone().with_intersample(spec.intersample);
     let clock = Instant::now();
-    let config = mme_config(&spec, opts);
+    let config = mme_config(spec, opts);
     let (result, outliers, robust_passes) = match robust {
         Some(r) => {
-            let ro = estimate_spec_robust(&spec, &data, &config, r)?;
+            let ro = estimate_spec_robust(spec, &data, &config, r)?;
             (ro.output, ro.outliers, Some(ro.passes))
         }
         None => {
-            let result = estimate_spec(&spec, &data, &config)?;
+            let result = estimate_spec(spec, &data, &config)?;
             let outliers = mme_core::screen_outliers(
                 &data,
                 spec.linear.output_names(),
@@ -478,28 +510,9 @@ pub fn run_estimate_with(
         }
     };
     phases.insert("estimate".to_string(), clock.elapsed().as_secs_f64());
-
-    let clock = Instant::now();
-    ensure_dir(out)?;
     let est = &result.estimate;
-    let mut files = Vec::new();
-    for i in 0..est.experiments.len() {
-        let name = if i == 0 {
-            "estimate.csv".to_string()
-        } else {
-            format!("estimate_{i}.csv")
-        };
-        write_estimate_csv(&out.join(&name), est, i)?;
-        files.push(name);
-    }
+    let mut files: Vec<String> = (0..est.experiments.len()).map(estimate_csv_name).collect();
     let target_ratio = robust.map_or(1.0, |r| mme_core::robust::huber_variance(r.huber_c));
-    for p in estimate_figures_with_target(&result, &data, &spec, out, target_ratio)? {
-        files.push(
-            p.file_name()
-                .map(|f| f.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-        );
-    }
     let samples = data.total_samples();
     let sweep_time = est
         .report
@@ -517,7 +530,7 @@ pub fn run_estimate_with(
     files.push("summary.json".into());
     files.push("report.md".into());
     files.push("report.html".into());
-    let mut summary = EstimateSummary {
+    let summary = EstimateSummary {
         w: (0..est.w.nrows()).map(|i| row(&est.w, i)).collect(),
         w_by_correction: by_name(&est.correction_names, &w_diag),
         noise_variance: by_name(&est.output_names, &est.noise_variance),
@@ -536,7 +549,45 @@ pub fn run_estimate_with(
         robust_passes,
         files,
     };
-    crate::html::write_report(out, &estimate_report(&summary, &spec))?;
+    Ok(EstimateOutcome {
+        summary,
+        output: result,
+        data,
+        spec: spec.clone(),
+        target_ratio,
+    })
+}
+
+fn estimate_csv_name(i: usize) -> String {
+    if i == 0 {
+        "estimate.csv".to_string()
+    } else {
+        format!("estimate_{i}.csv")
+    }
+}
+
+/// Write what [`compute_estimate`] computed into `out`: `estimate*.csv`, the figures,
+/// `report.md` and `summary.json` (atomically, each file). Returns the summary as written
+/// (its file list with the figures, and the time the writing took).
+pub fn write_estimate(o: &EstimateOutcome, out: &Path) -> Result<EstimateSummary> {
+    let clock = Instant::now();
+    ensure_dir(out)?;
+    let est = &o.output.estimate;
+    let mut summary = o.summary.clone();
+    for i in 0..est.experiments.len() {
+        write_estimate_csv(&out.join(estimate_csv_name(i)), est, i)?;
+    }
+    let mut figures = Vec::new();
+    for p in estimate_figures_with_target(&o.output, &o.data, &o.spec, out, o.target_ratio)? {
+        figures.push(
+            p.file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+        );
+    }
+    let at = est.experiments.len();
+    summary.files.splice(at..at, figures);
+    crate::html::write_report(out, &estimate_report(&summary, &o.spec))?;
     summary
         .phase_seconds
         .insert("write".to_string(), clock.elapsed().as_secs_f64());

@@ -14,21 +14,23 @@ use nn::{Mlp, NetCorrection, SweepConfig, SweepRow};
 use serde::{Deserialize, Serialize};
 use sysid_core::{
     ChannelMetrics, CorrectedModel, Dataset, Experiment, Horizon, MmeEstimate, TermModel,
-    channel_metrics,
 };
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::write_csv;
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
-use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
+use crate::model::{
+    InitialRule, Judgement, LoadedModel, ModelDynamics, ModelKind, ScoredWindow, judge_free_run,
+};
+use crate::model_file::{ModelSpec, format_model, parse_model};
 use crate::plot::{Figure, Series};
 /// `predict` lives in [`crate::predict`]; these names stay reachable from here.
 pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
+use crate::refine::refine_network;
 pub use crate::refine::{RefineChoice, RefineSummary};
-use crate::refine::{refine_network, validation_run};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
 
 mod choices;
@@ -281,32 +283,83 @@ pub fn training_pairs(
     )
 }
 
-/// Free-run metrics of a hybrid model per measured channel of one experiment.
+/// Free-run metrics of a model per judged channel of one record, by the one judge
+/// ([`crate::model::judge_free_run`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FreeRunReport {
     /// Always free-run simulation.
     pub horizon: Horizon,
     /// Initial state used.
     pub x0: Vec<f64>,
-    /// How the initial state was obtained.
+    /// How the initial state was obtained (the judge's rule, in words).
     pub x0_source: String,
+    /// The samples scored.
+    pub scored: ScoredWindow,
     /// Metrics per channel present in the data.
     pub channels: BTreeMap<String, ChannelMetrics>,
 }
 
-fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
-    m.row(i).iter().copied().collect()
+impl FreeRunReport {
+    /// The report of a free-run judgement.
+    pub fn of(j: &Judgement) -> Self {
+        Self {
+            horizon: j.horizon,
+            x0: j.x0.clone(),
+            x0_source: j.x0_rule.clone(),
+            scored: j.scored,
+            channels: j.channels.clone(),
+        }
+    }
 }
 
-/// Simulate free-run over an experiment's inputs from `x0`, the inputs between samples
-/// held or interpolated as the experiment's `intersample` says.
-pub(crate) fn free_run(model: &HybridModel, exp: &Experiment, x0: &[f64]) -> Result<DMatrix<f64>> {
-    model
-        .simulate_states_with(x0, exp.t0(), exp.dt(), exp.inputs(), exp.intersample())
-        .map_err(|source| MmennError::Core {
-            context: "free-run simulation of the hybrid model",
-            source,
-        })
+/// The hybrid model of a model file, a network, a stored initial state and sub-steps, as
+/// a loaded model (what `model.json` holds, in memory).
+pub(crate) fn hybrid_loaded(
+    spec: &ModelSpec,
+    network: &Mlp,
+    x0: &[f64],
+    dt: f64,
+    substeps: usize,
+) -> Result<(HybridFile, LoadedModel)> {
+    let file = HybridFile {
+        format: HYBRID_FORMAT.into(),
+        model_toml: format_model(spec)?,
+        network: network.clone(),
+        x0: x0.to_vec(),
+        dt,
+        substeps,
+    };
+    let model = hybrid_model(spec, network.clone(), x0, substeps)?;
+    let loaded = LoadedModel {
+        path: PathBuf::from("model.json"),
+        kind: ModelKind::Hybrid,
+        spec: spec.clone(),
+        integrator: model.integrator,
+        dynamics: ModelDynamics::Hybrid(model),
+        hybrid: Some(file.clone()),
+    };
+    Ok((file, loaded))
+}
+
+/// The one free-run judge on the first record of `data`, on the model's outputs, the
+/// initial state fitted to the first `window` samples.
+pub(crate) fn judge_outputs(
+    model: &LoadedModel,
+    data: &Dataset,
+    window: usize,
+) -> Result<Judgement> {
+    judge_free_run(
+        model,
+        &data.experiments()[0],
+        &model.outputs(),
+        &InitialRule::Fit {
+            window: Some(window),
+        },
+    )
+}
+
+fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
+    m.row(i).iter().copied().collect()
 }
 
 /// What `mmenn fit` reports.
@@ -341,25 +394,6 @@ pub struct FitSummary {
     pub files: Vec<String>,
 }
 
-pub(crate) fn metrics_for(
-    names: &[String],
-    c: &DMatrix<f64>,
-    xs: &DMatrix<f64>,
-    exp: &Experiment,
-) -> Result<BTreeMap<String, ChannelMetrics>> {
-    let y = c * xs;
-    let mut out = BTreeMap::new();
-    for (i, name) in names.iter().enumerate() {
-        let measured = row(exp.outputs(), i);
-        let m = channel_metrics(&measured, &row(&y, i)).map_err(|source| MmennError::Core {
-            context: "free-run metrics",
-            source,
-        })?;
-        out.insert(name.clone(), m);
-    }
-    Ok(out)
-}
-
 /// Run MME on the data, train the network (sweep or fixed size), build the hybrid model,
 /// judge it free-run on the training and (if given) validation data, and write
 /// `model.json`, `sweep.csv`, `summary.json`, figures and `report.md` into `out`.
@@ -381,7 +415,10 @@ pub fn run_fit(
 }
 
 /// [`run_fit`], reporting the MME estimate and the network sizing sweep (one step per
-/// trained network) to `progress`. The results do not depend on the sink.
+/// trained network) to `progress`. The results do not depend on the sink. Reads the
+/// files, [`compute_fit`], [`write_fit`]. The model may be any model file (with or
+/// without `[[terms]]`, e.g. `discover`'s `model.discovered.toml`) or a hybrid
+/// `model.json`, whose model-file part is the assumed model (its network is replaced).
 pub fn run_fit_with_progress(
     data_paths: &[PathBuf],
     model_path: &Path,
@@ -390,28 +427,101 @@ pub fn run_fit_with_progress(
     out: &Path,
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<FitSummary> {
-    let mut spec = read_model(model_path)?;
+    let spec = LoadedModel::read(model_path)?.spec;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
+    let outcome = compute_fit(&data, &spec, val.as_ref(), opts, progress)?;
+    write_fit(&outcome, out)?;
+    Ok(outcome.summary)
+}
+
+/// Everything `mmenn fit` computes, as values ([`write_fit`] writes it).
+#[derive(Debug, Clone)]
+pub struct FitOutcome {
+    /// What `summary.json` holds.
+    pub summary: FitSummary,
+    /// What `model.json` holds.
+    pub model: HybridFile,
+    /// The assumed model (after the regression update, when asked for).
+    pub spec: ModelSpec,
+    /// The network sizing sweep (`sweep.csv`).
+    pub sweep: Vec<SweepRow>,
+    /// Index of the chosen sweep row.
+    pub chosen: usize,
+    /// The free-run judgement on the first training record.
+    pub train: Judgement,
+    /// The free-run judgement on the first validation record, when given.
+    pub validation: Option<Judgement>,
+    /// The first training record.
+    pub train_record: Experiment,
+    /// The first validation record, when given.
+    pub validation_record: Option<Experiment>,
+    /// MME's `d̂` at the training pairs (`q × pairs`).
+    pub d_train: DMatrix<f64>,
+    /// The network's output at the training pairs (`q × pairs`).
+    pub d_network: DMatrix<f64>,
+    /// The network's inputs at the training pairs (`(n + m) × pairs`: x̂ then u).
+    pub x_train: DMatrix<f64>,
+}
+
+/// The files [`write_fit`] writes, in order.
+fn fit_files(spec: &ModelSpec, validation: bool) -> Vec<String> {
+    let mut files = vec!["compare_train.svg".to_string()];
+    if validation {
+        files.push("compare_validation.svg".into());
+    }
+    for name in spec.linear.correction_names() {
+        files.push(format!("nn_d_{name}.svg"));
+        for var in network_variables(spec) {
+            files.push(format!("nn_d_{name}_vs_{var}.svg"));
+        }
+    }
+    for f in [
+        "sweep.csv",
+        "sweep.svg",
+        "model.json",
+        "summary.json",
+        "report.md",
+        "report.html",
+    ] {
+        files.push(f.into());
+    }
+    files
+}
+
+/// `mmenn fit` without files: MME on `data`, the network sweep (and refinement), the
+/// hybrid model, and its free-run judgements on the first training and validation record
+/// (the one judge: initial state fitted to the first `x0_window` samples from the
+/// minimum-norm start and the model's `x̂(t0)`, every sample scored).
+pub fn compute_fit(
+    data: &Dataset,
+    spec: &ModelSpec,
+    val: Option<&Dataset>,
+    opts: &FitOptions,
+    progress: &dyn crate::progress::ProgressSink,
+) -> Result<FitOutcome> {
+    let mut spec = spec.clone();
+    let data = &data.clone().with_intersample(spec.intersample);
+    let val = val.map(|v| v.clone().with_intersample(spec.intersample));
     let config = mme_config(&spec, &opts.estimate);
     let mut result = crate::progress::stage(progress, "MME estimate", || {
-        estimate_spec(&spec, &data, &config)
+        estimate_spec(&spec, data, &config)
     })?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
         let up = mme_core::update_model(
             &spec.linear,
-            &data,
+            data,
             &result.estimate,
             &mme_core::UpdateConfig::default(),
         )?;
         spec.linear = up.model.clone();
-        result = estimate_spec(&spec, &data, &config)?;
+        result = estimate_spec(&spec, data, &config)?;
         update_report = Some(up.regressions);
     }
     let lin = spec.linear.clone();
     let est = &result.estimate;
-    let (x_train, d_train) = training_pairs(est, &data, opts.trim_fraction);
+    let (x_train, d_train) = training_pairs(est, data, opts.trim_fraction);
 
     // The sweep's test set: MME on the validation data at the training W and noise, or the
     // last 20 % of the training pairs when there is no validation data.
@@ -497,137 +607,43 @@ pub fn run_fit_with_progress(
     let (chosen, free_run_sse) = match opts.selection {
         NetworkSelection::CorrectionMse => (sweep.chosen, None),
         NetworkSelection::FreeRun => {
-            let (i, sse) = select_by_free_run(&spec, &sweep.networks, &data, &x0, opts.substeps)?;
+            let (i, sse) = select_by_free_run(&spec, &sweep.networks, data, &x0, opts.substeps)?;
             (i, Some(sse))
         }
     };
     let mut network = sweep.networks[chosen].clone();
-    let val_guess = |ve: &MmeEstimate| -> Vec<f64> {
-        ve.experiments[0].states.column(0).iter().copied().collect()
-    };
     let val_pair = val_est.as_ref().zip(val.as_ref());
     let mut refinement = match opts.refine {
         RefineChoice::None => None,
         RefineChoice::Trajectory => Some(refine_network(
             &spec,
             &mut network,
-            (est, &data),
+            (est, data),
             val_pair,
             &x0,
             opts,
             progress,
         )?),
     };
-    let hybrid = hybrid_model(&spec, network.clone(), &x0, opts.substeps)?;
 
-    ensure_dir(out)?;
-    let mut files = Vec::new();
     let exp0 = &data.experiments()[0];
-    let xs = free_run(&hybrid, exp0, &x0)?;
-    let train = FreeRunReport {
-        horizon: Horizon::FreeRun,
-        x0: x0.clone(),
-        x0_source: "MME estimate x̂(t0) of the training record".into(),
-        channels: metrics_for(lin.output_names(), lin.c(), &xs, exp0)?,
+    let (file, loaded) = hybrid_loaded(&spec, &network, &x0, exp0.dt(), opts.substeps)?;
+    let train_j = judge_outputs(&loaded, data, opts.x0_window)?;
+    let train = FreeRunReport::of(&train_j);
+    let validation_j = match &val {
+        Some(v) => Some(judge_outputs(&loaded, v, opts.x0_window)?),
+        None => None,
     };
-    compare_figure(&spec, exp0, &xs, &train, "training")?.write(&out.join("compare_train.svg"))?;
-    files.push("compare_train.svg".to_string());
-    let validation = match (&val, &val_est) {
-        (Some(v), Some(ve)) => {
-            let vexp = &v.experiments()[0];
-            let (vx0, vxs) =
-                validation_run(&hybrid, lin.c(), vexp, &val_guess(ve), opts.x0_window)?;
-            let report = FreeRunReport {
-                horizon: Horizon::FreeRun,
-                x0: vx0,
-                x0_source: format!(
-                    "least-squares fit of the free response to the first {} validation samples",
-                    opts.x0_window.min(vexp.len())
-                ),
-                channels: metrics_for(lin.output_names(), lin.c(), &vxs, vexp)?,
-            };
-            if let Some(r) = refinement.as_mut() {
-                r.validation_fit_after = Some(
-                    report
-                        .channels
-                        .iter()
-                        .map(|(k, m)| (k.clone(), m.fit_percent))
-                        .collect(),
-                );
-            }
-            compare_figure(&spec, vexp, &vxs, &report, "validation")?
-                .write(&out.join("compare_validation.svg"))?;
-            files.push("compare_validation.svg".to_string());
-            Some(report)
-        }
-        _ => None,
-    };
-
-    // d̂ and the network's fit of it on the training record.
-    let pred = network.predict(&x_train)?;
-    for (i, name) in lin.correction_names().iter().enumerate() {
-        let idx: Vec<f64> = (0..x_train.ncols()).map(|k| k as f64).collect();
-        let fig = Figure {
-            title: format!("d_{name}: MME estimate and network"),
-            x_label: "training pair".into(),
-            y_label: match spec.unit_of(&format!("d_{name}")) {
-                Some(u) => format!("d_{name} ({u})"),
-                None => format!("d_{name}"),
-            },
-            series: vec![
-                Series::points("MME d̂", idx.clone(), row(&d_train, i)),
-                Series::line(
-                    match sysid_core::channel_metrics(&row(&d_train, i), &row(&pred, i)) {
-                        Ok(m) if m.fit_percent.is_finite() => {
-                            format!("NN(x̂, u) (fit {:.1} % to d̂)", m.fit_percent)
-                        }
-                        _ => "NN(x̂, u)".to_string(),
-                    },
-                    idx,
-                    row(&pred, i),
-                ),
-            ],
-            bands: vec![],
-        };
-        fig.write(&out.join(format!("nn_d_{name}.svg")))?;
-        files.push(format!("nn_d_{name}.svg"));
-        let variables: Vec<String> = lin
-            .state_names()
-            .iter()
-            .chain(lin.input_names())
-            .cloned()
-            .collect();
-        files.extend(d_figures::d_against_variables(
-            name,
-            &row(&d_train, i),
-            &row(&pred, i),
-            &x_train,
-            &variables,
-            &spec,
-            out,
-        )?);
+    let validation = validation_j.as_ref().map(FreeRunReport::of);
+    if let (Some(r), Some(v)) = (refinement.as_mut(), &validation) {
+        r.validation_fit_after = Some(
+            v.channels
+                .iter()
+                .map(|(k, m)| (k.clone(), m.fit_percent))
+                .collect(),
+        );
     }
-    write_sweep(&out.join("sweep.csv"), &sweep.rows)?;
-    files.push("sweep.csv".into());
-    sweep_figure(&sweep.rows, chosen).write(&out.join("sweep.svg"))?;
-    files.push("sweep.svg".into());
-
-    let file = HybridFile {
-        format: HYBRID_FORMAT.into(),
-        model_toml: format_model(&spec)?,
-        network,
-        x0,
-        dt: exp0.dt(),
-        substeps: opts.substeps,
-    };
-    write_atomic(
-        &out.join("model.json"),
-        serde_json::to_string_pretty(&file)?.as_bytes(),
-    )?;
-    files.push("model.json".into());
-    files.push("summary.json".into());
-    files.push("report.md".into());
-    files.push("report.html".into());
+    let d_network = network.predict(&x_train)?;
     let w_by_correction = lin
         .correction_names()
         .iter()
@@ -647,25 +663,102 @@ pub fn run_fit_with_progress(
         train,
         validation,
         refinement,
-        files,
+        files: fit_files(&spec, val.is_some()),
     };
+    Ok(FitOutcome {
+        summary,
+        model: file,
+        spec,
+        sweep: sweep.rows,
+        chosen,
+        train: train_j,
+        validation: validation_j,
+        train_record: exp0.clone(),
+        validation_record: val.as_ref().map(|v| v.experiments()[0].clone()),
+        d_train,
+        d_network,
+        x_train,
+    })
+}
+
+/// Write what [`compute_fit`] computed into `out`: `model.json`, `sweep.csv`,
+/// `summary.json`, `report.md` and the figures (atomically, each file).
+pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
+    ensure_dir(out)?;
+    let spec = &o.spec;
+    compare_figure(spec, &o.train_record, &o.train, "training")
+        .write(&out.join("compare_train.svg"))?;
+    if let (Some(j), Some(exp)) = (&o.validation, &o.validation_record) {
+        compare_figure(spec, exp, j, "validation").write(&out.join("compare_validation.svg"))?;
+    }
+    // d̂ and the network's fit of it on the training record.
+    for (i, name) in spec.linear.correction_names().iter().enumerate() {
+        let idx: Vec<f64> = (0..o.d_train.ncols()).map(|k| k as f64).collect();
+        let fig = Figure {
+            title: format!("d_{name}: MME estimate and network"),
+            x_label: "training pair".into(),
+            y_label: match spec.unit_of(&format!("d_{name}")) {
+                Some(u) => format!("d_{name} ({u})"),
+                None => format!("d_{name}"),
+            },
+            series: vec![
+                Series::points("MME d̂", idx.clone(), row(&o.d_train, i)),
+                Series::line(
+                    match sysid_core::channel_metrics(&row(&o.d_train, i), &row(&o.d_network, i)) {
+                        Ok(m) if m.fit_percent.is_finite() => {
+                            format!("NN(x̂, u) (fit {:.1} % to d̂)", m.fit_percent)
+                        }
+                        _ => "NN(x̂, u)".to_string(),
+                    },
+                    idx,
+                    row(&o.d_network, i),
+                ),
+            ],
+            bands: vec![],
+        };
+        fig.write(&out.join(format!("nn_d_{name}.svg")))?;
+        d_figures::d_against_variables(
+            name,
+            &row(&o.d_train, i),
+            &row(&o.d_network, i),
+            &o.x_train,
+            &network_variables(spec),
+            spec,
+            out,
+        )?;
+    }
+    write_sweep(&out.join("sweep.csv"), &o.sweep)?;
+    sweep_figure(&o.sweep, o.chosen).write(&out.join("sweep.svg"))?;
+    write_atomic(
+        &out.join("model.json"),
+        serde_json::to_string_pretty(&o.model)?.as_bytes(),
+    )?;
     write_atomic(
         &out.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
+        serde_json::to_string_pretty(&o.summary)?.as_bytes(),
     )?;
-    crate::html::write_report(out, &fit_report(&summary))?;
-    Ok(summary)
+    crate::html::write_report(out, &fit_report(&o.summary))?;
+    Ok(())
+}
+
+/// The network's inputs by name: every state, then every input.
+fn network_variables(spec: &ModelSpec) -> Vec<String> {
+    spec.linear
+        .state_names()
+        .iter()
+        .chain(spec.linear.input_names())
+        .cloned()
+        .collect()
 }
 
 fn compare_figure(
     spec: &ModelSpec,
     exp: &Experiment,
-    xs: &DMatrix<f64>,
-    rep: &FreeRunReport,
+    rep: &Judgement,
     which: &str,
-) -> Result<crate::plot::Panels> {
+) -> crate::plot::Panels {
     let t = exp.times();
-    let y = spec.linear.c() * xs;
+    let y = &rep.outputs;
     let mut series = Vec::new();
     let mut residuals = Vec::new();
     let outputs = spec.linear.output_names();
@@ -687,7 +780,7 @@ fn compare_figure(
         series.push(Series::line(
             format!("{name} MME/NN free-run (fit {fit:.1} %)"),
             t.clone(),
-            row(&y, i),
+            row(y, i),
         ));
         residuals.push(
             Series::line(
@@ -695,14 +788,14 @@ fn compare_figure(
                 t.clone(),
                 row(exp.outputs(), i)
                     .iter()
-                    .zip(row(&y, i))
+                    .zip(row(y, i))
                     .map(|(m, s)| m - s)
                     .collect(),
             )
             .coloured(2 * i + 1),
         );
     }
-    Ok(crate::plot::Panels {
+    crate::plot::Panels {
         top: Figure {
             title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
             x_label: "t (s)".into(),
@@ -717,7 +810,7 @@ fn compare_figure(
             series: residuals,
             bands: vec![],
         },
-    })
+    }
 }
 
 fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {
@@ -816,14 +909,14 @@ fn fit_report(s: &FitSummary) -> String {
          free-run simulation (no measurement used after the initial state).\n\n",
     );
     r.push_str(&format!(
-        "## Training data — {} ({})\n\n",
-        s.train.horizon, s.train.x0_source
+        "## Training data — {}, {} scored\n\nInitial state: {}.\n\n",
+        s.train.horizon, s.train.scored, s.train.x0_source
     ));
     r.push_str(&metrics_table(&s.train));
     if let Some(v) = &s.validation {
         r.push_str(&format!(
-            "\n## Validation data — {} ({})\n\n",
-            v.horizon, v.x0_source
+            "\n## Validation data — {}, {} scored\n\nInitial state: {}.\n\n",
+            v.horizon, v.scored, v.x0_source
         ));
         r.push_str(&metrics_table(v));
     }

@@ -7,9 +7,10 @@
 //! `[[terms]]`, e.g. `discover`'s `model.discovered.toml`). Either way the result simulates
 //! itself free-run, the inputs between samples as the model's `intersample` says.
 //!
-//! [`judge_free_run`] is the one free-run evaluation of a loaded model on a record, used by
-//! `predict` and by `compare`'s model-file row, so the same model on the same record gets
-//! the same numbers in both. Its rule (stated in every report it feeds):
+//! [`judge_free_run`] runs the one free-run judge of `sysid-core`
+//! ([`sysid_core::judge`]) on a loaded model, used by `fit`, `predict` and `compare`, so
+//! the same model on the same record gets the same numbers in each. Its rule (stated in
+//! every report it feeds):
 //!
 //! - **initial state**: the `x0` minimising the squared error of the judged channels over
 //!   the first `window` samples of the record (Levenberg–Marquardt,
@@ -21,15 +22,14 @@
 //!   missing measurements skipped;
 //! - **metrics**: fit %, R², RMSE and error variance per judged channel.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_core::{
-    ChannelMetrics, Dynamics, Experiment, Horizon, InitialStateFit, Integrator, InterSample,
-    TermModel, channel_metrics, fit_initial_state, simulate_with,
+    Dynamics, Experiment, Integrator, InterSample, JudgeOptions, TermModel, simulate_with,
 };
+pub use sysid_core::{InitialRule, Judgement, Observation, ScoredWindow};
 
 use crate::error::{MmennError, ModelProblem, Result};
 use crate::fit::{HybridFile, HybridModel};
@@ -223,340 +223,65 @@ impl LoadedModel {
     }
 }
 
-/// Which channels a judgement scores: names and the rows mapping the state to them
-/// (`p × n`), in the order of the record's output rows.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Observation {
-    /// Channel names.
-    pub names: Vec<String>,
-    /// `p × n` map from the state to the channels.
-    pub matrix: DMatrix<f64>,
-}
-
-impl Observation {
-    /// The model's outputs (`C` and its output names).
-    pub fn outputs(model: &LoadedModel) -> Self {
-        let lin = &model.spec.linear;
-        Self {
-            names: lin.output_names().to_vec(),
-            matrix: lin.c().clone(),
+impl LoadedModel {
+    /// How the one judge simulates this model: its integrator, the blow-up bound, and its
+    /// stored state (a hybrid model's training `x̂(t0)`) as a second start of the
+    /// initial-state fit.
+    pub fn judge_options(&self) -> JudgeOptions {
+        JudgeOptions {
+            integrator: self.integrator,
+            blow_up: BLOW_UP,
+            stored_state: self.stored_state().map(<[f64]>::to_vec),
+            ..JudgeOptions::default()
         }
     }
 
-    /// The channels a data file can be compared on: every state present by name, then
-    /// every model output present by name that is not also a state name.
-    pub fn present(model: &LoadedModel, has_column: impl Fn(&str) -> bool) -> Self {
-        let lin = &model.spec.linear;
-        let n = lin.n_states();
-        let mut names = Vec::new();
-        let mut rows: Vec<Vec<f64>> = Vec::new();
-        for (i, s) in lin.state_names().iter().enumerate() {
-            if has_column(s) {
-                names.push(s.clone());
-                rows.push((0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect());
-            }
-        }
-        for (i, o) in lin.output_names().iter().enumerate() {
-            if has_column(o) && !lin.state_names().contains(o) {
-                names.push(o.clone());
-                rows.push(lin.c().row(i).iter().copied().collect());
-            }
-        }
-        let matrix = DMatrix::from_fn(rows.len(), n, |r, c| rows[r][c]);
-        Self { names, matrix }
+    /// The model's outputs (`C` and its output names) as judged channels.
+    pub fn outputs(&self) -> Observation {
+        Observation::outputs(&self.spec.linear)
+    }
+
+    /// The channels a data file can be compared on (see [`Observation::present`]).
+    pub fn present(&self, has_column: impl Fn(&str) -> bool) -> Observation {
+        Observation::present(&self.spec.linear, has_column)
     }
 }
 
-/// How the free-run judge gets its initial state.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub enum InitialRule {
-    /// Fitted to the first `window` samples of the record (`None`: every sample).
-    Fit {
-        /// Samples from the start of the record used in the fit.
-        window: Option<usize>,
-    },
-    /// This state.
-    Given(Vec<f64>),
-    /// The judge's default: fitted to the first 200 samples.
-    #[default]
-    Default,
-}
-
-impl InitialRule {
-    fn window(&self) -> Option<usize> {
-        match self {
-            InitialRule::Fit { window } => *window,
-            InitialRule::Default => Some(200),
-            InitialRule::Given(_) => None,
-        }
+/// A judgement as an evaluation-table row (the channels `names`, in order).
+pub fn evaluation(j: &Judgement, names: &[String]) -> sysid_baselines::Evaluation {
+    sysid_baselines::Evaluation {
+        horizon: j.horizon,
+        channels: names
+            .iter()
+            .filter_map(|n| {
+                j.channels
+                    .get(n)
+                    .map(|m| sysid_baselines::ChannelEvaluation {
+                        name: n.clone(),
+                        metrics: *m,
+                    })
+            })
+            .collect(),
+        initial_samples: j.scored.first,
     }
 }
 
-/// The samples a judgement scored.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct ScoredWindow {
-    /// First scored sample (0-based).
-    pub first: usize,
-    /// One past the last scored sample.
-    pub end: usize,
-    /// Time of the first scored sample, s.
-    pub t_first: f64,
-    /// Time of the last scored sample, s.
-    pub t_last: f64,
-}
-
-/// One model judged on one record.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Judgement {
-    /// Free-run simulation, or k-step prediction.
-    pub horizon: Horizon,
-    /// Initial state of the free run.
-    pub x0: Vec<f64>,
-    /// The initial-state rule, in words.
-    pub x0_rule: String,
-    /// The samples scored.
-    pub scored: ScoredWindow,
-    /// How a k-step prediction was started (absent for free run).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub k_step_rule: Option<String>,
-    /// Metrics per judged channel.
-    pub channels: BTreeMap<String, ChannelMetrics>,
-    /// Simulated states (`n × N`; for k-step, the free-run states its starts use).
-    #[serde(skip)]
-    pub states: DMatrix<f64>,
-    /// Predicted channels (`p × N`, NaN where a k-step prediction has no value).
-    #[serde(skip)]
-    pub outputs: DMatrix<f64>,
-}
-
-impl Judgement {
-    /// As an evaluation-table row.
-    pub fn evaluation(&self, names: &[String]) -> sysid_baselines::Evaluation {
-        sysid_baselines::Evaluation {
-            horizon: self.horizon,
-            channels: names
-                .iter()
-                .filter_map(|n| {
-                    self.channels
-                        .get(n)
-                        .map(|m| sysid_baselines::ChannelEvaluation {
-                            name: n.clone(),
-                            metrics: *m,
-                        })
-                })
-                .collect(),
-            initial_samples: self.scored.first,
-        }
-    }
-}
-
-/// The minimum-norm solution of `C x = y(t0)` over the channels measured at `t0` (zero
-/// when none is).
-fn initial_guess(model: &LoadedModel, obs: &Observation, exp: &Experiment) -> Vec<f64> {
-    let n = model.spec.linear.n_states();
-    let y = exp.output(0);
-    let rows: Vec<usize> = (0..obs.names.len()).filter(|&i| !y[i].is_nan()).collect();
-    if rows.is_empty() {
-        return vec![0.0; n];
-    }
-    let c = DMatrix::from_fn(rows.len(), n, |r, j| obs.matrix[(rows[r], j)]);
-    let rhs = DVector::from_iterator(rows.len(), rows.iter().map(|&i| y[i]));
-    match c.svd(true, true).solve(&rhs, 1e-12) {
-        Ok(x) if x.iter().all(|v| v.is_finite()) => x.iter().copied().collect(),
-        _ => vec![0.0; n],
-    }
-}
-
-/// Squared output error of the free response from `x0` over the fit's window.
-fn window_cost(
-    model: &LoadedModel,
-    obs: &Observation,
-    exp: &Experiment,
-    x0: &[f64],
-    fit: &InitialStateFit,
-) -> sysid_core::Result<f64> {
-    let len = fit.window.min(exp.len());
-    let u = exp.inputs().columns(0, len).into_owned();
-    let xs = simulate_with(
-        &model.dynamics,
-        x0,
-        exp.t0(),
-        exp.dt(),
-        &u,
-        model.intersample(),
-        &fit.integrator,
-        fit.blow_up,
-    )?;
-    let y = &obs.matrix * xs;
-    let mut cost = 0.0;
-    for k in 0..len {
-        for (i, m) in exp.output(k).iter().enumerate() {
-            if !m.is_nan() {
-                cost += (m - y[(i, k)]).powi(2);
-            }
-        }
-    }
-    Ok(if cost.is_finite() {
-        cost
-    } else {
-        f64::INFINITY
-    })
-}
-
-/// No starting point was tried (cannot happen: the minimum-norm start always is).
-fn unreachable_start() -> Result<(Vec<f64>, &'static str)> {
-    Err(MmennError::Core {
-        context: "fitting the initial state to the record",
-        source: sysid_core::CoreError::InvalidArgument {
-            name: "starting points",
-            value: 0.0,
-            reason: "no starting point for the initial-state fit",
-        },
-    })
-}
-
-fn metrics(
-    obs: &Observation,
-    exp: &Experiment,
-    predicted: &DMatrix<f64>,
-    first: usize,
-) -> Result<BTreeMap<String, ChannelMetrics>> {
-    let mut out = BTreeMap::new();
-    for (i, name) in obs.names.iter().enumerate() {
-        let measured: Vec<f64> = exp.outputs().row(i).iter().skip(first).copied().collect();
-        let sim: Vec<f64> = predicted.row(i).iter().skip(first).copied().collect();
-        out.insert(
-            name.clone(),
-            channel_metrics(&measured, &sim).map_err(core("judging the model"))?,
-        );
-    }
-    Ok(out)
-}
-
-fn check_rows(obs: &Observation, exp: &Experiment) -> Result<()> {
-    if obs.matrix.nrows() != exp.n_outputs() || obs.names.len() != exp.n_outputs() {
-        return Err(MmennError::Core {
-            context: "judging the model",
-            source: sysid_core::CoreError::Length {
-                what: "judged channels vs the record's output rows",
-                found: obs.names.len(),
-                expected: exp.n_outputs(),
-            },
-        });
-    }
-    Ok(())
-}
-
-/// The one free-run judge (rule in the module documentation): initial state by `rule`,
-/// free run over the whole record, every sample scored. `exp`'s output rows are the
-/// channels of `obs`, in order.
+/// [`sysid_core::judge_free_run`] on a loaded model: the record's inputs held as the model
+/// says, its integrator, its stored state as a second start (rule in the module
+/// documentation). `exp`'s output rows are the channels of `obs`, in order.
 pub fn judge_free_run(
     model: &LoadedModel,
     exp: &Experiment,
     obs: &Observation,
     rule: &InitialRule,
 ) -> Result<Judgement> {
-    check_rows(obs, exp)?;
-    let n = model.spec.linear.n_states();
-    let exp = &exp.clone().with_intersample(model.intersample());
-    let (x0, x0_rule) = match rule {
-        InitialRule::Given(x) => {
-            if x.len() != n || x.iter().any(|v| !v.is_finite()) {
-                return Err(MmennError::Core {
-                    context: "the given initial state",
-                    source: sysid_core::CoreError::Length {
-                        what: "initial state (finite numbers, one per state)",
-                        found: x.len(),
-                        expected: n,
-                    },
-                });
-            }
-            (x.clone(), "given".to_string())
-        }
-        _ if obs.names.is_empty() => {
-            let x = model.stored_state().map_or(vec![0.0; n], <[f64]>::to_vec);
-            let why = if model.stored_state().is_some() {
-                "the training record's x̂(t0) stored in the model: the record has no channel to fit it to"
-            } else {
-                "zero: the record has no channel to fit it to"
-            };
-            (x, why.to_string())
-        }
-        _ => {
-            let window = rule.window().unwrap_or(exp.len()).clamp(1, exp.len());
-            let fit = InitialStateFit {
-                window,
-                integrator: model.integrator,
-                blow_up: BLOW_UP,
-                ..InitialStateFit::default()
-            };
-            let mut starts = Vec::new();
-            if let Some(x) = model.stored_state() {
-                starts.push((x.to_vec(), "the state stored in the model"));
-            }
-            starts.push((
-                initial_guess(model, obs, exp),
-                "the minimum-norm solution of C x = y(t0)",
-            ));
-            let mut best: Option<(Vec<f64>, f64, &str)> = None;
-            let mut first_error = None;
-            for (guess, label) in starts {
-                match fit_initial_state(&model.dynamics, &obs.matrix, exp, &guess, &fit)
-                    .and_then(|x| window_cost(model, obs, exp, &x, &fit).map(|c| (x, c)))
-                {
-                    Ok((x, cost)) if best.as_ref().is_none_or(|b| cost < b.1) => {
-                        best = Some((x, cost, label));
-                    }
-                    Ok(_) => {}
-                    Err(e) => {
-                        first_error.get_or_insert(e);
-                    }
-                }
-            }
-            let (x, start) = match (best, first_error) {
-                (Some((x, _, label)), _) => (x, label),
-                (None, Some(e)) => return Err(core("fitting the initial state to the record")(e)),
-                (None, None) => unreachable_start()?,
-            };
-            (
-                x,
-                format!(
-                    "least-squares fit of the free response to the first {window} of {} samples ({}), started from {start}",
-                    exp.len(),
-                    obs.names.join(", ")
-                ),
-            )
-        }
-    };
-    let states = model.simulate_states(&x0, exp)?;
-    let outputs = &obs.matrix * &states;
-    let channels = if obs.names.is_empty() {
-        BTreeMap::new()
-    } else {
-        metrics(obs, exp, &outputs, 0)?
-    };
-    Ok(Judgement {
-        horizon: Horizon::FreeRun,
-        x0,
-        x0_rule,
-        scored: ScoredWindow {
-            first: 0,
-            end: exp.len(),
-            t_first: exp.t0(),
-            t_last: exp.time(exp.len() - 1),
-        },
-        k_step_rule: None,
-        channels,
-        states,
-        outputs,
-    })
+    let exp = exp.clone().with_intersample(model.intersample());
+    sysid_core::judge_free_run(&model.dynamics, &exp, obs, rule, &model.judge_options())
+        .map_err(core("judging the model free-run"))
 }
 
-/// k-step-ahead prediction beside a free run (`free`, from [`judge_free_run`] on the same
-/// record): the prediction of sample `j` starts at sample `j − k` from the free-run state
-/// there with every state a judged channel measures directly (a row selecting that one
-/// state) replaced by its measurement, and simulates `k` samples. Samples `k..N` are
-/// scored.
+/// [`sysid_core::judge_k_step`] on a loaded model, beside `free` (from [`judge_free_run`]
+/// on the same record).
 pub fn judge_k_step(
     model: &LoadedModel,
     exp: &Experiment,
@@ -564,74 +289,7 @@ pub fn judge_k_step(
     k: usize,
     free: &Judgement,
 ) -> Result<Judgement> {
-    check_rows(obs, exp)?;
-    let len = exp.len();
-    if k == 0 || k >= len {
-        return Err(MmennError::Core {
-            context: "k-step prediction",
-            source: sysid_core::CoreError::InvalidArgument {
-                name: "horizon",
-                value: k as f64,
-                reason: "must be at least 1 and shorter than the record",
-            },
-        });
-    }
-    let exp = &exp.clone().with_intersample(model.intersample());
-    let n = model.spec.linear.n_states();
-    // Channels that measure one state directly: (row, state).
-    let direct: Vec<(usize, usize)> = (0..obs.names.len())
-        .filter_map(|i| {
-            let row = obs.matrix.row(i);
-            let nz: Vec<usize> = (0..n).filter(|&j| row[j] != 0.0).collect();
-            (nz.len() == 1 && (row[nz[0]] - 1.0).abs() <= 0.0).then(|| (i, nz[0]))
-        })
-        .collect();
-    let mut outputs = DMatrix::from_element(obs.names.len(), len, f64::NAN);
-    for j in k..len {
-        let start = j - k;
-        let mut x: Vec<f64> = free.states.column(start).iter().copied().collect();
-        let y = exp.output(start);
-        for &(row, state) in &direct {
-            if !y[row].is_nan() {
-                x[state] = y[row];
-            }
-        }
-        let u = exp.inputs().columns(start, k + 1).into_owned();
-        let xs = simulate_with(
-            &model.dynamics,
-            &x,
-            exp.time(start),
-            exp.dt(),
-            &u,
-            model.intersample(),
-            &model.integrator,
-            BLOW_UP,
-        )
-        .map_err(core("k-step prediction"))?;
-        let yk = &obs.matrix * xs.column(k);
-        outputs.column_mut(j).copy_from(&yk);
-    }
-    let names: Vec<String> = direct.iter().map(|&(r, _)| obs.names[r].clone()).collect();
-    Ok(Judgement {
-        horizon: Horizon::Steps(k),
-        x0: free.x0.clone(),
-        x0_rule: free.x0_rule.clone(),
-        scored: ScoredWindow {
-            first: k,
-            end: len,
-            t_first: exp.time(k),
-            t_last: exp.time(len - 1),
-        },
-        k_step_rule: Some(format!(
-            "each sample predicted {k} samples ahead from the free-run state {k} samples earlier, with the directly measured states ({}) reset to their measurements there",
-            if names.is_empty() {
-                "none".to_string()
-            } else {
-                names.join(", ")
-            }
-        )),
-        channels: metrics(obs, exp, &outputs, k)?,
-        states: free.states.clone(),
-        outputs,
-    })
+    let exp = exp.clone().with_intersample(model.intersample());
+    sysid_core::judge_k_step(&model.dynamics, &exp, obs, k, free, &model.judge_options())
+        .map_err(core("k-step prediction"))
 }

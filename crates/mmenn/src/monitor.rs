@@ -13,13 +13,14 @@ use condmon::{
 use nalgebra::DMatrix;
 use nn::{LmConfig, Mlp};
 use serde::{Deserialize, Serialize};
+use sysid_core::Dataset;
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::read_dataset;
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 use crate::fit::training_pairs;
-use crate::model_file::{ModelSpec, format_model, parse_model, read_model};
+use crate::model_file::{ModelSpec, format_model, parse_model};
 
 /// Which features describe an identified model.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -123,25 +124,39 @@ pub struct MonitorFile {
     pub table: ErrorTable,
 }
 
-/// Identify one record and return its features.
+/// Read one record as the model's channels.
+fn read_record(spec: &ModelSpec, path: &Path) -> Result<Dataset> {
+    let lin = &spec.linear;
+    read_dataset(
+        &[path.to_path_buf()],
+        lin.input_names(),
+        lin.output_names(),
+        &spec.units,
+    )
+}
+
+/// Identify one record (a data file) and return its features.
 pub fn record_features(
     spec: &ModelSpec,
     path: &Path,
     opts: &MonitorOptions,
 ) -> Result<NamedFeatures> {
+    features_of(spec, &read_record(spec, path)?, opts)
+}
+
+/// Identify one record in memory and return its features.
+pub fn features_of(
+    spec: &ModelSpec,
+    data: &Dataset,
+    opts: &MonitorOptions,
+) -> Result<NamedFeatures> {
     let lin = &spec.linear;
-    let data = read_dataset(
-        &[path.to_path_buf()],
-        lin.input_names(),
-        lin.output_names(),
-        &spec.units,
-    )?
     // MME follows the model file's inputs-between-samples setting.
-    .with_intersample(spec.intersample);
-    let out = estimate_spec(spec, &data, &mme_config(spec, &opts.estimate))?;
+    let data = &data.clone().with_intersample(spec.intersample);
+    let out = estimate_spec(spec, data, &mme_config(spec, &opts.estimate))?;
     let mut parts: Vec<NamedFeatures> = Vec::new();
     if opts.features != FeatureKind::Physical {
-        let (x, d) = training_pairs(&out.estimate, &data, 0.02);
+        let (x, d) = training_pairs(&out.estimate, data, 0.02);
         let mut net = Mlp::for_data(&x, &d, &[opts.hidden], opts.seed)?;
         nn::train_lm(&mut net, &x, &d, &LmConfig::default(), None)?;
         parts.push(match opts.features {
@@ -153,12 +168,8 @@ pub fn record_features(
         opts.features,
         FeatureKind::Physical | FeatureKind::CanonicalAndPhysical
     ) {
-        let up = mme_core::update_model(
-            lin,
-            &data,
-            &out.estimate,
-            &mme_core::UpdateConfig::default(),
-        )?;
+        let up =
+            mme_core::update_model(lin, data, &out.estimate, &mme_core::UpdateConfig::default())?;
         let mut named: Vec<(String, Vec<f64>)> = Vec::new();
         for reg in &up.regressions {
             for c in &reg.coefficients {
@@ -189,18 +200,52 @@ fn to_matrix(rows: &[Vec<f64>]) -> DMatrix<f64> {
 }
 
 /// Train a monitor from labelled records: `classes` maps each condition name to its files.
+/// Reads the files, [`compute_monitor`], [`write_monitor`]. The model may be any model
+/// file (with or without `[[terms]]`) or a hybrid `model.json` (its model-file part).
 pub fn train_monitor(
     classes: &[(String, Vec<PathBuf>)],
     model_path: &Path,
     opts: &MonitorOptions,
     out: &Path,
 ) -> Result<MonitorFile> {
-    let spec = read_model(model_path)?;
+    let spec = crate::model::LoadedModel::read(model_path)?.spec;
+    let records = classes
+        .iter()
+        .map(|(name, files)| {
+            let data = files
+                .iter()
+                .map(|f| read_record(&spec, f))
+                .collect::<Result<Vec<_>>>()?;
+            Ok((name.clone(), data))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let file = compute_monitor(&records, &spec, opts)?;
+    write_monitor(&file, out)?;
+    Ok(file)
+}
+
+/// Write a trained monitor into `out`: `monitor.json` and `report.md` (atomically).
+pub fn write_monitor(file: &MonitorFile, out: &Path) -> Result<()> {
+    ensure_dir(out)?;
+    write_atomic(
+        &out.join("monitor.json"),
+        serde_json::to_string_pretty(file)?.as_bytes(),
+    )?;
+    crate::html::write_report(out, &monitor_report(file))
+}
+
+/// `mmenn monitor train` without files: every labelled record (in memory) identified,
+/// its features, the cross-validated error table and the chosen classifier.
+pub fn compute_monitor(
+    classes: &[(String, Vec<Dataset>)],
+    spec: &ModelSpec,
+    opts: &MonitorOptions,
+) -> Result<MonitorFile> {
     let mut samples = Vec::new();
     let mut labels = Vec::new();
-    for (label, (_, files)) in classes.iter().enumerate() {
-        for f in files {
-            samples.push(record_features(&spec, f, opts)?);
+    for (label, (_, records)) in classes.iter().enumerate() {
+        for r in records {
+            samples.push(features_of(spec, r, opts)?);
             labels.push(label);
         }
     }
@@ -249,7 +294,7 @@ pub fn train_monitor(
     }
     let file = MonitorFile {
         format: "mmenn-monitor/1".into(),
-        model_toml: format_model(&spec)?,
+        model_toml: format_model(spec)?,
         features: opts.features,
         hidden: opts.hidden,
         seed: opts.seed,
@@ -261,12 +306,6 @@ pub fn train_monitor(
         preprocessing: columns[best.1],
         table,
     };
-    ensure_dir(out)?;
-    write_atomic(
-        &out.join("monitor.json"),
-        serde_json::to_string_pretty(&file)?.as_bytes(),
-    )?;
-    crate::html::write_report(out, &monitor_report(&file))?;
     Ok(file)
 }
 
@@ -361,13 +400,19 @@ pub fn classify(monitor_dir: &Path, data: &Path) -> Result<Classification> {
         },
     })?;
     let spec = parse_model(&path, &m.model_toml)?;
+    classify_record(&m, &read_record(&spec, data)?)
+}
+
+/// Classify one record in memory with a trained monitor.
+pub fn classify_record(m: &MonitorFile, data: &Dataset) -> Result<Classification> {
+    let spec = parse_model(Path::new("monitor.json:model_toml"), &m.model_toml)?;
     let opts = MonitorOptions {
         features: m.features,
         hidden: m.hidden,
         seed: m.seed,
         estimate: EstimateOptions::default(),
     };
-    let f = record_features(&spec, data, &opts)?;
+    let f = features_of(&spec, data, &opts)?;
     let pipeline = TrainedPipeline::fit(
         &m.preprocessing,
         &m.classifier,

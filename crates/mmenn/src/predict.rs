@@ -9,10 +9,10 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::Serialize;
-use sysid_core::{ChannelMetrics, Horizon};
+use sysid_core::{ChannelMetrics, Dataset, Experiment};
 
 use crate::atomic::{ensure_dir, write_atomic};
-use crate::data_file::{read_table, table_to_experiment, write_csv};
+use crate::data_file::{Table, read_table, table_to_experiment, write_csv};
 use crate::error::Result;
 use crate::fit::FreeRunReport;
 use crate::model::{
@@ -85,7 +85,8 @@ pub fn run_predict(
     run_predict_with(model, data_path, &opts, out)
 }
 
-/// Load any model mmenn writes, judge it on the record and write the results into `out`.
+/// Load any model mmenn writes, judge it on the record and write the results into `out`:
+/// reads the files, [`compute_predict`], [`write_predict`].
 pub fn run_predict_with(
     model_path: &Path,
     data_path: &Path,
@@ -94,104 +95,196 @@ pub fn run_predict_with(
 ) -> Result<PredictSummary> {
     let model = LoadedModel::read(model_path)?;
     let table = read_table(data_path)?;
-    let obs = Observation::present(&model, |n| table.column_index(n).is_some());
+    let outcome = compute_predict(&model, &table, opts)?;
+    write_predict(&outcome, out)?;
+    Ok(outcome.summary)
+}
+
+/// Everything `mmenn predict` computes, as values ([`write_predict`] writes it).
+#[derive(Debug, Clone)]
+pub struct PredictOutcome {
+    /// What `prediction.json` holds.
+    pub summary: PredictSummary,
+    /// The record judged (inputs and the judged channels, held as the model says).
+    pub record: Experiment,
+    /// The judged channels.
+    pub observation: Observation,
+    /// The free-run judgement (states `n × N`, judged channels `p × N`).
+    pub free: Judgement,
+    /// What `prediction.csv` holds: `t`, every state, every output that is not a state,
+    /// then the k-step columns (`<channel>_<k>step`), as (header, values) pairs.
+    pub columns: Vec<(String, Vec<f64>)>,
+    /// A title for its figures (what kind of model).
+    pub model_kind: ModelKind,
+}
+
+impl PredictOutcome {
+    /// A column of `prediction.csv` by name.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
+    }
+}
+
+/// `mmenn predict` without files: the model judged free-run (and k steps ahead, when
+/// asked for) by the one judge on every state column and every model-output column the
+/// record has.
+pub fn compute_predict(
+    model: &LoadedModel,
+    data: &Table,
+    opts: &PredictOptions,
+) -> Result<PredictOutcome> {
+    let obs = model.present(|n| data.column_index(n).is_some());
+    let exp = table_to_experiment(data, model.spec.linear.input_names(), &obs.names)?;
+    compute_predict_record(model, &exp, obs, opts)
+}
+
+/// [`compute_predict`] on the first record of a dataset in memory: judged on every state
+/// and model output among its output channels. Its input channels must be the model's,
+/// in order.
+pub fn compute_predict_on(
+    model: &LoadedModel,
+    data: &Dataset,
+    opts: &PredictOptions,
+) -> Result<PredictOutcome> {
+    let names = data.output_names();
+    let inputs = data.input_names();
+    if inputs.as_slice() != model.spec.linear.input_names() {
+        return Err(crate::error::MmennError::Core {
+            context: "the record to predict: its input channels must be the model's, in order",
+            source: sysid_core::CoreError::Length {
+                what: "input channels of the record vs the model",
+                found: inputs.len(),
+                expected: model.spec.linear.n_inputs(),
+            },
+        });
+    }
+    let obs = model.present(|n| names.iter().any(|c| c == n));
+    let exp = &data.experiments()[0];
+    let rows: Vec<usize> = obs
+        .names
+        .iter()
+        .filter_map(|n| names.iter().position(|c| c == n))
+        .collect();
+    let outputs = exp.outputs().select_rows(rows.iter());
+    let record =
+        Experiment::new(exp.t0(), exp.dt(), exp.inputs().clone(), outputs).map_err(|source| {
+            crate::error::MmennError::Core {
+                context: "the record to predict",
+                source,
+            }
+        })?;
+    compute_predict_record(model, &record, obs, opts)
+}
+
+/// [`compute_predict`] on a record whose output rows are the channels of `obs`, in order
+/// (its inputs are held between samples as the model says).
+pub fn compute_predict_record(
+    model: &LoadedModel,
+    record: &Experiment,
+    obs: Observation,
+    opts: &PredictOptions,
+) -> Result<PredictOutcome> {
     let lin = &model.spec.linear;
-    let exp = table_to_experiment(&table, lin.input_names(), &obs.names)?
-        .with_intersample(model.intersample());
+    let exp = record.clone().with_intersample(model.intersample());
     let rule = match &opts.x0 {
         InitialChoice::Given(x) => InitialRule::Given(x.clone()),
         InitialChoice::Fit => InitialRule::Fit {
             window: opts.x0_window,
         },
     };
-    let free = judge_free_run(&model, &exp, &obs, &rule)?;
+    let free = judge_free_run(model, &exp, &obs, &rule)?;
     let k_step = match opts.horizon {
-        Some(k) => Some(judge_k_step(&model, &exp, &obs, k, &free)?),
+        Some(k) => Some(judge_k_step(model, &exp, &obs, k, &free)?),
         None => None,
     };
-    ensure_dir(out)?;
-    let mut files = Vec::new();
-
-    // prediction.csv: t, every state, every output that is not a state, k-step columns.
-    let t = exp.times();
     let y = lin.c() * &free.states;
-    let mut header = vec!["t".to_string()];
-    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut columns = vec![("t".to_string(), exp.times())];
     for (i, s) in lin.state_names().iter().enumerate() {
-        header.push(s.clone());
-        cols.push(free.states.row(i).iter().copied().collect());
+        columns.push((s.clone(), free.states.row(i).iter().copied().collect()));
     }
     for (i, o) in lin.output_names().iter().enumerate() {
         if !lin.state_names().contains(o) {
-            header.push(o.clone());
-            cols.push(y.row(i).iter().copied().collect());
+            columns.push((o.clone(), y.row(i).iter().copied().collect()));
         }
     }
     if let Some(ks) = &k_step {
         let k = opts.horizon.unwrap_or(0);
         for (i, name) in obs.names.iter().enumerate() {
-            header.push(format!("{name}_{k}step"));
-            cols.push(ks.outputs.row(i).iter().copied().collect());
-        }
-    }
-    let mut refs: Vec<&[f64]> = vec![&t];
-    refs.extend(cols.iter().map(Vec::as_slice));
-    write_csv(&out.join("prediction.csv"), &header, &refs)?;
-    files.push("prediction.csv".to_string());
-
-    for (i, name) in obs.names.iter().enumerate() {
-        let fit = |j: &Judgement| j.channels.get(name).map_or(f64::NAN, |m| m.fit_percent);
-        let mut series = vec![
-            Series::points(
-                format!("{name} measured"),
-                t.clone(),
-                exp.outputs().row(i).iter().copied().collect(),
-            ),
-            Series::line(
-                format!("free-run simulation (fit {:.1} %)", fit(&free)),
-                t.clone(),
-                free.outputs.row(i).iter().copied().collect(),
-            ),
-        ];
-        if let Some(ks) = &k_step {
-            series.push(Series::line(
-                format!("{} (fit {:.1} %)", ks.horizon, fit(ks)),
-                t.clone(),
+            columns.push((
+                format!("{name}_{k}step"),
                 ks.outputs.row(i).iter().copied().collect(),
             ));
         }
-        let fig = Figure {
-            title: format!("{name}: {} on new data", model.kind),
-            x_label: "t (s)".into(),
-            y_label: name.clone(),
-            series,
-            bands: vec![],
-        };
-        let file = format!("prediction_{name}.svg");
-        fig.write(&out.join(&file))?;
-        files.push(file);
     }
+    let mut files = vec!["prediction.csv".to_string()];
+    files.extend(obs.names.iter().map(|n| format!("prediction_{n}.svg")));
     files.push("prediction.json".into());
     files.push("report.md".into());
     files.push("report.html".into());
     let summary = PredictSummary {
         model_kind: model.kind,
-        free_run: FreeRunReport {
-            horizon: Horizon::FreeRun,
-            x0: free.x0.clone(),
-            x0_source: free.x0_rule.clone(),
-            channels: free.channels.clone(),
-        },
+        free_run: FreeRunReport::of(&free),
         scored: free.scored,
         k_step,
         files,
     };
+    Ok(PredictOutcome {
+        summary,
+        record: exp,
+        observation: obs,
+        free,
+        columns,
+        model_kind: model.kind,
+    })
+}
+
+/// Write what [`compute_predict`] computed into `out`: `prediction.csv`, a figure per
+/// judged channel, `prediction.json` and `report.md` (atomically, each file).
+pub fn write_predict(o: &PredictOutcome, out: &Path) -> Result<()> {
+    ensure_dir(out)?;
+    let header: Vec<String> = o.columns.iter().map(|(n, _)| n.clone()).collect();
+    let refs: Vec<&[f64]> = o.columns.iter().map(|(_, v)| v.as_slice()).collect();
+    write_csv(&out.join("prediction.csv"), &header, &refs)?;
+    let t = o.record.times();
+    let free = &o.free;
+    for (i, name) in o.observation.names.iter().enumerate() {
+        let mut series = vec![
+            Series::points(
+                format!("{name} measured"),
+                t.clone(),
+                o.record.outputs().row(i).iter().copied().collect(),
+            ),
+            Series::line(
+                format!("free-run simulation (fit {:.1} %)", free.fit_percent(name)),
+                t.clone(),
+                free.outputs.row(i).iter().copied().collect(),
+            ),
+        ];
+        if let Some(ks) = &o.summary.k_step {
+            series.push(Series::line(
+                format!("{} (fit {:.1} %)", ks.horizon, ks.fit_percent(name)),
+                t.clone(),
+                ks.outputs.row(i).iter().copied().collect(),
+            ));
+        }
+        let fig = Figure {
+            title: format!("{name}: {} on new data", o.model_kind),
+            x_label: "t (s)".into(),
+            y_label: name.clone(),
+            series,
+            bands: vec![],
+        };
+        fig.write(&out.join(format!("prediction_{name}.svg")))?;
+    }
     write_atomic(
         &out.join("prediction.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
+        serde_json::to_string_pretty(&o.summary)?.as_bytes(),
     )?;
-    crate::html::write_report(out, &report(&summary))?;
-    Ok(summary)
+    crate::html::write_report(out, &report(&o.summary))?;
+    Ok(())
 }
 
 fn table(channels: &BTreeMap<String, ChannelMetrics>) -> String {

@@ -5,13 +5,12 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::DMatrix;
 use nn::{HybridParts, Mlp, RefineReport, ShootingRecord, TrajectoryConfig};
 use serde::Serialize;
-use sysid_core::{Dataset, Experiment, InitialStateFit, MmeEstimate, fit_initial_state};
+use sysid_core::{Dataset, MmeEstimate};
 
 use crate::error::{MmennError, Result};
-use crate::fit::{FitOptions, HybridModel, free_run, hybrid_model, metrics_for};
+use crate::fit::{FitOptions, hybrid_loaded, judge_outputs};
 use crate::model_file::ModelSpec;
 
 /// Whether `fit` refines the network on trajectories after training it on `d̂`.
@@ -120,14 +119,19 @@ pub(crate) fn refine_network(
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<RefineSummary> {
     let lin = &spec.linear;
+    // Judged as `fit` judges the final model: the one free-run judge on the first
+    // validation record.
     let before = match val {
-        Some((ve, v)) => {
-            let h = hybrid_model(spec, network.clone(), x0, opts.substeps)?;
-            let vexp = &v.experiments()[0];
-            let guess: Vec<f64> = ve.experiments[0].states.column(0).iter().copied().collect();
-            let (_, vxs) = validation_run(&h, lin.c(), vexp, &guess, opts.x0_window)?;
-            let m = metrics_for(lin.output_names(), lin.c(), &vxs, vexp)?;
-            Some(m.into_iter().map(|(k, v)| (k, v.fit_percent)).collect())
+        Some((_, v)) => {
+            let dt = v.experiments()[0].dt();
+            let (_, loaded) = hybrid_loaded(spec, network, x0, dt, opts.substeps)?;
+            let j = judge_outputs(&loaded, v, opts.x0_window)?;
+            Some(
+                j.channels
+                    .into_iter()
+                    .map(|(k, m)| (k, m.fit_percent))
+                    .collect(),
+            )
         }
         None => None,
     };
@@ -168,27 +172,4 @@ pub(crate) fn refine_network(
         validation_fit_before: before,
         validation_fit_after: None,
     })
-}
-
-/// Free-run on a validation record: the initial state fitted to its first `window`
-/// samples (from `guess`), then the states over the whole record (both with the inputs
-/// between samples as the record's `intersample` says).
-pub(crate) fn validation_run(
-    model: &HybridModel,
-    c: &DMatrix<f64>,
-    exp: &Experiment,
-    guess: &[f64],
-    window: usize,
-) -> Result<(Vec<f64>, DMatrix<f64>)> {
-    let fit = InitialStateFit {
-        window,
-        integrator: model.integrator,
-        ..InitialStateFit::default()
-    };
-    let x0 = fit_initial_state(model, c, exp, guess, &fit).map_err(|source| MmennError::Core {
-        context: "fitting the validation initial state",
-        source,
-    })?;
-    let xs = free_run(model, exp, &x0)?;
-    Ok((x0, xs))
 }

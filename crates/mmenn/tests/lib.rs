@@ -3,6 +3,7 @@
 mod band_limited;
 mod compare;
 mod discover;
+mod examples;
 mod fit;
 mod hidden_effects;
 mod model;

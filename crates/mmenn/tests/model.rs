@@ -291,3 +291,89 @@ fn cli_show_and_a_data_file_as_model() {
     assert!(!err.contains("backtrace"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The "done when": simulate → discover (the test record as validation) →
+/// predict on the discovered model → compare with the discovered model as a row; the
+/// discovered model's free-run fit % on the test record is one number in `predict`,
+/// `compare` and `discover` (its validation gap after the discovered terms), all with the
+/// initial state fitted to the first 50 samples.
+#[test]
+// Measured on bfa0e7e: predict and compare 87.30277999699857 %, discover 87.30277977566405 %.
+fn one_fit_percent_in_predict_compare_and_discover() {
+    let dir = scratch("done-when");
+    let req = |recipe| SimulationRequest {
+        system: "msd_cubic".into(),
+        recipe,
+        seed: 2,
+        fs: Some(20.0),
+        ..Default::default()
+    };
+    let train = run_simulate(&req(Recipe::Train), &dir.join("train")).unwrap();
+    let test = run_simulate(&req(Recipe::Test), &dir.join("test")).unwrap();
+    let d = run_discover(
+        std::slice::from_ref(&train.data),
+        &train.model,
+        std::slice::from_ref(&test.data),
+        &DiscoverOptions {
+            max_rounds: 1,
+            x0_window: 50,
+            ..DiscoverOptions::default()
+        },
+        &dir.join("discover"),
+    )
+    .unwrap();
+    let discovered = dir.join("discover").join(&d.model);
+    assert_eq!(
+        LoadedModel::read(&discovered).unwrap().kind,
+        ModelKind::WithTerms
+    );
+    let p = run_predict(
+        &discovered,
+        &test.data,
+        &InitialChoice::Fit,
+        50,
+        &dir.join("predict"),
+    )
+    .unwrap();
+    let c = run_compare(
+        std::slice::from_ref(&train.data),
+        &discovered,
+        std::slice::from_ref(&test.data),
+        &CompareOptions {
+            fit: FitOptions {
+                hidden: HiddenChoice::Fixed(1),
+                inits: 1,
+                refine: RefineChoice::None,
+                x0_window: 50,
+                ..FitOptions::default()
+            },
+            narx_lags: Some(2),
+            ..CompareOptions::default()
+        },
+        &dir.join("compare"),
+    )
+    .unwrap();
+    let row = c
+        .validation
+        .as_ref()
+        .unwrap()
+        .rows()
+        .iter()
+        .find(|r| r.label == GIVEN_MODEL_ROW)
+        .unwrap()
+        .evaluation
+        .clone();
+    let discover_after = &d.validation_gap.as_ref().unwrap().after.fit_percent;
+    assert!(!p.free_run.channels.is_empty());
+    for (name, m) in &p.free_run.channels {
+        let in_compare = row.channel(name).unwrap().fit_percent;
+        let in_discover = discover_after[name];
+        assert_eq!(
+            (in_compare.to_bits(), in_discover.to_bits()),
+            (m.fit_percent.to_bits(), m.fit_percent.to_bits()),
+            "{name}: predict {} %, compare {in_compare} %, discover {in_discover} %",
+            m.fit_percent
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

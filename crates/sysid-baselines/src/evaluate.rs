@@ -3,10 +3,9 @@
 //! the [`Horizon`] carried along; and a table that refuses rows of another horizon, so
 //! free-run and k-step numbers can never be mixed.
 
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use sysid_core::{
-    ChannelMetrics, Dataset, Experiment, Horizon, Model, Prediction, channel_metrics,
-};
+use sysid_core::{ChannelMetrics, Dataset, Experiment, Horizon, Model, Prediction, score_rows};
 
 use crate::error::{BaselineError, Result};
 
@@ -130,7 +129,14 @@ pub(crate) fn check_outputs(model_outputs: &[String], data: &Dataset) -> Result<
 
 /// Evaluate a model on a dataset with the given horizon: per output channel, metrics of
 /// the predictions against the measurements pooled over every experiment, from each
-/// prediction's `initial_samples` on, missing measurements skipped.
+/// prediction's `initial_samples` on, missing measurements skipped, scored by the one
+/// judge's scoring ([`sysid_core::score_rows`]).
+///
+/// This is the judge of input–output models whose initial condition is a window of
+/// measured samples they consume (NARX's delay line, an output-error model's observer
+/// window): those samples are not scored. A continuous-time state-space model is judged
+/// by [`sysid_core::judge_free_run`] (initial state fitted to a stated window, every
+/// sample scored), as mmenn's commands do.
 ///
 /// The data's output channels must be the model's (names, in order). Errors: channel
 /// mismatch, the model's own errors, a non-finite prediction where a measurement exists,
@@ -139,29 +145,32 @@ pub fn evaluate<M: Model>(model: &M, data: &Dataset, horizon: Horizon) -> Result
     let names = model.output_names();
     check_outputs(&names, data)?;
     let preds = predictions(model, data, horizon)?;
-    let mut measured: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-    let mut predicted: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+    let p = names.len();
+    let mut measured: Vec<f64> = Vec::new();
+    let mut predicted: Vec<f64> = Vec::new();
     let mut initial = 0;
     for (exp, pred) in data.experiments().iter().zip(&preds) {
         let start = pred.initial_samples.min(exp.len());
         initial += start;
         for k in start..exp.len() {
-            for (i, y) in exp.output(k).iter().enumerate() {
-                measured[i].push(*y);
-                predicted[i].push(pred.outputs[(i, k)]);
-            }
+            measured.extend(exp.output(k).iter().copied());
+            predicted.extend((0..p).map(|i| pred.outputs[(i, k)]));
         }
     }
+    let cols = measured.len() / p.max(1);
+    let scored = score_rows(
+        &names,
+        &DMatrix::from_column_slice(p, cols, &measured),
+        &DMatrix::from_column_slice(p, cols, &predicted),
+        0,
+    )?;
     let channels = names
         .into_iter()
-        .enumerate()
-        .map(|(i, name)| {
-            Ok(ChannelEvaluation {
-                metrics: channel_metrics(&measured[i], &predicted[i])?,
-                name,
-            })
+        .map(|name| ChannelEvaluation {
+            metrics: scored[&name],
+            name,
         })
-        .collect::<Result<Vec<_>>>()?;
+        .collect();
     Ok(Evaluation {
         horizon,
         channels,

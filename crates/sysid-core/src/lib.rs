@@ -9,6 +9,7 @@ pub mod expr;
 pub mod hybrid;
 pub mod initial;
 pub mod integrate;
+pub mod judge;
 pub mod linear;
 pub mod metrics;
 pub mod terms;
@@ -22,6 +23,10 @@ pub use expr::{Expr, ExprError, Func};
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};
 pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with};
+pub use judge::{
+    DEFAULT_X0_WINDOW, InitialRule, JudgeOptions, Judgement, Observation, ScoredWindow,
+    judge_free_run, judge_k_step, score, score_rows,
+};
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};

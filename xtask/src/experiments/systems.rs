@@ -6,9 +6,13 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use mmenn::data_file::read_table;
-use mmenn::fit::{FitOptions, InitialChoice, ModelUpdateChoice, run_fit, run_predict};
+use mmenn::LoadedModel;
+use mmenn::data_file::{read_table, read_with_validation};
+use mmenn::fit::{FitOptions, InitialChoice, ModelUpdateChoice, compute_fit, write_fit};
+use mmenn::nn::SweepRow;
 use mmenn::plot::{Figure, Series};
+use mmenn::predict::{PredictOptions, compute_predict, write_predict};
+use mmenn::progress::NoProgress;
 use mmenn::sysid_core::{ChannelMetrics, channel_metrics};
 use nalgebra::DMatrix;
 
@@ -307,28 +311,17 @@ fn values(m: Option<ChannelMetrics>) -> [Option<f64>; 4] {
     }
 }
 
-/// Free-run states of the fitted hybrid model on one record (`n × N`), from the true x0.
-fn predict_states(model_json: &Path, rec: &Record, out: &Path) -> Result<DMatrix<f64>> {
-    run_predict(
-        model_json,
-        &rec.files.truth,
-        &InitialChoice::Given(rec.x0()),
-        200,
-        out,
-    )?;
-    let table = read_table(&out.join("prediction.csv"))?;
-    let names = &rec.sim.truth.state_names;
-    let n = table.lines.len();
-    let mut m = DMatrix::zeros(names.len(), n);
-    for (i, name) in names.iter().enumerate() {
-        let j = table
-            .column_index(name)
-            .with_context(|| format!("prediction.csv has no column {name}"))?;
-        for k in 0..n {
-            m[(i, k)] = table.columns[j][k];
-        }
-    }
-    Ok(m)
+/// Free-run states of the fitted hybrid model on one record (`n × N`), from the true x0
+/// (`mmenn predict`'s computation, its files written into `out` for inspection).
+fn predict_states(model: &LoadedModel, rec: &Record, out: &Path) -> Result<DMatrix<f64>> {
+    let opts = PredictOptions {
+        x0: InitialChoice::Given(rec.x0()),
+        x0_window: Some(200),
+        horizon: None,
+    };
+    let outcome = compute_predict(model, &read_table(&rec.files.truth)?, &opts)?;
+    write_predict(&outcome, out)?;
+    Ok(outcome.free.states)
 }
 
 /// A model's free-run states (rows = all states, NaN rows where it has no estimate) on the
@@ -354,18 +347,16 @@ fn run_case(ctx: &Ctx, case: &Case) -> Result<Outcome> {
         refine: mmenn::fit::RefineChoice::None,
         ..FitOptions::default()
     };
-    let summary = run_fit(
-        std::slice::from_ref(&set.train.files.data),
-        &set.train.files.model,
-        &[],
-        &opts,
-        &dir,
-    )
-    .with_context(|| format!("mmenn fit on {}", case.data))?;
-    let model_json = dir.join("model.json");
+    let spec = LoadedModel::read(&set.train.files.model)?.spec;
+    let (data, _) = read_with_validation(std::slice::from_ref(&set.train.files.data), &[], &spec)?;
+    let fit = compute_fit(&data, &spec, None, &opts, &NoProgress)
+        .with_context(|| format!("mmenn fit on {}", case.data))?;
+    write_fit(&fit, &dir)?;
+    let summary = &fit.summary;
+    let model = LoadedModel::from_hybrid(&dir.join("model.json"), fit.model.clone())?;
     let n = set.train.sim.truth.state_names.len();
     let hybrid: Trajectories = [("train", &set.train), ("test", test)].map(|(name, rec)| {
-        match predict_states(&model_json, rec, &dir.join(format!("predict_{name}"))) {
+        match predict_states(&model, rec, &dir.join(format!("predict_{name}"))) {
             Ok(m) => (m, None),
             Err(e) => failed(n, rec.sim.truth.states.ncols(), format!("{e:#}")),
         }
@@ -436,7 +427,7 @@ fn run_case(ctx: &Ctx, case: &Case) -> Result<Outcome> {
          the first corrected state's."
     ));
     out.tables.push(nets);
-    let (sweep, sweep_fig) = sweep_table(&dir.join("sweep.csv"), case.id)?;
+    let (sweep, sweep_fig) = sweep_table(&fit.sweep, case.id);
     out.tables.push(sweep);
     out.figures
         .push(ctx.figure(&format!("ch4_{}_sweep", case.id), &sweep_fig)?);
@@ -552,15 +543,10 @@ fn rate_table(set: &DataSet, fs: f64, traj: &Trajectories) -> Table {
     t
 }
 
-fn sweep_table(path: &Path, case: &str) -> Result<(Table, Figure)> {
-    let csv = read_table(path)?;
-    let col = |name: &str| -> Result<&Vec<f64>> {
-        let j = csv
-            .column_index(name)
-            .with_context(|| format!("{}: no column {name}", path.display()))?;
-        Ok(&csv.columns[j])
-    };
-    let (hidden, train, test) = (col("hidden")?, col("train_mse")?, col("test_mse")?);
+fn sweep_table(rows: &[SweepRow], case: &str) -> (Table, Figure) {
+    let hidden: &Vec<f64> = &rows.iter().map(|r| r.hidden as f64).collect();
+    let train: &Vec<f64> = &rows.iter().map(|r| r.train_mse).collect();
+    let test: &Vec<f64> = &rows.iter().map(|r| r.test_mse).collect();
     let mut t = Table::new(
         SWEEP,
         "Ch. 4 sizing sweep (thesis Figs. 4.5, 4.9): best MSE of d̂ over the initialisations per size",
@@ -609,5 +595,5 @@ fn sweep_table(path: &Path, case: &str) -> Result<(Table, Figure)> {
         ],
         bands: vec![],
     };
-    Ok((t, fig))
+    (t, fig)
 }

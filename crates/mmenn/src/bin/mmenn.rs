@@ -656,8 +656,9 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
 #[allow(clippy::print_stdout)]
 fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
     println!(
-        "{label} — {} from x0 = {} ({}):",
+        "{label} — {}, {} scored, from x0 = {} ({}):",
         r.horizon,
+        r.scored,
         mmenn::words::numbers(&r.x0),
         r.x0_source
     );
@@ -755,6 +756,7 @@ fn predict(args: PredictArgs, force: bool) -> Result<()> {
                 horizon: k.horizon,
                 x0: k.x0.clone(),
                 x0_source: k.k_step_rule.clone().unwrap_or_default(),
+                scored: k.scored,
                 channels: k.channels.clone(),
             },
         );
