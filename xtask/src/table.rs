@@ -77,6 +77,10 @@ pub struct Row {
     pub key: Vec<String>,
     /// Values, one per value column; `null` in JSON for N/A.
     pub values: Vec<Option<f64>>,
+    /// What the table shows instead of "N/A" for this row's missing values (e.g. "diverged
+    /// at t = 12.3 s"): a model that failed is reported as failed, never as a number.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub remark: Option<String>,
 }
 
 /// A table of results.
@@ -116,7 +120,16 @@ impl Table {
         self.rows.push(Row {
             key: key.iter().map(|k| k.to_string()).collect(),
             values: values.iter().map(|v| v.filter(|x| x.is_finite())).collect(),
+            remark: None,
         });
+    }
+
+    /// Append a row whose missing values read `remark` (why there is no number).
+    pub fn push_remark(&mut self, key: &[&str], values: &[Option<f64>], remark: &str) {
+        self.push(key, values);
+        if let Some(r) = self.rows.last_mut() {
+            r.remark = Some(remark.to_string());
+        }
     }
 
     /// Add a note.
@@ -167,16 +180,17 @@ impl Table {
         s.push_str(&format!("| {} |\n", head.join(" | ")));
         s.push_str(&format!("|{}\n", "---|".repeat(head.len())));
         for r in &self.rows {
-            let cells: Vec<String> =
-                r.key
-                    .iter()
-                    .cloned()
-                    .chain(
-                        r.values.iter().zip(&self.columns).map(|(v, c)| {
-                            v.map_or("N/A".to_string(), |x| format_value(x, c.digits))
-                        }),
+            let cells: Vec<String> = r
+                .key
+                .iter()
+                .cloned()
+                .chain(r.values.iter().zip(&self.columns).map(|(v, c)| {
+                    v.map_or_else(
+                        || r.remark.clone().unwrap_or_else(|| "N/A".to_string()),
+                        |x| format_value(x, c.digits),
                     )
-                    .collect();
+                }))
+                .collect();
             s.push_str(&format!("| {} |\n", cells.join(" | ")));
         }
         if !self.notes.is_empty() {
@@ -234,5 +248,12 @@ mod tests {
         assert_eq!(t.get(&["p"], "a"), None);
         assert_eq!(t.get(&["p"], "b"), Some(2.0));
         assert!(t.markdown().contains("| p | N/A | 2.00 |"));
+        t.push_remark(
+            &["q"],
+            &[Some(f64::INFINITY), Some(1.0)],
+            "diverged at t = 3 s",
+        );
+        assert_eq!(t.get(&["q"], "a"), None);
+        assert!(t.markdown().contains("| q | diverged at t = 3 s | 1.00 |"));
     }
 }

@@ -1,0 +1,222 @@
+//! NARX networks on the official records, their orders chosen by the data: every
+//! `(na, nb)` of a small grid (delay window no longer than the official initialisation
+//! window, so the test run uses only the samples the protocol grants) is trained on the
+//! first 80 % of the training record and run free over the last 20 %; the order with the
+//! lowest held-out free-run RMSE is trained on the whole record and scored on the tests.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use mmenn::benchmarks::{Benchmark, BenchmarkData};
+use mmenn::sysid_baselines::{NarxConfig, NarxOrders, NetworkChoice, fit_narx};
+use mmenn::sysid_core::{Channel, Dataset, Experiment, InterSample, Model};
+
+use super::{OFFICIAL, rmse_after};
+use crate::experiments::{FIT_SEED, Mode, row};
+use crate::table::Table;
+
+/// Fraction of the training record the order selection trains on.
+const SELECT_FRACTION: f64 = 0.8;
+
+/// The grid of `(na, nb)`, the network of the selection runs and of the final fit, and
+/// how many training samples the selection uses (`None`: all).
+struct Plan {
+    grid: Vec<(usize, usize)>,
+    select: NetworkChoice,
+    last: NetworkChoice,
+    select_samples: Option<usize>,
+}
+
+fn plan(b: Benchmark, mode: Mode) -> Plan {
+    let hidden = |units, restarts| NetworkChoice::Hidden { units, restarts };
+    match mode {
+        Mode::Quick => Plan {
+            grid: vec![(4, 4), (8, 8)],
+            select: hidden(3, 1),
+            last: hidden(3, 1),
+            select_samples: Some(8192),
+        },
+        Mode::Full => Plan {
+            // Delay windows up to the official initialisation window (50 samples; 20 on
+            // EMPS), with input windows longer than the output's as well.
+            grid: match b {
+                Benchmark::Emps => vec![(4, 4), (8, 8), (8, 19), (16, 16), (19, 19)],
+                _ => vec![(4, 4), (8, 8), (8, 24), (16, 16), (24, 24)],
+            },
+            select: hidden(3, 2),
+            last: hidden(5, 4),
+            // Silverbox: the selection on the first 16 384 of the 65 062 samples (the
+            // final fit uses all of them).
+            select_samples: match b {
+                Benchmark::Silverbox => Some(16_384),
+                _ => None,
+            },
+        },
+    }
+}
+
+fn dataset(e: &Experiment, start: usize, len: usize, hold: InterSample) -> Result<Dataset> {
+    let x = Experiment::new(
+        e.t0() + start as f64 * e.dt(),
+        e.dt(),
+        e.inputs().columns(start, len).into_owned(),
+        e.outputs().columns(start, len).into_owned(),
+    )?
+    .with_intersample(hold);
+    Ok(Dataset::new(
+        vec![Channel::new("u")],
+        vec![Channel::new("y")],
+        vec![x],
+    )?)
+}
+
+fn config(orders: NarxOrders, network: NetworkChoice) -> NarxConfig {
+    NarxConfig {
+        orders,
+        network,
+        seed: FIT_SEED,
+        ..NarxConfig::default()
+    }
+}
+
+/// "diverged at …" or the error text, for a failed free run.
+fn failure(e: &dyn std::fmt::Display) -> String {
+    let text = e.to_string();
+    if text.contains("diverg") || text.contains("limits") {
+        format!("diverged ({text})")
+    } else {
+        format!("failed ({text})")
+    }
+}
+
+/// NARX rows under the official protocol; the first test record's free run joins the
+/// figure when it has the figure's grid (`offset`: what the figure adds back).
+pub fn narx_rows(
+    data: &BenchmarkData,
+    mode: Mode,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    offset: f64,
+) {
+    if let Err(e) = narx_inner(data, mode, table, sims, offset) {
+        table.note(format!("NARX: not built: {e:#}"));
+    }
+}
+
+fn narx_inner(
+    data: &BenchmarkData,
+    mode: Mode,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    offset: f64,
+) -> Result<()> {
+    let b = data.benchmark;
+    let window = b.init_window();
+    let (scale, unit) = b.reporting_unit();
+    let est = &data.estimation.experiments()[0];
+    let hold = est.intersample();
+    let Plan {
+        grid,
+        select: small,
+        last,
+        select_samples,
+    } = plan(b, mode);
+    let clock = Instant::now();
+    let used = select_samples.map_or(est.len(), |n| n.min(est.len()));
+    let cut = (used as f64 * SELECT_FRACTION) as usize;
+    let head = dataset(est, 0, cut, hold)?;
+    let tail = &dataset(est, cut, used - cut, hold)?.experiments()[0].clone();
+    let y_tail = row(tail.outputs(), 0);
+    let mut tried = Vec::new();
+    let mut best: Option<(NarxOrders, f64)> = None;
+    for &(na, nb) in &grid {
+        let orders = NarxOrders { na, nb, nk: 1 };
+        if orders.max_lag() > window {
+            continue;
+        }
+        let scored = fit_narx(&head, &config(orders, small.clone()))
+            .map_err(|e| failure(&e))
+            .and_then(|f| f.model.simulate(tail).map_err(|e| failure(&e)))
+            .and_then(|p| {
+                rmse_after(&y_tail, &row(&p.outputs, 0), window, scale)
+                    .ok_or_else(|| "diverged (non-finite output)".to_string())
+            });
+        match scored {
+            Ok(r) => {
+                tried.push(format!("({na}, {nb}): {r:.4} {unit}"));
+                if best.is_none_or(|(_, b)| r < b) {
+                    best = Some((orders, r));
+                }
+            }
+            Err(why) => tried.push(format!("({na}, {nb}): {why}")),
+        }
+    }
+    let select_seconds = clock.elapsed().as_secs_f64();
+    let Some((orders, _)) = best else {
+        anyhow::bail!("every order of the grid failed: {}", tried.join("; "));
+    };
+    let clock = Instant::now();
+    let fit = fit_narx(&data.estimation, &config(orders, last.clone()))?;
+    let fit_seconds = clock.elapsed().as_secs_f64();
+    let label = format!(
+        "NARX (na = {}, nb = {}, order chosen on held-out data)",
+        orders.na, orders.nb
+    );
+    let protocol = format!(
+        "{OFFICIAL}: all training samples at full rate; delay window = the first {} of the {window} initialisation samples, RMSE after them",
+        orders.max_lag()
+    );
+    let mut results = Vec::new();
+    for (i, test) in data.tests.iter().enumerate() {
+        let e = &test.data.experiments()[0];
+        let y = row(e.outputs(), 0);
+        match fit.model.simulate(e) {
+            Ok(p) => {
+                let v = row(&p.outputs, 0);
+                match rmse_after(&y, &v, window, scale) {
+                    Some(r) => {
+                        table.push(&[&label, &test.name, &protocol], &[Some(r)]);
+                        results.push(format!("{}: {r:.4} {unit}", test.name));
+                    }
+                    None => table.push_remark(
+                        &[&label, &test.name, &protocol],
+                        &[None],
+                        "diverged (non-finite output)",
+                    ),
+                }
+                if i == 0 && sims.first().is_some_and(|(_, f)| f.len() == v.len()) {
+                    sims.push(("NARX".into(), v.iter().map(|x| x - offset).collect()));
+                }
+            }
+            Err(err) => {
+                let why = failure(&err);
+                table.push_remark(&[&label, &test.name, &protocol], &[None], &why);
+                results.push(format!("{}: {why}", test.name));
+            }
+        }
+    }
+    let net = |c: &NetworkChoice| match c {
+        NetworkChoice::Hidden { units, restarts } => {
+            format!("{units} hidden × {restarts} restarts")
+        }
+        NetworkChoice::Sweep { .. } => "a sizing sweep".into(),
+    };
+    table.note(format!(
+        "NARX ({OFFICIAL}): orders chosen by the data — each (na, nb) of the grid with a delay \
+         window no longer than the {window}-sample initialisation window, nk = 1, trained \
+         ({}) on the first {:.0} % of the first {used} of the {} training samples and run free over the rest of them \
+         (held-out free-run RMSE after {window} samples: {}); chosen (na, nb) = ({}, {}), \
+         trained on all training samples ({}). Time to accuracy: order selection \
+         {select_seconds:.1} s, final fit {fit_seconds:.1} s wall, rayon pool of {} threads \
+         on 2 shared cores.",
+        net(&small),
+        100.0 * SELECT_FRACTION,
+        est.len(),
+        tried.join(", "),
+        orders.na,
+        orders.nb,
+        net(&last),
+        rayon::current_num_threads(),
+    ));
+    Ok(())
+}
