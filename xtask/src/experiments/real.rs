@@ -9,7 +9,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use mmenn::benchmarks::{Benchmark, load};
 use mmenn::data_file::{read_table, write_csv};
-use mmenn::fit::{FitOptions, InitialChoice, run_fit, run_predict};
+use mmenn::fit::{FitOptions, InitialChoice, run_fit};
 use mmenn::model_file::{ModelSpec, NoiseVariance, write_model};
 use mmenn::plot::Figure;
 use mmenn::sysid_baselines::{LinearSsConfig, OeConfig, X0Policy, fit_linear_ss, fit_oe};
@@ -405,21 +405,27 @@ fn write_record(path: &Path, data: &Dataset) -> Result<()> {
     Ok(())
 }
 
-/// Free-run output of the fitted hybrid model on a test CSV.
+/// Free-run output `output` of a fitted model (`model.json` or any model file) on a test
+/// record, computed in memory by `mmenn::predict::compute_predict` (nothing written).
 fn hybrid_output(
     model_json: &Path,
     csv: &Path,
     choice: &InitialChoice,
     window: usize,
-    out: &Path,
     output: &str,
 ) -> Result<Vec<f64>> {
-    run_predict(model_json, csv, choice, window, out)?;
-    let t = read_table(&out.join("prediction.csv"))?;
-    let j = t
-        .column_index(output)
-        .with_context(|| format!("prediction.csv has no {output}"))?;
-    Ok(t.columns[j].clone())
+    let model = mmenn::model::LoadedModel::read(model_json)?;
+    let record = read_table(csv)?;
+    let opts = mmenn::predict::PredictOptions {
+        x0: choice.clone(),
+        x0_window: Some(window),
+        horizon: None,
+    };
+    let outcome = mmenn::predict::compute_predict(&model, &record, &opts)?;
+    outcome
+        .column(output)
+        .map(<[f64]>::to_vec)
+        .with_context(|| format!("the prediction has no channel {output}"))
 }
 
 type Setter = fn(Mode, &mmenn::benchmarks::BenchmarkData) -> Result<Setup>;
@@ -593,14 +599,7 @@ fn run_benchmark(
         }
         for (choice, proto, tag) in variants {
             let sim = match &fit {
-                Ok(_) => hybrid_output(
-                    &model_json,
-                    &csv,
-                    &choice,
-                    s.window,
-                    &fit_dir.join(format!("predict_{name}_{tag}")),
-                    &output,
-                ),
+                Ok(_) => hybrid_output(&model_json, &csv, &choice, s.window, &output),
                 Err(_) => Err(anyhow::anyhow!("no fitted model")),
             };
             if let (Err(e), Ok(_)) = (&sim, &fit) {

@@ -14,8 +14,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use mmenn::benchmarks::{Benchmark, BenchmarkData};
-use mmenn::data_file::{read_table, write_csv};
-use mmenn::fit::{FitOptions, InitialChoice, NetworkSelection, RefineChoice, run_fit, run_predict};
+use mmenn::data_file::write_csv;
+use mmenn::fit::{FitOptions, InitialChoice, NetworkSelection, RefineChoice, run_fit};
 use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry, write_model};
 use mmenn::sysid_core::{Experiment, Integrator};
 
@@ -241,16 +241,7 @@ fn hybrid_rows_inner(
         let y = row(e.outputs(), 0);
         let csv = work.join(format!("{}.csv", test.name));
         write_record(&csv, e, &output)?;
-        let out = work.join(format!("predict_{}", test.name));
-        let sim = run_predict(&model_json, &csv, &InitialChoice::Fit, window, &out)
-            .map_err(anyhow::Error::from)
-            .and_then(|_| {
-                let t = read_table(&out.join("prediction.csv"))?;
-                let j = t
-                    .column_index(&output)
-                    .with_context(|| format!("prediction.csv has no {output}"))?;
-                Ok(t.columns[j].clone())
-            });
+        let sim = super::hybrid_output(&model_json, &csv, &InitialChoice::Fit, window, &output);
         match sim {
             Ok(v) => {
                 let rmse = rmse_after(&y, &v, window, scale);
