@@ -275,13 +275,15 @@ pub fn run_discover(
     if let Some(est) = &outcome.final_estimate {
         after.d_rms = workflow::d_rms(est);
     }
-    let validation_gap = match &val {
-        Some(v) => Some(GapPair {
-            before: free_run_gap(&base_model, v, opts.x0_window)?.0,
-            after: free_run_gap(final_model, v, opts.x0_window)?.0,
-        }),
+    let validation_runs = match &val {
+        Some(v) => {
+            let (before, y_before) = free_run_gap(&base_model, v, opts.x0_window)?;
+            let (after, y_after) = free_run_gap(final_model, v, opts.x0_window)?;
+            Some((GapPair { before, after }, y_before, y_after))
+        }
         None => None,
     };
+    let validation_gap = validation_runs.as_ref().map(|(g, _, _)| g.clone());
     let mut written = spec.clone();
     if let NoiseVariance::Auto = original.noise_variance {
         written.noise_variance = NoiseVariance::Auto;
@@ -301,7 +303,28 @@ pub fn run_discover(
         model: "model.discovered.toml".into(),
         rounds: outcome.rounds,
     };
-    let files = figures(&summary, &data, &spec, &y_before, &y_after, out)?;
+    let estimation_run = report::GapRun {
+        data: &data,
+        gap: &summary.gap,
+        before: y_before,
+        after: y_after,
+    };
+    let validation_run = match (&val, &validation_runs, &summary.validation_gap) {
+        (Some(v), Some((_, before, after)), Some(gap)) => Some(report::GapRun {
+            data: v,
+            gap,
+            before: before.clone(),
+            after: after.clone(),
+        }),
+        _ => None,
+    };
+    let files = figures(
+        &summary,
+        &spec,
+        &estimation_run,
+        validation_run.as_ref(),
+        out,
+    )?;
     write_atomic(
         &out.join("discovery.json"),
         serde_json::to_string_pretty(&summary)?.as_bytes(),

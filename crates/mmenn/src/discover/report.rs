@@ -10,59 +10,32 @@ use sysid_core::Dataset;
 use super::{DiscoverSummary, GapPair};
 use crate::error::Result;
 use crate::model_file::ModelSpec;
-use crate::plot::{Figure, Series};
+use crate::plot::{Figure, Panels, Series};
 
+/// The simulated outputs of the assumed and the discovered model on one record.
+pub(super) struct GapRun<'a> {
+    /// The record (its first experiment is drawn).
+    pub data: &'a Dataset,
+    /// Its fit % and RMSE before and after.
+    pub gap: &'a GapPair,
+    /// Assumed model's free-run outputs (`p × N`).
+    pub before: DMatrix<f64>,
+    /// Discovered model's free-run outputs (`p × N`).
+    pub after: DMatrix<f64>,
+}
+
+/// `gap_<output>.svg` (estimation record) and `gap_validation_<output>.svg`, each with
+/// a residual panel, and `d̂` against every state and input of round 1.
 pub(super) fn figures(
     s: &DiscoverSummary,
-    data: &Dataset,
     spec: &ModelSpec,
-    y_before: &DMatrix<f64>,
-    y_after: &DMatrix<f64>,
+    estimation: &GapRun<'_>,
+    validation: Option<&GapRun<'_>>,
     out: &Path,
 ) -> Result<Vec<String>> {
-    let mut files = Vec::new();
-    let exp = &data.experiments()[0];
-    let t = exp.times();
-    for (i, name) in spec.linear.output_names().iter().enumerate() {
-        let fit_b = s
-            .gap
-            .before
-            .fit_percent
-            .get(name)
-            .copied()
-            .unwrap_or(f64::NAN);
-        let fit_a = s
-            .gap
-            .after
-            .fit_percent
-            .get(name)
-            .copied()
-            .unwrap_or(f64::NAN);
-        Figure {
-            title: format!("{name}: free-run simulation before and after discovery"),
-            x_label: "t (s)".into(),
-            y_label: name.clone(),
-            series: vec![
-                Series::points(
-                    "measured",
-                    t.clone(),
-                    exp.outputs().row(i).iter().copied().collect(),
-                ),
-                Series::line(
-                    format!("assumed model (fit {fit_b:.1} %)"),
-                    t.clone(),
-                    y_before.row(i).iter().copied().collect(),
-                ),
-                Series::line(
-                    format!("discovered model (fit {fit_a:.1} %)"),
-                    t.clone(),
-                    y_after.row(i).iter().copied().collect(),
-                ),
-            ],
-            bands: vec![],
-        }
-        .write(&out.join(format!("gap_{name}.svg")))?;
-        files.push(format!("gap_{name}.svg"));
+    let mut files = gap_figures(spec, estimation, "", "estimation", out)?;
+    if let Some(v) = validation {
+        files.extend(gap_figures(spec, v, "validation_", "validation", out)?);
     }
     if let Some(round) = s.rounds.first() {
         for p in &round.localisation.profiles {
@@ -85,6 +58,72 @@ pub(super) fn figures(
             .write(&out.join(format!("d_{}_vs_{}.svg", p.equation, p.variable)))?;
             files.push(format!("d_{}_vs_{}.svg", p.equation, p.variable));
         }
+    }
+    Ok(files)
+}
+
+/// The before/after figures of one record, files `gap_<tag><output>.svg`.
+fn gap_figures(
+    spec: &ModelSpec,
+    run: &GapRun<'_>,
+    tag: &str,
+    which: &str,
+    out: &Path,
+) -> Result<Vec<String>> {
+    let mut files = Vec::new();
+    let exp = &run.data.experiments()[0];
+    let t = exp.times();
+    for (i, name) in spec.linear.output_names().iter().enumerate() {
+        let fit = |g: &super::Gap| g.fit_percent.get(name).copied().unwrap_or(f64::NAN);
+        let (fit_b, fit_a) = (fit(&run.gap.before), fit(&run.gap.after));
+        let measured: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
+        let residual = |y: &DMatrix<f64>| -> Vec<f64> {
+            measured
+                .iter()
+                .zip(y.row(i).iter())
+                .map(|(m, v)| m - v)
+                .collect()
+        };
+        let y_label = match spec.unit_of(name) {
+            Some(u) => format!("{name} ({u})"),
+            None => name.clone(),
+        };
+        let file = format!("gap_{tag}{name}.svg");
+        Panels {
+            top: Figure {
+                title: format!(
+                    "{name}: free-run simulation before and after discovery ({which} record)"
+                ),
+                x_label: "t (s)".into(),
+                y_label: y_label.clone(),
+                series: vec![
+                    Series::points("measured", t.clone(), measured.clone()),
+                    Series::line(
+                        format!("assumed model (fit {fit_b:.1} %)"),
+                        t.clone(),
+                        run.before.row(i).iter().copied().collect(),
+                    ),
+                    Series::line(
+                        format!("discovered model (fit {fit_a:.1} %)"),
+                        t.clone(),
+                        run.after.row(i).iter().copied().collect(),
+                    ),
+                ],
+                bands: vec![],
+            },
+            bottom: Figure {
+                title: "residual: measured − simulated".into(),
+                x_label: "t (s)".into(),
+                y_label,
+                series: vec![
+                    Series::line("assumed model", t.clone(), residual(&run.before)).coloured(1),
+                    Series::line("discovered model", t.clone(), residual(&run.after)).coloured(2),
+                ],
+                bands: vec![],
+            },
+        }
+        .write(&out.join(&file))?;
+        files.push(file);
     }
     Ok(files)
 }
@@ -196,9 +235,13 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
     }
     for (i, round) in s.rounds.iter().enumerate() {
         r.push_str(&format!(
-            "\n## Round {}: verdict {:?}\n\n",
+            "\n## Round {}\n\nThe regression on d̂ in this round: {} (a proposal; the verdict above is the workflow's, judged on the free run).\n\n",
             i + 1,
-            round.discovery.verdict
+            match round.discovery.verdict {
+                discovery::Verdict::Found => "named terms explain d̂ beyond its noise floor",
+                discovery::Verdict::None => "d̂ within its noise floor",
+                discovery::Verdict::Unexplained => "d̂ above its floor, not explained by the catalogue",
+            }
         ));
         if let Some(why) = &round.rejected {
             r.push_str(&format!(
