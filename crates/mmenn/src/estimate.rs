@@ -124,34 +124,34 @@ pub fn estimate_term_model(
         })
         .collect();
     let nonlinear = nonlinear_of(model.clone())?;
-    mme_core::estimate_nonlinear_with_report(&nonlinear, data, config).map_err(|e| {
-        let terms: Vec<&str> = match &e {
-            mme_core::MmeError::NonFiniteModel { state, .. } => described
-                .iter()
-                .filter(|(s, into, _)| s == state || into.as_deref() == Some(state.as_str()))
-                .map(|(_, _, d)| d.as_str())
-                .collect(),
-            _ => Vec::new(),
-        };
-        if terms.is_empty() {
-            MmennError::Mme(e)
-        } else {
-            MmennError::MmeTerms {
-                source: e,
-                terms: terms.join(", "),
-            }
-        }
-    })
+    mme_core::estimate_nonlinear_with_report(&nonlinear, data, config)
+        .map_err(|e| with_terms(&described, e))
 }
 
 /// A non-finite model error with the named terms of the equation it names attached.
 pub(crate) fn name_terms(spec: &ModelSpec, e: mme_core::MmeError) -> MmennError {
-    let terms: Vec<String> = match &e {
-        mme_core::MmeError::NonFiniteModel { state, .. } => spec
-            .terms
+    let described: Vec<(String, Option<String>, String)> = spec
+        .terms
+        .iter()
+        .map(|t| {
+            (
+                t.state.clone(),
+                t.into.clone(),
+                format!("{} = {}·({})", t.effect, t.coefficient, t.term),
+            )
+        })
+        .collect();
+    with_terms(&described, e)
+}
+
+/// `e` with the descriptions of the terms (`(state, into, description)`) that enter the
+/// equation a non-finite-model error names.
+fn with_terms(described: &[(String, Option<String>, String)], e: mme_core::MmeError) -> MmennError {
+    let terms: Vec<&str> = match &e {
+        mme_core::MmeError::NonFiniteModel { state, .. } => described
             .iter()
-            .filter(|t| &t.state == state || t.into.as_deref() == Some(state.as_str()))
-            .map(|t| format!("{} = {}·({})", t.effect, t.coefficient, t.term))
+            .filter(|(s, into, _)| s == state || into.as_deref() == Some(state.as_str()))
+            .map(|(_, _, d)| d.as_str())
             .collect(),
         _ => Vec::new(),
     };
