@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use mmenn::discover::{DiscoverOptions, run_discover};
+use mmenn::discover::{DiscoverOptions, WorkflowConfig, run_discover};
 use mmenn::plants::{Recipe, SimulationRequest, simulate_system};
 use mmenn::simulate::write_simulation;
 use mmenn::{LoadedModel, ModelKind};
@@ -39,7 +39,10 @@ pub fn run(dir: &Path) -> mmenn::Result<DiscoverExample> {
         &files.model,
         &[],
         &DiscoverOptions {
-            max_rounds: 1,
+            workflow: WorkflowConfig {
+                max_rounds: 1,
+                ..WorkflowConfig::default()
+            },
             ..DiscoverOptions::default()
         },
         &out,

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use discovery::Verdict;
-use discovery::workflow::{self, Observer, WorkflowConfig};
+use discovery::workflow::{self, Observer};
 use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_core::{Dataset, MmeEstimate, TermModel};
@@ -19,52 +19,24 @@ use crate::estimate::{EstimateOptions, estimate_term_model, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
 use report::{figures, report};
 
-pub use discovery::workflow::{Ambiguity, AssumedEntry, CONFIRM_COST, NamedEffect, Round};
+pub use discovery::workflow::{
+    Ambiguity, AssumedEntry, CONFIRM_COST, NamedEffect, Round, WorkflowConfig,
+};
 
 mod report;
 
 /// Options of [`run_discover`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct DiscoverOptions {
     /// MME settings.
     pub estimate: EstimateOptions,
-    /// Most discover–augment rounds.
-    pub max_rounds: usize,
-    /// Seed of the noise-floor simulation.
-    pub seed: u64,
-    /// Samples used to fit free-run initial states.
-    pub x0_window: usize,
-    /// Fraction of samples dropped at each end of every record before selection: a
-    /// smoother's `d̂` is least reliable at the ends (end effects), and on a decaying
-    /// response the ends carry the largest states, hence the most leverage. Default 0.05.
-    pub trim_fraction: f64,
-    /// Smallest relative drop of `d̂`'s mean square (over its floor) that accepts a
-    /// round's terms. Default 0.1.
-    pub min_d_drop: f64,
-    /// Without validation records, the fraction at the end of every estimation record
-    /// held out to judge the free-run search's candidate sets (coefficients are calibrated
-    /// on the rest). 0 judges on the estimation records themselves. Default 0.5 (0.3
-    /// named quadratic drag for viscous damping on the decaying MSD record, whose last
-    /// 30 % holds only small velocities; 0.2 and 0.5 named it right).
-    pub holdout_fraction: f64,
+    /// The workflow's settings (rounds, seed, initial-state window, trimming, the
+    /// acceptance threshold, the hold-out fraction); `noise_given` is set from the model
+    /// file.
+    pub workflow: WorkflowConfig,
     /// Print the workflow's stages as lines on standard error (the CLI does unless
     /// `--quiet`; off for library callers by default).
     pub progress: bool,
-}
-
-impl Default for DiscoverOptions {
-    fn default() -> Self {
-        Self {
-            estimate: EstimateOptions::default(),
-            max_rounds: 3,
-            seed: 1,
-            x0_window: 200,
-            trim_fraction: 0.05,
-            min_d_drop: 0.1,
-            holdout_fraction: 0.5,
-            progress: false,
-        }
-    }
 }
 
 /// Fit %, RMSE (free-run, per measured channel) and `d̂` RMS (per corrected equation).
@@ -237,13 +209,8 @@ pub fn run_discover(
         problem,
     })?;
     let config = WorkflowConfig {
-        max_rounds: opts.max_rounds,
-        seed: opts.seed,
-        x0_window: opts.x0_window,
-        trim_fraction: opts.trim_fraction,
-        min_d_drop: opts.min_d_drop,
-        holdout_fraction: opts.holdout_fraction,
         noise_given: matches!(original.noise_variance, NoiseVariance::Given(_)),
+        ..opts.workflow.clone()
     };
     let mme = MmeCore {
         spec: &original,
@@ -260,7 +227,7 @@ pub fn run_discover(
         &observer,
     )?;
 
-    let (mut before, y_before) = free_run_gap(&base_model, &data, opts.x0_window)?;
+    let (mut before, y_before) = free_run_gap(&base_model, &data, opts.workflow.x0_window)?;
     before.d_rms = workflow::d_rms(&outcome.first_estimate);
     let mut spec = original.clone();
     spec.terms.extend(outcome.added.iter().map(|t| TermEntry {
@@ -271,14 +238,14 @@ pub fn run_discover(
         coefficient: t.coefficient,
     }));
     let final_model = &outcome.model;
-    let (mut after, y_after) = free_run_gap(final_model, &data, opts.x0_window)?;
+    let (mut after, y_after) = free_run_gap(final_model, &data, opts.workflow.x0_window)?;
     if let Some(est) = &outcome.final_estimate {
         after.d_rms = workflow::d_rms(est);
     }
     let validation_runs = match &val {
         Some(v) => {
-            let (before, y_before) = free_run_gap(&base_model, v, opts.x0_window)?;
-            let (after, y_after) = free_run_gap(final_model, v, opts.x0_window)?;
+            let (before, y_before) = free_run_gap(&base_model, v, opts.workflow.x0_window)?;
+            let (after, y_after) = free_run_gap(final_model, v, opts.workflow.x0_window)?;
             Some((GapPair { before, after }, y_before, y_after))
         }
         None => None,

@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use mmenn::compare::{CompareOptions, GIVEN_MODEL_ROW, run_compare};
-use mmenn::discover::{DiscoverOptions, run_discover};
+use mmenn::discover::{DiscoverOptions, WorkflowConfig, run_discover};
 use mmenn::fit::{FitOptions, HiddenChoice, InitialChoice, RefineChoice, run_predict};
 use mmenn::plants::{Recipe, SimulationRequest};
 use mmenn::simulate::run_simulate;
@@ -36,7 +36,10 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
         &train.model,
         &[],
         &DiscoverOptions {
-            max_rounds: 1,
+            workflow: WorkflowConfig {
+                max_rounds: 1,
+                ..WorkflowConfig::default()
+            },
             ..DiscoverOptions::default()
         },
         &dir.join("discover"),
@@ -315,8 +318,11 @@ fn one_fit_percent_in_predict_compare_and_discover() {
         &train.model,
         std::slice::from_ref(&test.data),
         &DiscoverOptions {
-            max_rounds: 1,
-            x0_window: 50,
+            workflow: WorkflowConfig {
+                max_rounds: 1,
+                x0_window: 50,
+                ..WorkflowConfig::default()
+            },
             ..DiscoverOptions::default()
         },
         &dir.join("discover"),

@@ -828,9 +828,12 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
         bail!("--data, --model and --out are required");
     };
     let opts = mmenn::discover::DiscoverOptions {
-        max_rounds: a.max_rounds,
-        seed: a.seed,
-        holdout_fraction: a.holdout_fraction,
+        workflow: mmenn::discover::WorkflowConfig {
+            max_rounds: a.max_rounds,
+            seed: a.seed,
+            holdout_fraction: a.holdout_fraction,
+            ..Default::default()
+        },
         progress: !quiet,
         ..Default::default()
     };
