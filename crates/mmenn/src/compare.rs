@@ -270,22 +270,12 @@ fn compare_figures(
             Some(u) => format!("{name} ({u})"),
             None => name.clone(),
         };
-        let fig = Panels {
-            top: Figure {
-                title: format!("{name}: free-run simulation, {which} data"),
-                x_label: "t (s)".into(),
-                y_label: y_label.clone(),
-                series,
-                bands: vec![],
-            },
-            bottom: Figure {
-                title: "residual: measured − simulated".into(),
-                x_label: "t (s)".into(),
-                y_label,
-                series: residuals,
-                bands: vec![],
-            },
-        };
+        let fig = Panels::time_with_residuals(
+            format!("{name}: free-run simulation, {which} data"),
+            y_label,
+            series,
+            residuals,
+        );
         fig.write(&out.join(compare_figure_file(which, name)))?;
     }
     Ok(())

@@ -795,22 +795,12 @@ fn compare_figure(
             .coloured(2 * i + 1),
         );
     }
-    crate::plot::Panels {
-        top: Figure {
-            title: format!("MME/NN hybrid model, free-run simulation ({which} data)"),
-            x_label: "t (s)".into(),
-            y_label: y_label.clone(),
-            series,
-            bands: vec![],
-        },
-        bottom: Figure {
-            title: "residual: measured − simulated".into(),
-            x_label: "t (s)".into(),
-            y_label,
-            series: residuals,
-            bands: vec![],
-        },
-    }
+    crate::plot::Panels::time_with_residuals(
+        format!("MME/NN hybrid model, free-run simulation ({which} data)"),
+        y_label,
+        series,
+        residuals,
+    )
 }
 
 fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {

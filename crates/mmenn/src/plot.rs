@@ -431,6 +431,32 @@ const PANELS_SIZE: (u32, u32) = (900, 720);
 const PANELS_SPLIT: u32 = 470;
 
 impl Panels {
+    /// A time plot (`series` against `t (s)`) over its residual panel ("measured −
+    /// simulated", `residuals`), both with the y label `y_label`.
+    pub fn time_with_residuals(
+        title: String,
+        y_label: String,
+        series: Vec<Series>,
+        residuals: Vec<Series>,
+    ) -> Self {
+        Self {
+            top: Figure {
+                title,
+                x_label: "t (s)".into(),
+                y_label: y_label.clone(),
+                series,
+                bands: vec![],
+            },
+            bottom: Figure {
+                title: "residual: measured − simulated".into(),
+                x_label: "t (s)".into(),
+                y_label,
+                series: residuals,
+                bands: vec![],
+            },
+        }
+    }
+
     /// Render to SVG text: both panels over the union of their x ranges.
     pub fn to_svg(&self) -> Result<String> {
         let (a0, a1) = self.top.x_range();

@@ -89,39 +89,27 @@ fn gap_figures(
             None => name.clone(),
         };
         let file = format!("gap_{tag}{name}.svg");
-        Panels {
-            top: Figure {
-                title: format!(
-                    "{name}: free-run simulation before and after discovery ({which} record)"
+        Panels::time_with_residuals(
+            format!("{name}: free-run simulation before and after discovery ({which} record)"),
+            y_label,
+            vec![
+                Series::points("measured", t.clone(), measured.clone()),
+                Series::line(
+                    format!("assumed model (fit {fit_b:.1} %)"),
+                    t.clone(),
+                    run.before.row(i).iter().copied().collect(),
                 ),
-                x_label: "t (s)".into(),
-                y_label: y_label.clone(),
-                series: vec![
-                    Series::points("measured", t.clone(), measured.clone()),
-                    Series::line(
-                        format!("assumed model (fit {fit_b:.1} %)"),
-                        t.clone(),
-                        run.before.row(i).iter().copied().collect(),
-                    ),
-                    Series::line(
-                        format!("discovered model (fit {fit_a:.1} %)"),
-                        t.clone(),
-                        run.after.row(i).iter().copied().collect(),
-                    ),
-                ],
-                bands: vec![],
-            },
-            bottom: Figure {
-                title: "residual: measured − simulated".into(),
-                x_label: "t (s)".into(),
-                y_label,
-                series: vec![
-                    Series::line("assumed model", t.clone(), residual(&run.before)).coloured(1),
-                    Series::line("discovered model", t.clone(), residual(&run.after)).coloured(2),
-                ],
-                bands: vec![],
-            },
-        }
+                Series::line(
+                    format!("discovered model (fit {fit_a:.1} %)"),
+                    t.clone(),
+                    run.after.row(i).iter().copied().collect(),
+                ),
+            ],
+            vec![
+                Series::line("assumed model", t.clone(), residual(&run.before)).coloured(1),
+                Series::line("discovered model", t.clone(), residual(&run.after)).coloured(2),
+            ],
+        )
         .write(&out.join(&file))?;
         files.push(file);
     }
