@@ -265,6 +265,28 @@ fn fitted_x0(
     Ok(crate::augment::fit_initial_states(model, data, &[x0], &config)?.x0)
 }
 
+/// Zero-mean Gaussian noise, `variances.len() × len`, row by row from
+/// `ChaCha8Rng::seed_from_u64(seed)` on stream `stream` (the same stream as the
+/// simulators' noise, so a floor is reproducible from its seed).
+pub(crate) fn gaussian_noise(
+    variances: &[f64],
+    len: usize,
+    seed: u64,
+    stream: u64,
+) -> DMatrix<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(stream);
+    let mut out = DMatrix::zeros(variances.len(), len);
+    for (i, &v) in variances.iter().enumerate() {
+        let sd = v.max(0.0).sqrt();
+        for k in 0..len {
+            let z: f64 = StandardNormal.sample(&mut rng);
+            out[(i, k)] = sd * z;
+        }
+    }
+    out
+}
+
 /// One bootstrap copy of `data`: `model` simulated from `x0` by `integrator`, plus
 /// Gaussian noise of `variance` from stream `stream + e` of `seed`; missing samples stay
 /// missing.
@@ -295,16 +317,13 @@ fn draw(
             source,
         })?;
         let mut y: DMatrix<f64> = c * xs;
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        rng.set_stream(stream + e as u64);
-        for (ch, &v) in variance.iter().enumerate() {
-            let sd = v.max(0.0).sqrt();
+        let noise = gaussian_noise(variance, y.ncols(), seed, stream + e as u64);
+        for ch in 0..variance.len() {
             for k in 0..y.ncols() {
-                let z: f64 = StandardNormal.sample(&mut rng);
                 y[(ch, k)] = if exp.outputs()[(ch, k)].is_nan() {
                     f64::NAN
                 } else {
-                    y[(ch, k)] + sd * z
+                    y[(ch, k)] + noise[(ch, k)]
                 };
             }
         }

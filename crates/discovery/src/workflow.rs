@@ -297,26 +297,6 @@ pub fn d_rms(est: &MmeEstimate) -> BTreeMap<String, f64> {
     out
 }
 
-/// Zero-mean Gaussian noise, `variances.len() × len`, row by row from
-/// `ChaCha8Rng::seed_from_u64(seed)` on stream `stream` (the same stream as the
-/// simulators' noise, so a floor is reproducible from its seed).
-fn gaussian_noise(variances: &[f64], len: usize, seed: u64, stream: u64) -> DMatrix<f64> {
-    use rand::SeedableRng;
-    use rand::rngs::ChaCha8Rng;
-    use rand_distr::{Distribution, StandardNormal};
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(stream);
-    let mut out = DMatrix::zeros(variances.len(), len);
-    for (i, &v) in variances.iter().enumerate() {
-        let sd = v.max(0.0).sqrt();
-        for k in 0..len {
-            let z: f64 = StandardNormal.sample(&mut rng);
-            out[(i, k)] = sd * z;
-        }
-    }
-    out
-}
-
 /// Noise floor of `d̂`: simulate `model` itself (free-run from MME's `x̂(t0)`), add
 /// measurement noise of the estimated variance, and run MME at the same `W` and `R`
 /// (inputs between samples as the record says, for the simulation and for MME).
@@ -332,7 +312,7 @@ fn noise_floor<M: Mme>(
     for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
         let x0: Vec<f64> = e.states.column(0).iter().copied().collect();
         let xs = free_run_states(model, &x0, exp).map_err(DiscoveryError::from)?;
-        let noise = gaussian_noise(&est.noise_variance, exp.len(), seed, i as u64);
+        let noise = crate::judge::gaussian_noise(&est.noise_variance, exp.len(), seed, i as u64);
         let y = c * xs + noise;
         experiments.push(
             Experiment::new(exp.t0(), exp.dt(), exp.inputs().clone(), y)
