@@ -39,15 +39,17 @@ pub(super) fn figures(
     }
     if let Some(round) = s.rounds.first() {
         for p in &round.localisation.profiles {
+            let mut series = vec![Series::points(
+                "MME d̂ (assumed model)",
+                p.points.iter().map(|q| q[0]).collect(),
+                p.points.iter().map(|q| q[1]).collect(),
+            )];
+            series.extend(term_curve(s, &p.equation, &p.variable, &p.points));
             Figure {
                 title: format!("d̂ of {} against {} (round 1)", p.equation, p.variable),
                 x_label: p.variable.clone(),
                 y_label: format!("d_{}", p.equation),
-                series: vec![Series::points(
-                    "MME d̂",
-                    p.points.iter().map(|q| q[0]).collect(),
-                    p.points.iter().map(|q| q[1]).collect(),
-                )],
+                series,
                 bands: round
                     .floor_rms
                     .iter()
@@ -60,6 +62,70 @@ pub(super) fn figures(
         }
     }
     Ok(files)
+}
+
+/// Points of the overlaid curve of named terms.
+const CURVE_POINTS: usize = 400;
+
+/// The named terms (claimed or unconfirmed) of equation `equation` that read only
+/// `variable` (and constants), summed and drawn over the range of the profile's points:
+/// what the discovered model adds to that equation along that variable. `None` when no
+/// such term reads `variable`. Terms that also read other variables cannot be drawn
+/// against one of them, and the legend says the curve holds only the others.
+fn term_curve(
+    s: &DiscoverSummary,
+    equation: &str,
+    variable: &str,
+    points: &[[f64; 2]],
+) -> Option<Series> {
+    let (lo, hi) = points
+        .iter()
+        .map(|q| q[0])
+        .filter(|x| x.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        });
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    // (sign, parsed term, coefficient) of every term entering `equation`.
+    let mut parts = Vec::new();
+    let mut reads_variable = false;
+    let mut left_out = 0usize;
+    for e in s.effects.iter().chain(&s.unconfirmed) {
+        let sign = if e.state == equation {
+            1.0
+        } else if e.into.as_deref() == Some(equation) {
+            -1.0
+        } else {
+            continue;
+        };
+        match sysid_core::Expr::parse(&e.term, &[variable]) {
+            Ok(expr) => {
+                reads_variable |= sysid_core::Expr::parse(&e.term, &[]).is_err();
+                parts.push((sign * e.coefficient, expr));
+            }
+            Err(_) => left_out += 1,
+        }
+    }
+    if !reads_variable {
+        return None;
+    }
+    let x: Vec<f64> = (0..CURVE_POINTS)
+        .map(|k| lo + (hi - lo) * k as f64 / (CURVE_POINTS - 1) as f64)
+        .collect();
+    let y = x
+        .iter()
+        .map(|&v| parts.iter().map(|(c, g)| c * g.eval(&[v])).sum())
+        .collect();
+    let label = if left_out == 0 {
+        "discovered terms".to_string()
+    } else {
+        format!(
+            "discovered terms in {variable} alone ({left_out} reading other variables not drawn)"
+        )
+    };
+    Some(Series::line(label, x, y).coloured(2))
 }
 
 /// The before/after figures of one record, files `gap_<tag><output>.svg`.
