@@ -29,6 +29,7 @@
 //! | `orifice_outflow` | `sqrt(abs(h))` | `−α` (Torricelli) in its own tank, `+α` downstream |
 //! | `input_saturation` | `sign(u)*max(abs(u) - L, 0)` | `−b` when the input is capped at `±L` |
 //! | `dead_zone` | `sign(u)*min(abs(u), δ)` | `−b` when inputs below `δ` have no effect |
+//! | `overflow` | `max(h - L, 0)` | `−a` loss above the rim `L` in its own tank, `+a` spill into the tank below |
 //!
 //! **Why the difference forms.** If the truth has `b'·u·cos θ` and the linearised model
 //! `B·u`, the model error is `b'(u cos θ − u) + (b' − B)·u`: `u cos θ` itself would be
@@ -39,7 +40,14 @@
 //! `b·(dz(u) − u)` of a linear input `b·u`.
 //!
 //! `max` and `min` are written with `abs` (the expression language has no `max`):
-//! `sign(u)*(abs(u) - L + abs(abs(u) - L))/2` and `u - sign(u)*(abs(u) - δ + abs(abs(u) - δ))/2`.
+//! `sign(u)*(abs(u) - L + abs(abs(u) - L))/2`, `u - sign(u)*(abs(u) - δ + abs(abs(u) - δ))/2`
+//! and `(h - L + abs(h - L))/2`.
+//!
+//! **Overflow.** A tank whose level reaches its rim `L` loses what comes in above it: the
+//! balance gains a sink that is zero below `L` and grows steeply above it. With a finite
+//! coefficient `−a` the term is a stiff spring holding the level near `L` (`a` large) or a
+//! partial spill; `+a` in the balance of a tank the model connects it to is the water that
+//! falls into it. `L` is a shaping parameter, calibrated like a saturation limit.
 //!
 //! **Smooth variants.** `sign(v)` jumps at `v = 0`, which a fixed-step integrator turns
 //! into chattering; the augmented model therefore integrates `coulomb_friction_smooth`
@@ -94,6 +102,8 @@ pub enum Effect {
     InputSaturation,
     /// `sign(u)*min(abs(u), δ)` (input, threshold `δ`).
     DeadZone,
+    /// `max(h - L, 0)` (level, rim `L`).
+    Overflow,
 }
 
 /// What one variable slot of an effect accepts.
@@ -121,7 +131,7 @@ const LEVEL: &[Role] = &[Role::Level];
 impl Effect {
     /// Every effect, in catalogue order (regression candidates first in this order, which
     /// also breaks ties between exactly equivalent candidates).
-    pub const ALL: [Effect; 18] = [
+    pub const ALL: [Effect; 19] = [
         Effect::ConstantBias,
         Effect::ViscousDamping,
         Effect::LinearStiffness,
@@ -140,6 +150,7 @@ impl Effect {
         Effect::OrificeOutflow,
         Effect::InputSaturation,
         Effect::DeadZone,
+        Effect::Overflow,
     ];
 
     /// The snake_case name used in model files and `discovery.json`.
@@ -163,6 +174,7 @@ impl Effect {
             Effect::OrificeOutflow => "orifice_outflow",
             Effect::InputSaturation => "input_saturation",
             Effect::DeadZone => "dead_zone",
+            Effect::Overflow => "overflow",
         }
     }
 
@@ -192,6 +204,7 @@ impl Effect {
             Effect::OrificeOutflow => "orifice outflow",
             Effect::InputSaturation => "input saturation",
             Effect::DeadZone => "dead zone",
+            Effect::Overflow => "overflow above a level",
         }
     }
 
@@ -214,7 +227,7 @@ impl Effect {
             Effect::InputCouplingCos | Effect::InputCouplingSin => {
                 &[Slot::Input, Slot::State(ANGLE)]
             }
-            Effect::OrificeOutflow => &[Slot::State(LEVEL)],
+            Effect::OrificeOutflow | Effect::Overflow => &[Slot::State(LEVEL)],
         }
     }
 
@@ -226,6 +239,7 @@ impl Effect {
             Effect::StribeckFrictionSmooth => &["v_s", "eps"],
             Effect::InputSaturation => &["limit"],
             Effect::DeadZone => &["width"],
+            Effect::Overflow => &["level"],
             _ => &[],
         }
     }
@@ -238,7 +252,7 @@ impl Effect {
             | Effect::InputGain
             | Effect::InputSaturation
             | Effect::DeadZone => ALL_KINDS,
-            Effect::OrificeOutflow => &[EquationKind::Flow],
+            Effect::OrificeOutflow | Effect::Overflow => &[EquationKind::Flow],
             _ => MECHANICAL,
         }
     }
@@ -300,6 +314,10 @@ impl Effect {
                 let d = p(0);
                 format!("{a} - sign({a})*(abs({a}) - {d} + abs(abs({a}) - {d}))/2")
             }
+            Effect::Overflow => {
+                let l = p(0);
+                format!("({a} - {l} + abs({a} - {l}))/2")
+            }
         }
     }
 
@@ -329,7 +347,8 @@ impl Effect {
             | Effect::LinearCoupling
             | Effect::InputGain
             | Effect::InputSaturation
-            | Effect::DeadZone => u(0).map(str::to_string),
+            | Effect::DeadZone
+            | Effect::Overflow => u(0).map(str::to_string),
             Effect::CubicStiffness => u(0).map(|a| power(a, "3")),
             Effect::QuadraticDrag => u(0).map(|a| power(a, "2")),
             Effect::OrificeOutflow => u(0).map(|a| power(a, "0.5")),
@@ -377,6 +396,8 @@ impl Effect {
             Effect::OrificeOutflow => "inflow from an orifice upstream",
             Effect::InputSaturation => "the input's effect changes above the threshold",
             Effect::DeadZone => "the input's effect changes below the threshold",
+            Effect::Overflow if negative => "a loss above a level (the tank overflows)",
+            Effect::Overflow => "a spill from a tank above (it overflows into this one)",
         }
     }
 }
@@ -519,7 +540,7 @@ mod tests {
     /// Saturation and dead zone are what their doc says: `sign(u)·max(|u| − L, 0)` and
     /// `sign(u)·min(|u|, δ)`, checked against direct formulas on a grid.
     #[test]
-    fn piecewise_input_terms_match_their_definitions() {
+    fn piecewise_terms_match_their_definitions() {
         let vars = ["u"];
         let sat = Effect::InputSaturation
             .expression(&["u"], &[0.5], &vars)
@@ -527,12 +548,20 @@ mod tests {
         let dz = Effect::DeadZone
             .expression(&["u"], &[0.5], &vars)
             .unwrap_or_else(|e| panic!("{e}"));
+        let over = Effect::Overflow
+            .expression(&["u"], &[0.5], &vars)
+            .unwrap_or_else(|e| panic!("{e}"));
         for k in -40..=40 {
             let u = k as f64 * 0.05;
             let want_sat = u.signum() * (u.abs() - 0.5).max(0.0);
             let want_dz = u.signum() * u.abs().min(0.5);
+            let want_over = (u - 0.5).max(0.0);
             assert!((sat.eval(&[u]) - want_sat).abs() < 1e-15, "sat at {u}");
             assert!((dz.eval(&[u]) - want_dz).abs() < 1e-15, "dz at {u}");
+            assert!(
+                (over.eval(&[u]) - want_over).abs() < 1e-15,
+                "overflow at {u}"
+            );
         }
     }
 

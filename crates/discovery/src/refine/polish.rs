@@ -24,7 +24,10 @@ use super::{Eval, RefineCandidate, RefineConfig, RefineStep, Search, evaluate, e
 /// Coulomb partner's rule.
 fn shaping_parameters(effect: Effect) -> &'static [usize] {
     match effect {
-        Effect::InputSaturation | Effect::DeadZone | Effect::CoulombFrictionSmooth => &[0],
+        Effect::InputSaturation
+        | Effect::DeadZone
+        | Effect::CoulombFrictionSmooth
+        | Effect::Overflow => &[0],
         Effect::StribeckFrictionSmooth => &[0],
         _ => &[],
     }
@@ -34,6 +37,16 @@ fn shaping_parameters(effect: Effect) -> &'static [usize] {
 /// library's smoothing velocity is 1 % of the velocity RMS; a real transition can be
 /// several times wider).
 const SPAN: f64 = 10.0;
+/// The search interval's factor for `effect`: an overflow's rim lies among the level's
+/// values (the library starts it at a high quantile of them, and a level that spills
+/// piles up just above its rim), so it is searched within a factor 1.5; far outside the
+/// data the cost is flat and a wide bracket only wastes evaluations.
+fn span_of(effect: Effect) -> f64 {
+    match effect {
+        Effect::Overflow => 1.5,
+        _ => SPAN,
+    }
+}
 /// Golden-section evaluations per parameter: the bracket `ln(SPAN²)` shrinks by 0.618
 /// per evaluation, to about 1.4 % of the parameter after 14.
 const EVALUATIONS: usize = 14;
@@ -113,7 +126,8 @@ pub(super) fn polish(
             Ok((cost_at(&trial)?, Some(c)))
         };
         let ratio = (5f64.sqrt() - 1.0) / 2.0;
-        let (mut a, mut b) = (p0.ln() - SPAN.ln(), p0.ln() + SPAN.ln());
+        let span = span_of(effect);
+        let (mut a, mut b) = (p0.ln() - span.ln(), p0.ln() + span.ln());
         let mut x1 = b - ratio * (b - a);
         let mut x2 = a + ratio * (b - a);
         let (mut f1, mut c1) = trial_cost(x1)?;

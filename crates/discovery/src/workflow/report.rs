@@ -45,6 +45,14 @@ pub struct NamedEffect {
 }
 
 impl NamedEffect {
+    /// Whether the calibrated coefficient's 95 % interval excludes zero (`None` when no
+    /// interval was computed). On real records, where the free-run cost stays far above
+    /// the noise level and every χ² step test passes, this colour-inflated interval is
+    /// what tells a term the data support from one that only bends the fit.
+    pub fn interval_excludes_zero(&self) -> Option<bool> {
+        self.ci95.map(|[lo, hi]| lo > 0.0 || hi < 0.0)
+    }
+
     /// Where it enters, for reports: `d(h1)`, or `d(h1) and −d(h2) (transfer h1 → h2)`.
     pub fn equations(&self) -> String {
         match &self.into {

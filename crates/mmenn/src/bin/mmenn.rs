@@ -853,8 +853,13 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
         );
     }
     for e in &s.unconfirmed {
+        let support = match e.interval_excludes_zero() {
+            Some(true) => " (95 % interval excludes 0)",
+            Some(false) => " (95 % interval includes 0: not supported by the data)",
+            None => "",
+        };
         println!(
-            "  not claimed (cost stays above the noise level): {} in {}: {} × {:.6}",
+            "  not claimed (cost stays above the noise level): {} in {}: {} × {:.6}{support}",
             e.name,
             e.equations(),
             e.term,

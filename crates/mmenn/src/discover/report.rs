@@ -258,14 +258,24 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
             s.claim_bound
         ));
         for e in &s.unconfirmed {
+            let support = match (e.ci95, e.interval_excludes_zero()) {
+                (Some([lo, hi]), Some(true)) => {
+                    format!(" — 95 % interval [{lo:.6}, {hi:.6}] excludes 0")
+                }
+                (Some([lo, hi]), _) => format!(
+                    " — 95 % interval [{lo:.6}, {hi:.6}] **includes 0**: the data do not support this term"
+                ),
+                _ => String::new(),
+            };
             r.push_str(&format!(
-                "- {} in {}: `{}` × {:.6}\n",
+                "- {} in {}: `{}` × {:.6}{support}\n",
                 e.name,
                 e.equations(),
                 e.term,
                 e.coefficient
             ));
         }
+        r.push_str("\nThe intervals are the free-run calibration's (Gauss–Newton, inflated for the colour of the residual). Far above the noise level every term that lowers the cost passes the search's step test; a term whose interval includes zero is one the data do not pin down, so read those as shape-fitting, not as physics.\n");
     }
     if let Some(a) = &s.ambiguity {
         r.push_str(&format!(
