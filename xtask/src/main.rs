@@ -7,6 +7,7 @@ mod baselines;
 mod check;
 mod data;
 mod experiments;
+mod fuzz;
 mod progress;
 mod report;
 mod stamp;
@@ -40,6 +41,18 @@ struct Cli {
 enum Command {
     /// Regenerate the simulated data, rerun every experiment, write docs/results.
     Reproduce(ReproduceArgs),
+    /// Bounded libFuzzer runs of the targets in fuzz/ (nightly toolchain and cargo-fuzz).
+    Fuzz(FuzzArgs),
+}
+
+#[derive(Debug, Args)]
+struct FuzzArgs {
+    /// Seconds per target.
+    #[arg(long, default_value_t = 60)]
+    seconds: u64,
+    /// Only these targets (csv, model_toml, expr, model_json, estimate), comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    targets: Vec<String>,
 }
 
 #[derive(Debug, Args)]
@@ -412,5 +425,6 @@ fn run_jobs(
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Reproduce(args) => reproduce(args),
+        Command::Fuzz(args) => fuzz::fuzz(&workspace_root(), &args.targets, args.seconds),
     }
 }
