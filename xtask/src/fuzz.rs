@@ -22,6 +22,8 @@ struct Run {
 }
 
 /// Run `targets` (all when empty) for `seconds` each; fail when any target crashed.
+/// Prints its table to the terminal (a development command, like `reproduce`'s progress).
+#[allow(clippy::print_stdout, clippy::print_stderr)]
 pub fn fuzz(root: &Path, targets: &[String], seconds: u64) -> Result<()> {
     let chosen: Vec<String> = if targets.is_empty() {
         TARGETS.iter().map(|t| t.to_string()).collect()
