@@ -5,6 +5,12 @@
 //! (MME, network selection, refinement, free runs, `predict`) treats the inputs between
 //! samples as the model file's `intersample` says; `model.json` keeps the model file, so
 //! `predict` follows the setting the model was fitted with.
+//!
+//! The hybrid is never kept when it is worse than the physics it starts from: the guard
+//! ([`GuardReport`]) runs the assumed model alone, the network before refinement and after
+//! it free on held-out data (the validation record, else the last fifth of the first
+//! training record) and keeps the best; the report says which and why, and whether
+//! refinement hurt.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -1,7 +1,16 @@
 //! Real measured benchmarks (read in place from the shared data folder, never copied):
-//! Cascaded Tanks, Silverbox and EMPS. Each gets a physics-based linear model fitted by
-//! output error, the MME/NN completion of that model, and a NARX network; free-run RMSE on
-//! the official test records, beside the published numbers.
+//! Cascaded Tanks, Silverbox and EMPS under the `nonlinear_benchmarks` 1.0.1 protocol
+//! (official split, full rate, its initialisation windows). Each gets a linear
+//! state-space baseline (MOESP + free-run output error), the calibrated physics-first grey
+//! box, MME/NN on that grey box (guarded: physics alone, the network, or the refined
+//! network, kept by held-out training free run), and a NARX network; Cascaded Tanks also
+//! the linear output-error model of the physics structure and MME/NN on it. Free-run RMSE
+//! on the official test records, beside the published numbers.
+//!
+//! `--quick` keeps every row and the protocol; it cuts effort only: linear SS orders up
+//! to 4 (6), one grey-box candidate on Silverbox (4) and two on Cascaded Tanks (3), hybrid
+//! sweeps of 1–3 hidden units × 2 initialisations with 5–10 refinement steps, and NARX on
+//! two orders (4, 4), (8, 8) with 3 hidden units and one restart, selected on 8192 samples.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -365,6 +374,111 @@ fn emps(_mode: Mode, b: &mmenn::benchmarks::BenchmarkData) -> Result<Setup> {
     })
 }
 
+/// Issue 16's target 4 for each test record that has one: the best published free-run
+/// RMSE, its source, and the best black box, in the published unit.
+fn targets(b: Benchmark) -> &'static [(&'static str, f64, &'static str, f64)] {
+    match b {
+        Benchmark::CascadedTanks => {
+            &[("test", 0.18, "grey box with overflow, 0.18–0.191 V", 0.306)]
+        }
+        Benchmark::Silverbox => &[
+            ("test_multisine", 0.30, "GP-NARX 0.301 mV", 0.301),
+            (
+                "test_arrow_full",
+                0.26,
+                "PNLSS 0.26 mV (older protocol)",
+                0.60,
+            ),
+        ],
+        Benchmark::Emps => &[("test", 2.64, "dynoNet 2.64 mm", 2.64)],
+    }
+}
+
+/// Why a physics-first model misses the target where it does (what the runs show; see the
+/// grey-box notes).
+fn gap_cause(b: Benchmark) -> &'static str {
+    match b {
+        Benchmark::CascadedTanks => {
+            "not diagnosed further here; the upper level is not measured, so its test state \
+             comes from the first 50 samples of the lower level alone (the training free runs \
+             start from a state fitted to the whole record: grey box 0.189 V, hybrid about \
+             0.15 V)"
+        }
+        Benchmark::Silverbox => {
+            "test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
+             free-run error (0.2565 mV), so the excess on test_arrow_full is where it \
+             extrapolates beyond the training amplitudes and the polynomial spring and damping \
+             fitted on them do not hold; the network (trained on the same amplitudes) does \
+             not change that"
+        }
+        Benchmark::Emps => {
+            "the training free run is at 2.43 mm but the test record adds force pulses that \
+             the input vir does not carry and excites a flexibility the training record does \
+             not (data README): the input-to-position physics, and a network trained on the \
+             training record, cannot see either; training error does not rank the structures \
+             on the test record (the asymmetric-friction row)"
+        }
+    }
+}
+
+/// The physics-first rows against target 4, per test record with a target.
+fn target_note(b: Benchmark, table: &Table) -> String {
+    let (_, unit) = b.reporting_unit();
+    let mut parts = Vec::new();
+    let mut missed = false;
+    for &(record, target, best, black_box) in targets(b) {
+        let ours: Vec<String> = table
+            .rows
+            .iter()
+            .filter(|r| {
+                r.key[1] == record
+                    && (r.key[0].starts_with("physics-first grey box") || r.key[0] == hybrid::LABEL)
+            })
+            .map(|r| {
+                let name = if r.key[0] == hybrid::LABEL {
+                    "MME/NN on the grey box".to_string()
+                } else {
+                    r.key[0].clone()
+                };
+                match r.values[0] {
+                    Some(v) => {
+                        let verdict = if v <= target {
+                            "meets it"
+                        } else if v < black_box {
+                            "misses it, below the best black box"
+                        } else {
+                            "misses it"
+                        };
+                        missed |= v > target;
+                        format!("{name} {v:.4} {unit} ({verdict})")
+                    }
+                    None => {
+                        missed = true;
+                        format!("{name}: {}", r.remark.as_deref().unwrap_or("no number"))
+                    }
+                }
+            })
+            .collect();
+        parts.push(format!(
+            "{record}: target ≤ {target} {unit} (best published: {best}; best black box \
+             {black_box} {unit}) — {}",
+            ours.join("; ")
+        ));
+    }
+    let mut note = format!(
+        "Target 4 of issue 16 (free-run RMSE, {OFFICIAL}; every physics-first model chosen \
+         without the test records): {}.",
+        parts.join(". ")
+    );
+    if missed {
+        note.push_str(&format!(
+            " Where a target is missed, the cause: {}.",
+            gap_cause(b)
+        ));
+    }
+    note
+}
+
 fn rmse_after(y: &[f64], sim: &[f64], skip: usize, scale: f64) -> Option<f64> {
     let pairs: Vec<(f64, f64)> = y
         .iter()
@@ -496,6 +610,7 @@ fn run_benchmark(
 
     // NARX on the official records, its orders chosen on held-out training data.
     narx::narx_rows(&data, ctx.mode, &mut table, &mut sims, s.offset);
+    table.note(target_note(benchmark, &table));
 
     // Figure: first test record.
     if let Some((name, test)) = s.tests.first() {
