@@ -896,6 +896,38 @@ mod tests {
         simulate_outputs(model, &DMatrix::identity(n, n), x0, &e, &spec.integrator).unwrap()
     }
 
+    /// The outflows act on the positive part of each level: started below empty with the
+    /// pump off, no term drains further (the pump offset refills the upper tank, the
+    /// inflow is ≥ 0), so the levels never fall below their start and stay bounded. With
+    /// `√|h|` and the calibrated `+k5·h2` the lower level ran away below zero (the MME/NN
+    /// blow-up on b801ccd, h2 = −1e12 at t = 2044 s).
+    #[test]
+    fn tanks_levels_below_empty_do_not_run_away() {
+        let spec = tanks_model(&TanksOptions::default()).unwrap();
+        // outflow, pump, overflow, inflow, outflow, overflow_inflow, overflow,
+        // linear_outflow, pump_offset: the calibrated values of the full run.
+        let c = [
+            -0.033, 0.027, -1.0, 0.084, -0.147, 1.38, -1.0, 0.0196, 0.0172,
+        ];
+        let model = with_coefficients(&spec.model, &c);
+        let u = vec![0.0; 1024];
+        let x = run(&spec, &model, &[-1.0, -1.0], &u, 4.0);
+        for k in 0..u.len() {
+            for i in 0..2 {
+                let h = x[(i, k)];
+                assert!(
+                    h.is_finite() && (-1.0 - 1e-9..=10.0).contains(&h),
+                    "h{} = {h} at {k}",
+                    i + 1
+                );
+            }
+        }
+        // The upper tank settles where its outflow balances the pump offset:
+        // k1·√h1 = k0, h1 = (0.0172/0.033)² = 0.2717 (analytic).
+        let h1 = x[(0, u.len() - 1)];
+        assert!((h1 - (0.0172f64 / 0.033).powi(2)).abs() < 1e-3, "h1 = {h1}");
+    }
+
     /// The upper level is unmeasured: scaling it by `s` maps `(k1, k4, k0, k2, c2, H1)` to
     /// `(k1·√s, k4·s, k0·s, k2/√s, c2/s, s·H1)` with the same lower level, so calibrating
     /// `k2` with `H1` held fits the overflow level in effect (analytic identity, checked
