@@ -5,6 +5,12 @@
 //! (MME, network selection, refinement, free runs, `predict`) treats the inputs between
 //! samples as the model file's `intersample` says; `model.json` keeps the model file, so
 //! `predict` follows the setting the model was fitted with.
+//!
+//! The hybrid is never kept when it is worse than the physics it starts from: the guard
+//! ([`GuardReport`]) runs the assumed model alone, the network before refinement and after
+//! it free on held-out data (the validation record, else the last fifth of the first
+//! training record) and keeps the best; the report says which and why, and whether
+//! refinement hurt.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -32,9 +38,11 @@ pub use crate::predict::{
 use crate::refine::refine_network;
 pub use crate::refine::{RefineChoice, RefineSummary};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
+pub use guard::{Candidate, CandidateScore, GuardReport};
 
 mod choices;
 mod d_figures;
+mod guard;
 
 /// Format tag of `model.json`.
 pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
@@ -390,6 +398,9 @@ pub struct FitSummary {
     pub validation: Option<FreeRunReport>,
     /// Trajectory refinement of the network, when asked for.
     pub refinement: Option<RefineSummary>,
+    /// Which of physics alone, the network before and after refinement was kept, judged
+    /// free-run on held-out data (never a test record), and whether refinement hurt.
+    pub guard: GuardReport,
     /// Files written.
     pub files: Vec<String>,
 }
@@ -612,6 +623,7 @@ pub fn compute_fit(
         }
     };
     let mut network = sweep.networks[chosen].clone();
+    let before_refinement = network.clone();
     let val_pair = val_est.as_ref().zip(val.as_ref());
     let mut refinement = match opts.refine {
         RefineChoice::None => None,
@@ -627,6 +639,21 @@ pub fn compute_fit(
     };
 
     let exp0 = &data.experiments()[0];
+    // The guard: physics alone, the network before and after refinement, judged free-run
+    // on held-out data; the best is kept.
+    let mut candidates = vec![
+        (
+            guard::Candidate::PhysicsAlone,
+            guard::zero_network(&network)?,
+        ),
+        (guard::Candidate::Network, before_refinement),
+    ];
+    if refinement.is_some() {
+        candidates.push((guard::Candidate::Refined, network.clone()));
+    }
+    let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
+    let (guard_report, kept) = guard::choose(&spec, candidates, &held, exp0.dt(), opts.substeps)?;
+    let network = kept;
     let (file, loaded) = hybrid_loaded(&spec, &network, &x0, exp0.dt(), opts.substeps)?;
     let train_j = judge_outputs(&loaded, data, opts.x0_window)?;
     let train = FreeRunReport::of(&train_j);
@@ -635,13 +662,13 @@ pub fn compute_fit(
         None => None,
     };
     let validation = validation_j.as_ref().map(FreeRunReport::of);
-    if let (Some(r), Some(v)) = (refinement.as_mut(), &validation) {
-        r.validation_fit_after = Some(
-            v.channels
-                .iter()
-                .map(|(k, m)| (k.clone(), m.fit_percent))
-                .collect(),
-        );
+    // The refined network's validation free run (the guard judged it there, whether or
+    // not it was kept).
+    if let (Some(r), Some(_)) = (refinement.as_mut(), &validation) {
+        r.validation_fit_after = guard_report
+            .score(guard::Candidate::Refined)
+            .filter(|s| s.failure.is_none())
+            .map(|s| s.fit_percent.clone());
     }
     let d_network = network.predict(&x_train)?;
     let w_by_correction = lin
@@ -663,6 +690,7 @@ pub fn compute_fit(
         train,
         validation,
         refinement,
+        guard: guard_report,
         files: fit_files(&spec, val.is_some()),
     };
     Ok(FitOutcome {
@@ -913,6 +941,7 @@ fn fit_report(s: &FitSummary) -> String {
     if let Some(refine) = &s.refinement {
         r.push_str(&refine.markdown());
     }
+    r.push_str(&s.guard.markdown());
     r.push_str(
         "\nFigures: `compare_*.svg` (measured output and the hybrid model's free run), \
          `nn_d_*.svg` (MME's d̂ and the network's fit of it, over the training pairs and \

@@ -5,6 +5,7 @@ mod compare;
 mod discover;
 mod examples;
 mod fit;
+mod fit_guard;
 mod hidden_effects;
 mod model;
 mod monitor;

@@ -398,6 +398,11 @@ impl Default for TanksOptions {
     }
 }
 
+/// `max(h, 0)` of the expression `h`, as a term: `(h + abs(h))/2`.
+pub fn positive(h: &str) -> String {
+    format!("({h} + abs({h}))/2")
+}
+
 /// `max(h − level, 0)`, sharp or smooth (see [`TanksOptions::smooth`]).
 fn excess_term(state: &str, level: f64, smooth: Option<f64>) -> String {
     match smooth {
@@ -420,7 +425,8 @@ fn excess_term(state: &str, level: f64, smooth: Option<f64>) -> String {
 /// away from Torricelli's √ (calibrated `k5 > 0`: a discharge that grows more slowly than
 /// √h2, as with an orifice coefficient falling with the level). The upper level is not measured:
 /// its unit is set by holding `H1` and `k2` is calibrated ([`TanksOptions::free_k2`]);
-/// `√` of `|h|` keeps a transient below zero finite. `rate` scales the starting outflow
+/// the outflows act on the positive part of each level ([`positive`]: an empty tank
+/// drains nothing, and a transient below zero stays bounded). `rate` scales the starting outflow
 /// coefficients (`k1 = k2 = k3 = rate`, `k4` such that the mean input 2.8 V holds the
 /// levels near 5 V); the calibrated model is the same from `rate` 0.03, 0.06 or 0.09 and
 /// `H1` 6, 10 or 14 (training free-run RMSE 0.1890 V each, `H1` absorbed by the scale).
@@ -446,7 +452,10 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     c[(0, out)] = 1.0;
     let mut a = DMatrix::zeros(n, n);
     let mut terms: Vec<(&str, &str, String, f64)> = Vec::new();
-    let upper = "sqrt(abs(h1))".to_string();
+    // Levels are never negative: the outflow laws act on the positive part of a level,
+    // so a transient below empty (an initial-state fit, a correction pushing the level
+    // down) drains nothing and leaks nothing, instead of running away through `√|h|`.
+    let upper = format!("sqrt({})", positive("h1"));
     let spill = excess_term("h1", o.h1_top, o.smooth);
     let top2 = excess_term("h2", o.h2_top, o.smooth);
     terms.push(("h1", "outflow", upper.clone(), -rate));
@@ -455,9 +464,9 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     terms.push(("h1", "overflow", spill.clone(), -c_over));
     terms.push(("h2", "inflow", upper, rate));
     let lower = if o.sensor_offset == 0.0 {
-        "sqrt(abs(h2))".to_string()
+        format!("sqrt({})", positive("h2"))
     } else {
-        format!("sqrt(abs(h2 - {:e}))", o.sensor_offset)
+        format!("sqrt({})", positive(&format!("h2 - {:e}", o.sensor_offset)))
     };
     terms.push(("h2", "outflow", lower, -rate));
     terms.push(("h2", "overflow_inflow", spill, 0.05));
@@ -482,7 +491,7 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     }
     if o.linear_outflow {
         free.push(terms.len());
-        terms.push(("h2", "linear_outflow", "h2".into(), -1e-3));
+        terms.push(("h2", "linear_outflow", positive("h2"), -1e-3));
     }
     if o.linear_outflow1 {
         free.push(terms.len());
@@ -885,6 +894,38 @@ mod tests {
         .unwrap()
         .with_intersample(spec.intersample);
         simulate_outputs(model, &DMatrix::identity(n, n), x0, &e, &spec.integrator).unwrap()
+    }
+
+    /// The outflows act on the positive part of each level: started below empty with the
+    /// pump off, no term drains further (the pump offset refills the upper tank, the
+    /// inflow is ≥ 0), so the levels never fall below their start and stay bounded. With
+    /// `√|h|` and the calibrated `+k5·h2` the lower level ran away below zero (the MME/NN
+    /// blow-up on b801ccd, h2 = −1e12 at t = 2044 s).
+    #[test]
+    fn tanks_levels_below_empty_do_not_run_away() {
+        let spec = tanks_model(&TanksOptions::default()).unwrap();
+        // outflow, pump, overflow, inflow, outflow, overflow_inflow, overflow,
+        // linear_outflow, pump_offset: the calibrated values of the full run.
+        let c = [
+            -0.033, 0.027, -1.0, 0.084, -0.147, 1.38, -1.0, 0.0196, 0.0172,
+        ];
+        let model = with_coefficients(&spec.model, &c);
+        let u = vec![0.0; 1024];
+        let x = run(&spec, &model, &[-1.0, -1.0], &u, 4.0);
+        for k in 0..u.len() {
+            for i in 0..2 {
+                let h = x[(i, k)];
+                assert!(
+                    h.is_finite() && (-1.0 - 1e-9..=10.0).contains(&h),
+                    "h{} = {h} at {k}",
+                    i + 1
+                );
+            }
+        }
+        // The upper tank settles where its outflow balances the pump offset:
+        // k1·√h1 = k0, h1 = (0.0172/0.033)² = 0.2717 (analytic).
+        let h1 = x[(0, u.len() - 1)];
+        assert!((h1 - (0.0172f64 / 0.033).powi(2)).abs() < 1e-3, "h1 = {h1}");
     }
 
     /// The upper level is unmeasured: scaling it by `s` maps `(k1, k4, k0, k2, c2, H1)` to

@@ -1,7 +1,16 @@
 //! Real measured benchmarks (read in place from the shared data folder, never copied):
-//! Cascaded Tanks, Silverbox and EMPS. Each gets a physics-based linear model fitted by
-//! output error, the MME/NN completion of that model, and a NARX network; free-run RMSE on
-//! the official test records, beside the published numbers.
+//! Cascaded Tanks, Silverbox and EMPS under the `nonlinear_benchmarks` 1.0.1 protocol
+//! (official split, full rate, its initialisation windows). Each gets a linear
+//! state-space baseline (MOESP + free-run output error), the calibrated physics-first grey
+//! box, MME/NN on that grey box (guarded: physics alone, the network, or the refined
+//! network, kept by held-out training free run), and a NARX network; Cascaded Tanks also
+//! the linear output-error model of the physics structure and MME/NN on it. Free-run RMSE
+//! on the official test records, beside the published numbers.
+//!
+//! `--quick` keeps every row and the protocol; it cuts effort only: linear SS orders up
+//! to 4 (6), one grey-box candidate on Silverbox (4) and two on Cascaded Tanks (3), hybrid
+//! sweeps of 1–3 hidden units × 2 initialisations with 5–10 refinement steps, and NARX on
+//! two orders (4, 4), (8, 8) with 3 hidden units and one restart, selected on 8192 samples.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -299,19 +308,9 @@ fn silverbox(mode: Mode, b: &mmenn::benchmarks::BenchmarkData) -> Result<Setup> 
         // between samples, it reaches the model half a sample late.
         intersample: InterSample::Foh,
         notes: vec![
-            format!(
-                "Estimation on the first {n} samples of train_val_multisine (a window, to keep \
-                 the run short: linear OE and the OE-based MME/NN only); tests on the official splits, whole records (test_arrow_full \
-                 extrapolates beyond the estimation amplitudes)."
-            ),
-            "Inputs linear between samples (`intersample = \"foh\"`: OE fit and simulation, \
-             MME, the network's training and its free runs). With the inputs held instead, the \
-             full run gave linear OE 15.6 mV and MME/NN 17.9 mV on test_multisine."
+            "Inputs linear between samples (`intersample = \"foh\"`: grey-box calibration, \
+             MME, the network's training and every free run of the physics-first models)."
                 .to_string(),
-            format!(
-                "OE starting point from a least-squares ARX(2,2): k = {k:.4e} 1/s², c = {c:.4e} \
-                 1/s, b = {gain:.4e}; MME noise variance 1e-8 V² (σ = 0.1 mV)."
-            ),
             "Published free-run RMSE (shared/data/README.md): arrow full 0.26 mV (PNLSS, older \
              protocol), GP-NARX 0.60, LSTM 2.68, linear state-space 14.4; multisine test / arrow \
              without extrapolation: GP-NARX 0.301 / 0.259, LSTM 1.50 / 0.96, linear 6.96 / 6.58."
@@ -367,16 +366,117 @@ fn emps(_mode: Mode, b: &mmenn::benchmarks::BenchmarkData) -> Result<Setup> {
         same_x0: false,
         intersample: InterSample::Zoh,
         notes: vec![
-            "Records decimated by 10 to 100 Hz (input averaged over each 10 ms block, position \
-             taken at the block start); the official 20-sample (20 ms) initialisation window is \
-             2 samples here; RMSE on the decimated samples after it."
-                .into(),
             "Published (shared/data/README.md): dynoNet 2.64 mm (best); continuous-time SUBNET \
              4.61; polynomial NARX 5.17; linear state-space 5.53."
                 .into(),
         ],
         shortened: Some("records decimated to 100 Hz, window 2 samples = 20 ms"),
     })
+}
+
+/// Issue 16's target 4 for each test record that has one: the best published free-run
+/// RMSE, its source, and the best black box, in the published unit.
+fn targets(b: Benchmark) -> &'static [(&'static str, f64, &'static str, f64)] {
+    match b {
+        Benchmark::CascadedTanks => {
+            &[("test", 0.18, "grey box with overflow, 0.18–0.191 V", 0.306)]
+        }
+        Benchmark::Silverbox => &[
+            ("test_multisine", 0.30, "GP-NARX 0.301 mV", 0.301),
+            (
+                "test_arrow_full",
+                0.26,
+                "PNLSS 0.26 mV (older protocol)",
+                0.60,
+            ),
+        ],
+        Benchmark::Emps => &[("test", 2.64, "dynoNet 2.64 mm", 2.64)],
+    }
+}
+
+/// Why a physics-first model misses the target where it does (what the runs show; see the
+/// grey-box notes).
+fn gap_cause(b: Benchmark) -> &'static str {
+    match b {
+        Benchmark::CascadedTanks => {
+            "not diagnosed further here; the upper level is not measured, so its test state \
+             comes from the first 50 samples of the lower level alone (the training free runs \
+             start from a state fitted to the whole record: grey box 0.189 V, hybrid about \
+             0.15 V)"
+        }
+        Benchmark::Silverbox => {
+            "test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
+             free-run error (0.2565 mV), so the excess on test_arrow_full is where it \
+             extrapolates beyond the training amplitudes and the polynomial spring and damping \
+             fitted on them do not hold; the network (trained on the same amplitudes) does \
+             not change that"
+        }
+        Benchmark::Emps => {
+            "the training free run is at 2.43 mm but the test record adds force pulses that \
+             the input vir does not carry and excites a flexibility the training record does \
+             not (data README): the input-to-position physics, and a network trained on the \
+             training record, cannot see either; training error does not rank the structures \
+             on the test record (the asymmetric-friction row)"
+        }
+    }
+}
+
+/// The physics-first rows against target 4, per test record with a target.
+fn target_note(b: Benchmark, table: &Table) -> String {
+    let (_, unit) = b.reporting_unit();
+    let mut parts = Vec::new();
+    let mut missed = false;
+    for &(record, target, best, black_box) in targets(b) {
+        let ours: Vec<String> = table
+            .rows
+            .iter()
+            .filter(|r| {
+                r.key[1] == record
+                    && (r.key[0].starts_with("physics-first grey box") || r.key[0] == hybrid::LABEL)
+            })
+            .map(|r| {
+                let name = if r.key[0] == hybrid::LABEL {
+                    "MME/NN on the grey box".to_string()
+                } else {
+                    r.key[0].clone()
+                };
+                match r.values[0] {
+                    Some(v) => {
+                        let verdict = if v <= target {
+                            "meets it"
+                        } else if v < black_box {
+                            "misses it, below the best black box"
+                        } else {
+                            "misses it"
+                        };
+                        missed |= v > target;
+                        format!("{name} {v:.4} {unit} ({verdict})")
+                    }
+                    None => {
+                        missed = true;
+                        format!("{name}: {}", r.remark.as_deref().unwrap_or("no number"))
+                    }
+                }
+            })
+            .collect();
+        parts.push(format!(
+            "{record}: target ≤ {target} {unit} (best published: {best}; best black box \
+             {black_box} {unit}) — {}",
+            ours.join("; ")
+        ));
+    }
+    let mut note = format!(
+        "Target 4 of issue 16 (free-run RMSE, {OFFICIAL}; every physics-first model chosen \
+         without the test records): {}.",
+        parts.join(". ")
+    );
+    if missed {
+        note.push_str(&format!(
+            " Where a target is missed, the cause: {}.",
+            gap_cause(b)
+        ));
+    }
+    note
 }
 
 fn rmse_after(y: &[f64], sim: &[f64], skip: usize, scale: f64) -> Option<f64> {
@@ -479,7 +579,71 @@ fn run_benchmark(
     }
     let mut sims: Vec<(String, Vec<f64>)> = Vec::new();
 
-    // Linear output-error model from the physics structure.
+    // Linear output-error model from the physics structure, and MME/NN on it: only where
+    // the estimation record follows the official protocol (Cascaded Tanks).
+    let oe = match &s.shortened {
+        None => Some(oe_rows(&s, &protocol, &mut table, &mut sims, benchmark)?),
+        Some(how) => {
+            table.note(format!(
+                "Not run here: the linear output-error model of the physics structure and \
+                 MME/NN on it. They ran only on a shortened protocol ({how}); the same model \
+                 class (a second-order linear model) is the linear SS baseline below, run under \
+                 the full protocol, and MME/NN runs on the grey box under the full protocol."
+            ));
+            None
+        }
+    };
+
+    // Linear state-space baseline on the official records (full rate, every training
+    // sample): MOESP, then free-run output error, order chosen on held-out data.
+    linear_ss_rows(&data, &mut table, &mut sims, ctx.mode, s.offset);
+
+    // Physics-first grey box on the official records.
+    grey_rows(&data, &mut table, &mut sims, ctx.mode, s.offset);
+
+    // MME/NN on top of the calibrated grey box, trained on trajectories.
+    hybrid::hybrid_rows(ctx, &data, &mut table, &mut sims, s.offset);
+
+    if let Some(oe) = &oe {
+        oe_hybrid_rows(ctx, &s, oe, &protocol, &mut table, &mut sims, benchmark)?;
+    }
+
+    // NARX on the official records, its orders chosen on held-out training data.
+    narx::narx_rows(&data, ctx.mode, &mut table, &mut sims, s.offset);
+    table.note(target_note(benchmark, &table));
+
+    // Figure: first test record.
+    if let Some((name, test)) = s.tests.first() {
+        let e = &test.experiments()[0];
+        let t = e.times();
+        let shift = |v: &[f64]| v.iter().map(|x| x + s.offset).collect::<Vec<_>>();
+        let mut series = vec![line("measured", &t, &shift(&row(e.outputs(), 0)))];
+        for (label, y) in &sims {
+            series.push(line(label.clone(), &t, &shift(y)));
+        }
+        let fig = Figure {
+            title: format!("{benchmark} {name}: free-run simulation"),
+            x_label: "t (s)".into(),
+            y_label: format!("{output} (as recorded)"),
+            series,
+            bands: vec![],
+        };
+        out.figures
+            .push(ctx.figure(&format!("real_{}_{name}", benchmark.folder()), &fig)?);
+    }
+    out.tables.push(table);
+    Ok(out)
+}
+
+/// Rows of the linear output-error model of the physics structure on the test records;
+/// returns the fit (MME/NN on it starts from its model).
+fn oe_rows(
+    s: &Setup,
+    protocol: &str,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    benchmark: Benchmark,
+) -> Result<mmenn::sysid_baselines::OeFit> {
     let oe_cfg = OeConfig {
         free: s.oe_free.iter().map(|p| p.to_string()).collect(),
         ..OeConfig::default()
@@ -502,7 +666,14 @@ fn run_benchmark(
             .as_ref()
             .ok()
             .and_then(|sim| rmse_after(&y, sim, s.window, s.scale));
-        table.push(&["linear OE (physics structure)", name, &protocol], &[rmse]);
+        match &r {
+            Err(e) => table.push_remark(
+                &["linear OE (physics structure)", name, protocol],
+                &[None],
+                &hybrid::failure_text(&format!("{e:#}")),
+            ),
+            Ok(_) => table.push(&["linear OE (physics structure)", name, protocol], &[rmse]),
+        }
         if let (0, Ok(sim)) = (i, r) {
             sims.push(("linear OE".into(), sim));
         }
@@ -522,17 +693,21 @@ fn run_benchmark(
         params.join(", ")
     ));
 
-    // Linear state-space baseline on the official records (full rate, every training
-    // sample): MOESP, then free-run output error, order chosen on held-out data.
-    linear_ss_rows(&data, &mut table, &mut sims, ctx.mode, s.offset);
+    Ok(oe)
+}
 
-    // Physics-first grey box on the official records.
-    grey_rows(&data, &mut table, &mut sims, ctx.mode, s.offset);
-
-    // MME/NN on top of the calibrated grey box, trained on trajectories.
-    hybrid::hybrid_rows(ctx, &data, &mut table, &mut sims, s.offset);
-
-    // MME/NN on the OE model.
+/// Rows of MME/NN on the output-error model (the thesis method: the network as trained
+/// on `d̂`, then the guard of `mmenn fit`); a free run that diverges is reported with its
+/// time.
+fn oe_hybrid_rows(
+    ctx: &Ctx,
+    s: &Setup,
+    oe: &mmenn::sysid_baselines::OeFit,
+    protocol: &str,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    benchmark: Benchmark,
+) -> Result<()> {
     let work = ctx.work.join("real").join(benchmark.folder());
     std::fs::create_dir_all(&work)?;
     let est_csv = work.join("estimation.csv");
@@ -579,21 +754,28 @@ fn run_benchmark(
         Err(e) => table.note(format!("MME/NN: fit failed: {e:#}")),
         Ok(summary) => table.note(format!(
             "MME/NN: MME on the estimation record with the OE model (correction on the {} \
-             equation), network of {} hidden units from a 1–{max_hidden} × {inits} sweep.",
+             equation), network of {} hidden units from a 1–{max_hidden} × {inits} sweep; \
+             kept: {} ({}).",
             s.initial.correction_names().join(", "),
-            summary.hidden
+            summary.hidden,
+            summary.guard.chosen.describe(),
+            summary.guard.reason
         )),
     }
     let model_json = fit_dir.join("model.json");
+    let output = s.est.output_names()[0].clone();
     for (i, (name, test)) in s.tests.iter().enumerate() {
         let y = row(test.experiments()[0].outputs(), 0);
         let csv = work.join(format!("{name}.csv"));
         write_record(&csv, test)?;
-        let mut variants = vec![(InitialChoice::Fit, protocol.clone(), "fit")];
+        let mut variants = vec![(InitialChoice::Fit, protocol.to_string(), "fit")];
         if let (true, Ok(summary)) = (s.same_x0 && i == 0, &fit) {
             variants.push((
                 InitialChoice::Given(summary.train.x0.clone()),
-                "x0 of the estimation record (the benchmark states they share it), RMSE on all samples".into(),
+                format!(
+                    "{OFFICIAL} split; x0 of the estimation record (the benchmark states they \
+                     share it), RMSE on all samples"
+                ),
                 "same_x0",
             ));
         }
@@ -610,37 +792,23 @@ fn run_benchmark(
                 .as_ref()
                 .ok()
                 .and_then(|v| rmse_after(&y, v, skip, s.scale));
-            table.push(&["MME/NN (OE model + network)", name, &proto], &[rmse]);
+            let key = ["MME/NN (OE model + network)", name.as_str(), proto.as_str()];
+            match (&sim, &fit) {
+                (Err(e), Ok(_)) => {
+                    table.push_remark(&key, &[None], &hybrid::failure_text(&format!("{e:#}")))
+                }
+                (Ok(_), _) if rmse.is_none() => {
+                    table.push_remark(&key, &[None], "diverged (non-finite output)")
+                }
+                _ => table.push(&key, &[rmse]),
+            }
             if let (0, "fit", Ok(v)) = (i, tag, sim) {
                 sims.push(("MME/NN".into(), v));
             }
         }
     }
 
-    // NARX on the official records, its orders chosen on held-out training data.
-    narx::narx_rows(&data, ctx.mode, &mut table, &mut sims, s.offset);
-
-    // Figure: first test record.
-    if let Some((name, test)) = s.tests.first() {
-        let e = &test.experiments()[0];
-        let t = e.times();
-        let shift = |v: &[f64]| v.iter().map(|x| x + s.offset).collect::<Vec<_>>();
-        let mut series = vec![line("measured", &t, &shift(&row(e.outputs(), 0)))];
-        for (label, y) in &sims {
-            series.push(line(label.clone(), &t, &shift(y)));
-        }
-        let fig = Figure {
-            title: format!("{benchmark} {name}: free-run simulation"),
-            x_label: "t (s)".into(),
-            y_label: format!("{output} (as recorded)"),
-            series,
-            bands: vec![],
-        };
-        out.figures
-            .push(ctx.figure(&format!("real_{}_{name}", benchmark.folder()), &fig)?);
-    }
-    out.tables.push(table);
-    Ok(out)
+    Ok(())
 }
 
 /// Rows of the linear state-space baseline (subspace model and its free-run refinement)
