@@ -3,14 +3,16 @@
 //! record's experiment says), their scaled residuals, the fit of a window's start state,
 //! and the forward-difference Jacobian over weights and start states.
 
-use nalgebra::{Cholesky, DMatrix, DVector};
+use nalgebra::DMatrix;
 use rayon::prelude::*;
-use sysid_core::{Dynamics, InterSample};
+use sysid_core::{
+    Dynamics, InterSample, LeastSquaresProblem, LmSettings, Termination, levenberg_marquardt,
+};
 
 use super::{HybridParts, ShootingRecord};
 use crate::mlp::{Mlp, Workspace};
 
-/// LM iterations when fitting a held-out window's start state.
+/// Levenberg–Marquardt iterations when fitting a window's start state.
 const START_FIT_ITERATIONS: usize = 20;
 
 /// A window: record, first sample, last sample (inclusive).
@@ -167,10 +169,10 @@ impl<F: Dynamics> Shooter<'_, F> {
     }
 
     /// Held-out objective of one window: the sum of squared residuals minimised over its
-    /// start state (LM in the start state with the weights fixed, from `x0`, in units of
-    /// `x_scale`), so held-out windows are judged like training windows, whose starts are
-    /// free. The fitted start is written into `fitted`. Infinite when the window diverges
-    /// from `x0`.
+    /// start state (the workspace's Levenberg–Marquardt in the start state with the
+    /// weights fixed, from `x0`, forward differences of step `√ε` in units of `x_scale`),
+    /// so held-out windows are judged like training windows, whose starts are free. The
+    /// fitted start is written into `fitted`. Infinite when the window diverges from `x0`.
     pub(super) fn fitted_window_sse(
         &self,
         net: &Mlp,
@@ -180,71 +182,26 @@ impl<F: Dynamics> Shooter<'_, F> {
         b: &mut Buffers,
         fitted: &mut [f64],
     ) -> f64 {
-        let n = x0.len();
-        let rows = (w.end - w.start) * self.parts.c.nrows();
-        let mut x = x0.to_vec();
-        fitted.copy_from_slice(x0);
-        let mut r = DVector::zeros(rows);
-        let mut trial_r = DVector::zeros(rows);
-        let mut jac = DMatrix::zeros(rows, n);
-        if !self.window_residuals(net, w, &x, r.as_mut_slice(), b) {
+        let mut problem = StartFit {
+            shooter: self,
+            net,
+            window: w,
+            x_scale,
+            bufs: b,
+        };
+        let settings = LmSettings {
+            max_iterations: START_FIT_ITERATIONS,
+            mu_max: 1e10,
+            ftol: 1e-10,
+            ..LmSettings::default()
+        };
+        let Ok(solution) = levenberg_marquardt(&mut problem, x0, &settings);
+        if solution.report.termination == Termination::Diverged {
+            fitted.copy_from_slice(x0);
             return f64::INFINITY;
         }
-        let mut sse = r.norm_squared();
-        let mut mu = None;
-        for _ in 0..START_FIT_ITERATIONS {
-            let mut xp = x.clone();
-            for j in 0..n {
-                let h = f64::EPSILON.sqrt() * x_scale[j];
-                xp[j] = x[j] + h;
-                let col = jac.column_mut(j);
-                let mut col = col;
-                if self.window_residuals(net, w, &xp, col.as_mut_slice(), b) {
-                    for (c, r0) in col.iter_mut().zip(r.iter()) {
-                        *c = (*c - r0) / h;
-                    }
-                } else {
-                    col.fill(0.0);
-                }
-                xp[j] = x[j];
-            }
-            let jtj = jac.tr_mul(&jac);
-            let g = -jac.tr_mul(&r);
-            let diag_max = (0..n).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
-            if diag_max.is_nan() || diag_max <= 0.0 {
-                break;
-            }
-            let mut mu_now: f64 = mu.unwrap_or(1e-3 * diag_max);
-            let mut accepted = false;
-            while mu_now <= 1e10 * diag_max {
-                let mut a = jtj.clone();
-                for i in 0..n {
-                    a[(i, i)] += mu_now;
-                }
-                if let Some(chol) = Cholesky::new(a) {
-                    let delta = chol.solve(&g);
-                    let trial: Vec<f64> = x.iter().zip(delta.iter()).map(|(a, d)| a + d).collect();
-                    if self.window_residuals(net, w, &trial, trial_r.as_mut_slice(), b) {
-                        let t = trial_r.norm_squared();
-                        if t < sse {
-                            let small = sse - t < 1e-10 * sse;
-                            x = trial;
-                            sse = t;
-                            std::mem::swap(&mut r, &mut trial_r);
-                            accepted = !small;
-                            break;
-                        }
-                    }
-                }
-                mu_now *= 10.0;
-            }
-            if !accepted {
-                break;
-            }
-            mu = Some(mu_now * 0.1);
-        }
-        fitted.copy_from_slice(&x);
-        sse
+        fitted.copy_from_slice(&solution.theta);
+        solution.report.final_cost()
     }
 
     /// One classical RK4 step of size `h` on `b.x`; stage 1 reads the input at the step's
@@ -292,6 +249,55 @@ impl<F: Dynamics> Shooter<'_, F> {
     }
 }
 
+/// The start state of one window as a least-squares problem, the weights fixed.
+struct StartFit<'s, 'a, F> {
+    shooter: &'s Shooter<'a, F>,
+    net: &'s Mlp,
+    window: &'s Window,
+    x_scale: &'s [f64],
+    bufs: &'s mut Buffers,
+}
+
+impl<F: Dynamics> LeastSquaresProblem for StartFit<'_, '_, F> {
+    type Error = std::convert::Infallible;
+
+    fn residual_count(&self) -> usize {
+        (self.window.end - self.window.start) * self.shooter.parts.c.nrows()
+    }
+
+    fn residuals(&mut self, x0: &[f64], r: &mut [f64]) -> Result<bool, Self::Error> {
+        Ok(self
+            .shooter
+            .window_residuals(self.net, self.window, x0, r, self.bufs))
+    }
+
+    /// Forward differences, step `√ε·σ_j`; a diverging perturbed window gives a zero
+    /// column.
+    fn jacobian(
+        &mut self,
+        x0: &[f64],
+        r: &[f64],
+        jac: &mut DMatrix<f64>,
+    ) -> Result<(), Self::Error> {
+        let mut xp = x0.to_vec();
+        for (j, s) in self.x_scale.iter().enumerate() {
+            let h = f64::EPSILON.sqrt() * s;
+            xp[j] = x0[j] + h;
+            let mut col = jac.column_mut(j);
+            let ok = self.shooter.window_residuals(
+                self.net,
+                self.window,
+                &xp,
+                col.as_mut_slice(),
+                self.bufs,
+            );
+            finish_column(col.as_mut_slice(), r, h, ok);
+            xp[j] = x0[j];
+        }
+        Ok(())
+    }
+}
+
 /// The network buffers of [`Buffers`], borrowed apart from the state buffers.
 struct BufRest<'b> {
     xu: &'b mut [f64],
@@ -316,7 +322,7 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
     /// (the other rows are zero). Columns are computed in parallel, each with its own
     /// network copy and buffers, so the result does not depend on the thread count. A
     /// perturbed simulation that diverges leaves a zero column.
-    pub(super) fn jacobian(&self, r0: &DVector<f64>, jac: &mut DMatrix<f64>) {
+    pub(super) fn jacobian(&self, r0: &[f64], jac: &mut DMatrix<f64>) {
         let (n, m, q) = self.dims;
         let nw = self.net.n_weights();
         let p = self.shooter.parts.c.nrows();
@@ -348,7 +354,7 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
                             .shooter
                             .residuals(pert, self.windows, self.starts, col, bufs)
                             .is_ok();
-                        finish_column(col, r0.as_slice(), h, ok);
+                        finish_column(col, r0, h, ok);
                     } else {
                         let (wi, i) = ((j - nw) / n, (j - nw) % n);
                         x0.copy_from_slice(&self.starts[wi * n..(wi + 1) * n]);
@@ -360,7 +366,7 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
                         col[b..].fill(0.0);
                         let seg = &mut col[a..b];
                         let ok = self.shooter.window_residuals(self.net, w, x0, seg, bufs);
-                        finish_column(seg, &r0.as_slice()[a..b], h, ok);
+                        finish_column(seg, &r0[a..b], h, ok);
                     }
                 },
             );
