@@ -293,7 +293,7 @@ pub fn fit_oe(initial: &LinearModel, data: &Dataset, config: &OeConfig) -> Resul
         exact_rtol: 1e-13,
         data_norm,
     };
-    let outcome = lsq::minimise(&problem, &theta0, &names, settings)?;
+    let outcome = lsq::minimise(&problem, &theta0, &names, "model", settings)?;
 
     let sse = outcome.residuals.norm_squared();
     let dof = (n_res - n_par) as f64;
