@@ -13,6 +13,7 @@ pub mod judge;
 pub mod least_squares;
 pub mod linear;
 pub mod metrics;
+pub mod tangent;
 pub mod terms;
 
 pub use correlation::{Confidence, acf, confidence_bound, xcf};
