@@ -154,13 +154,27 @@ impl Dynamics for Trial<'_> {
         self.linear.n_inputs()
     }
     fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        self.linear.rhs(t, x, u, dx);
-        for (term, c) in self.terms.iter().zip(self.coefficients) {
-            let v = c * term.expr.eval_parts(x, u);
-            dx[term.state] += v;
-            if let Some(r) = term.into {
-                dx[r] -= v;
-            }
+        trial_rhs(self.linear, self.terms, self.coefficients, t, x, u, dx);
+    }
+}
+
+/// `dx = A x + B u + Σ_k c_k φ_k(x, u) (e_{s_k} − e_{r_k})`: the right-hand side of a
+/// [`Trial`], shared with the sensitivity pass so both simulate the same bits.
+pub(crate) fn trial_rhs(
+    linear: &LinearModel,
+    terms: &[Term],
+    coefficients: &[f64],
+    t: f64,
+    x: &[f64],
+    u: &[f64],
+    dx: &mut [f64],
+) {
+    linear.rhs(t, x, u, dx);
+    for (term, c) in terms.iter().zip(coefficients) {
+        let v = c * term.expr.eval_parts(x, u);
+        dx[term.state] += v;
+        if let Some(r) = term.into {
+            dx[r] -= v;
         }
     }
 }
