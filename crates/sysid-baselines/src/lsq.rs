@@ -5,7 +5,9 @@
 //! parameter before the solve, and the exact-fit test.
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{LeastSquaresProblem, LmSettings, SolveReport, Termination, levenberg_marquardt};
+use sysid_core::{
+    LeastSquaresProblem, LmSettings, Scaling, SolveReport, Termination, levenberg_marquardt,
+};
 
 use crate::error::{BaselineError, Result};
 
@@ -32,6 +34,8 @@ pub(crate) struct Settings {
     pub exact_rtol: f64,
     /// Norm of the data, for the exact-fit test.
     pub data_norm: f64,
+    /// The solver's damping scale.
+    pub scaling: Scaling,
 }
 
 /// Smallest over largest singular value of the column-scaled Jacobian below which the
@@ -146,6 +150,7 @@ pub(crate) fn minimise<P: LeastSquares>(
         gtol: settings.gtol,
         ftol: settings.ftol,
         exact_cost: exact * exact,
+        scaling: settings.scaling,
         ..LmSettings::default()
     };
     let mut adapter = Adapter {

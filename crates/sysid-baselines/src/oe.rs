@@ -5,7 +5,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-use sysid_core::{Dataset, LinearModel, SolveReport};
+use sysid_core::{Dataset, LinearModel, Scaling, SolveReport};
 
 use crate::discrete::SampleStep;
 use crate::error::{BaselineError, Result, check_config};
@@ -292,6 +292,7 @@ pub fn fit_oe(initial: &LinearModel, data: &Dataset, config: &OeConfig) -> Resul
         // growth over long records.
         exact_rtol: 1e-13,
         data_norm,
+        scaling: Scaling::Columns,
     };
     let outcome = lsq::minimise(&problem, &theta0, &names, "model", settings)?;
 

@@ -89,6 +89,9 @@ pub enum Scaling {
     /// with a small column is a direction the data hardly determine, and scaling it up
     /// lets the step run along it).
     Uniform,
+    /// Marquardt's `D² = diag(JᵀJ)` of the current Jacobian (no memory of earlier
+    /// columns): the linear state-space baseline's order choice was tuned with it.
+    Current,
 }
 
 /// Settings of [`levenberg_marquardt`].
@@ -249,6 +252,11 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             *dj = if norm.is_finite() { dj.max(norm) } else { *dj };
             if *dj == 0.0 {
                 *dj = if norm > 0.0 { norm } else { 1.0 };
+            }
+        }
+        if settings.scaling == Scaling::Current {
+            for (j, dj) in d.iter_mut().enumerate() {
+                *dj = jtj[(j, j)].max(1e-300).sqrt();
             }
         }
         if settings.scaling == Scaling::Uniform {
