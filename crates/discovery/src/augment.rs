@@ -12,16 +12,16 @@
 //!
 //! # Solver
 //!
-//! Levenberg–Marquardt (Marquardt's diagonal scaling, `μ` divided by 3 on success and
-//! multiplied by 4 on failure) on the residuals `√(w_c/M)·(y − ŷ)`, started from the
+//! The workspace's Levenberg–Marquardt ([`sysid_core::least_squares`]: MINPACK's column
+//! scaling, gain-ratio damping) on the residuals `√(w_c/M)·(y − ŷ)`, started from the
 //! regression coefficients. Jacobians come from forward sensitivities integrated with the
 //! state (the exact derivative of the RK4 simulation, module `sensitivity`); finite
 //! differences (step `1e-5·max(|θ_j|, 0.01)`, forward inside the solver, central for the
 //! standard errors) stand in for the adaptive integrator, for a term whose derivative does
 //! not build, and from the first non-finite sensitivity on.
 //! A trial step whose simulation diverges counts as a failed step. A stage stops when an
-//! accepted step lowers `J` by less than `tolerance·J`, when `μ` exceeds `1e12` (no
-//! descent left), or after `max_iterations` accepted-or-rejected iterations.
+//! accepted step lowers `J` by at most `tolerance·J`, when no damping gives a descent (a
+//! stationary point, reported as converged), or after `max_iterations` Jacobians.
 //!
 //! **Growing horizons.** Free-run error of an oscillator is far from convex in its
 //! coefficients: a 40 % error in a stiffness shifts the phase by half a period within a
@@ -36,8 +36,8 @@
 use nalgebra::{DMatrix, DVector};
 use sysid_core::integrate::DEFAULT_BLOW_UP;
 use sysid_core::{
-    Dataset, Dynamics, Experiment, Integrator, IterationRecord, LinearModel, Term, TermModel,
-    TermSpec, Termination, simulate_with,
+    Dataset, Dynamics, Experiment, Integrator, IterationRecord, LeastSquaresProblem, LinearModel,
+    LmSettings, Term, TermModel, TermSpec, Termination, levenberg_marquardt, simulate_with,
 };
 
 use crate::error::{DiscoveryError, Result};
@@ -154,13 +154,27 @@ impl Dynamics for Trial<'_> {
         self.linear.n_inputs()
     }
     fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        self.linear.rhs(t, x, u, dx);
-        for (term, c) in self.terms.iter().zip(self.coefficients) {
-            let v = c * term.expr.eval_parts(x, u);
-            dx[term.state] += v;
-            if let Some(r) = term.into {
-                dx[r] -= v;
-            }
+        trial_rhs(self.linear, self.terms, self.coefficients, t, x, u, dx);
+    }
+}
+
+/// `dx = A x + B u + Σ_k c_k φ_k(x, u) (e_{s_k} − e_{r_k})`: the right-hand side of a
+/// [`Trial`], shared with the sensitivity pass so both simulate the same bits.
+pub(crate) fn trial_rhs(
+    linear: &LinearModel,
+    terms: &[Term],
+    coefficients: &[f64],
+    t: f64,
+    x: &[f64],
+    u: &[f64],
+    dx: &mut [f64],
+) {
+    linear.rhs(t, x, u, dx);
+    for (term, c) in terms.iter().zip(coefficients) {
+        let v = c * term.expr.eval_parts(x, u);
+        dx[term.state] += v;
+        if let Some(r) = term.into {
+            dx[r] -= v;
         }
     }
 }
@@ -584,78 +598,69 @@ pub fn calibrate(
     })
 }
 
-/// One Levenberg–Marquardt solve at the problem's current horizon, from `theta`.
+/// The calibration at its current horizon as a least-squares problem.
+struct Stage<'p, 'a> {
+    problem: &'p mut Problem<'a>,
+}
+
+impl LeastSquaresProblem for Stage<'_, '_> {
+    type Error = DiscoveryError;
+
+    fn residual_count(&self) -> usize {
+        self.problem.valid
+    }
+
+    /// A diverging trial simulation is a rejected step.
+    fn residuals(&mut self, theta: &[f64], r: &mut [f64]) -> Result<bool> {
+        Ok(match self.problem.residuals(theta) {
+            Ok(v) => {
+                r.copy_from_slice(v.as_slice());
+                true
+            }
+            Err(_) => false,
+        })
+    }
+
+    fn jacobian(&mut self, theta: &[f64], r: &[f64], jac: &mut DMatrix<f64>) -> Result<()> {
+        let at = DVector::from_column_slice(r);
+        jac.copy_from(&jacobian(self.problem, theta, Some(&at))?);
+        Ok(())
+    }
+}
+
+/// One Levenberg–Marquardt solve ([`sysid_core::least_squares`]) at the problem's current
+/// horizon, from `theta`; its accepted steps are appended to `iterations`. A stage that
+/// finds no descent at any damping ends at a stationary point, reported as converged.
 fn lm_stage(
     problem: &mut Problem<'_>,
-    mut theta: Vec<f64>,
+    theta: Vec<f64>,
     config: &CalibrationConfig,
     iterations: &mut Vec<IterationRecord>,
 ) -> Result<(Vec<f64>, Termination)> {
-    let p = theta.len();
-    if p == 0 {
+    if theta.is_empty() {
         return Ok((theta, Termination::Exact));
     }
-    let mut r = problem
+    // The start of a stage must simulate: its error names the experiment.
+    problem
         .residuals(&theta)
         .map_err(|(experiment, source)| DiscoveryError::Simulation { experiment, source })?;
-    let mut cost = r.norm_squared();
-    let mut jac = jacobian(problem, &theta, Some(&r))?;
-    let mut mu = {
-        let jtj = jac.transpose() * &jac;
-        (1e-3 * (0..p).map(|i| jtj[(i, i)]).fold(0.0, f64::max)).max(1e-12)
+    let settings = LmSettings {
+        max_iterations: config.max_iterations,
+        ftol: config.tolerance,
+        ..LmSettings::default()
     };
-    let mut termination = Termination::MaxIterations;
-    for _ in 0..config.max_iterations {
-        let jtj = jac.transpose() * &jac;
-        let g = jac.transpose() * &r;
-        let mut a = jtj.clone();
-        let top = (0..p).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
-        let diag_floor = (1e-12 * top).max(f64::MIN_POSITIVE);
-        for i in 0..p {
-            a[(i, i)] += mu * jtj[(i, i)].max(diag_floor);
-        }
-        let step = a.cholesky().map(|c| c.solve(&(-&g)));
-        let trial: Option<Vec<f64>> = step
-            .as_ref()
-            .map(|st| theta.iter().zip(st.iter()).map(|(t, s)| t + s).collect());
-        let accepted = match &trial {
-            Some(tr) => match problem.residuals(tr) {
-                Ok(rt) if rt.norm_squared() < cost => Some(rt),
-                _ => None,
-            },
-            None => None,
-        };
-        match (accepted, trial, step) {
-            (Some(r_trial), Some(tr), Some(st)) => {
-                let new_cost = r_trial.norm_squared();
-                let decrease = cost - new_cost;
-                theta = tr;
-                r = r_trial;
-                cost = new_cost;
-                mu = (mu / 3.0).max(1e-15);
-                iterations.push(IterationRecord {
-                    iteration: iterations.len() + 1,
-                    cost,
-                    step_norm: st.norm(),
-                    step_length: 1.0,
-                });
-                if decrease < config.tolerance * cost {
-                    termination = Termination::Converged;
-                    break;
-                }
-                jac = jacobian(problem, &theta, Some(&r))?;
-            }
-            _ => {
-                mu *= 4.0;
-                if mu > 1e12 * top.max(1.0) {
-                    // No descent direction left at any damping: a stationary point.
-                    termination = Termination::Converged;
-                    break;
-                }
-            }
-        }
+    let solution = levenberg_marquardt(&mut Stage { problem }, &theta, &settings)?;
+    for step in &solution.report.steps {
+        iterations.push(IterationRecord {
+            iteration: iterations.len() + 1,
+            ..*step
+        });
     }
-    Ok((theta, termination))
+    let termination = match solution.report.termination {
+        Termination::NoDescent => Termination::Converged,
+        t => t,
+    };
+    Ok((solution.theta, termination))
 }
 
 /// Term derivatives for sensitivity Jacobians, or `None` where finite differences must

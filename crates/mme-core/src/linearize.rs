@@ -1,51 +1,43 @@
-//! The discrete map of the nonlinear assumed model over one sub-step — one classical RK4
-//! step of `ẋ = f(t, x, u) + E d` with `d` held and `u` held or, for first-order-hold
-//! inputs, interpolated at each stage time ([`StageInput`]) — and its Jacobians
-//! `Φ = ∂x⁺/∂x`, `Γ = ∂x⁺/∂d`, chained exactly through the four stages.
-//!
-//! With `k_i = g(ξ_i)`, `ξ_1 = x`, `ξ_2 = x + ½h k_1`, `ξ_3 = x + ½h k_2`,
-//! `ξ_4 = x + h k_3` and `A_i = ∂f/∂x(ξ_i)`:
-//! `∂k_1/∂x = A_1`, `∂k_i/∂x = A_i (I + c_i h ∂k_{i−1}/∂x)`,
-//! `∂k_1/∂d = E`, `∂k_i/∂d = A_i c_i h ∂k_{i−1}/∂d + E` (`c = ½, ½, 1`), and
-//! `Φ = I + h/6 Σ w_i ∂k_i/∂x`, `Γ = h/6 Σ w_i ∂k_i/∂d` (`w = 1, 2, 2, 1`).
+//! The discrete map of the nonlinear assumed model over one sub-step — one step of
+//! sysid-core's RK4 ([`sysid_core::tangent`]) of `ẋ = f(t, x, u) + E d` with `d` held and
+//! `u` held or, for first-order-hold inputs, interpolated at each stage time
+//! ([`StepInput`]) — and its Jacobians `Φ = ∂x⁺/∂x`, `Γ = ∂x⁺/∂d`: the step's tangents
+//! from `S = [I | 0]` with the direct source `[0 | E]`, exact through the four stages.
 
 use nalgebra::DMatrix;
 use sysid_core::Dynamics;
+use sysid_core::tangent::{self, StepInput, TangentSource};
 
-/// The input over one sub-step.
-#[derive(Debug, Clone, Copy)]
-pub(crate) enum StageInput<'u> {
-    /// Held at `u` for every stage (zero-order hold).
-    Held(&'u [f64]),
-    /// Linear between two samples (first-order hold): at a stage `c·h` into the step,
-    /// `u = ua + (from + c·per)·(ub − ua)`, where `from` is the fraction of the sample
-    /// interval at the step's start and `per = h/dt` the fraction one step spans (so the
-    /// stage times are `t, t + h/2, t + h`, as in `sysid_core`'s RK4).
-    Ramp {
-        /// Input at the interval's first sample.
-        ua: &'u [f64],
-        /// Input at the interval's last sample.
-        ub: &'u [f64],
-        /// Interval fraction at the step's start.
-        from: f64,
-        /// Interval fraction per step.
-        per: f64,
-    },
+/// `f + E d` with `E d` computed once per step.
+struct Corrected<'a, F: ?Sized> {
+    f: &'a F,
+    ed: &'a [f64],
 }
 
-impl StageInput<'_> {
-    /// The input at stage offset `c` (fraction of the step), computed into `buf` if needed.
-    fn at<'a>(&'a self, c: f64, buf: &'a mut [f64]) -> &'a [f64] {
-        match *self {
-            StageInput::Held(u) => u,
-            StageInput::Ramp { ua, ub, from, per } => {
-                let f = from + c * per;
-                for ((b, a), z) in buf.iter_mut().zip(ua).zip(ub) {
-                    *b = a + f * (z - a);
-                }
-                &buf[..ua.len()]
-            }
-        }
+impl<F: Dynamics + ?Sized> Dynamics for Corrected<'_, F> {
+    fn n_states(&self) -> usize {
+        self.f.n_states()
+    }
+    fn n_inputs(&self) -> usize {
+        self.f.n_inputs()
+    }
+    fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.f.rhs(t, x, u, dx);
+        dx.iter_mut().zip(self.ed).for_each(|(k, e)| *k += e);
+    }
+    fn jacobians(&self, t: f64, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+        self.f.jacobians(t, x, u, a, b);
+    }
+}
+
+/// `∂(E d)/∂d = E` in the tangent columns after the `n` state ones.
+struct HeldCorrection<'a>(&'a DMatrix<f64>);
+
+impl TangentSource for HeldCorrection<'_> {
+    fn add_to(&self, _: f64, _: &[f64], _: &[f64], out: &mut DMatrix<f64>) {
+        let n = self.0.nrows();
+        let mut block = out.columns_mut(n, self.0.ncols());
+        block += self.0;
     }
 }
 
@@ -53,21 +45,11 @@ impl StageInput<'_> {
 pub(crate) struct Rk4 {
     n: usize,
     q: usize,
-    /// Interpolated input (first-order hold).
-    u: Vec<f64>,
     ed: Vec<f64>,
-    k: [Vec<f64>; 4],
-    xi: Vec<f64>,
-    a: DMatrix<f64>,
-    b: DMatrix<f64>,
-    dk_dx: [DMatrix<f64>; 4],
-    dk_dd: [DMatrix<f64>; 4],
-    tmp_x: DMatrix<f64>,
-    tmp_d: DMatrix<f64>,
+    rk: tangent::Rk4,
+    /// Tangents `[∂x/∂x | ∂x/∂d]`, `n × (n + q)`.
+    s: DMatrix<f64>,
 }
-
-const STAGE_C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
-const WEIGHT: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
 
 impl Rk4 {
     /// Buffers for `n` states, `m` inputs, `q` corrections.
@@ -75,42 +57,15 @@ impl Rk4 {
         Self {
             n,
             q,
-            u: vec![0.0; m],
             ed: vec![0.0; n],
-            k: std::array::from_fn(|_| vec![0.0; n]),
-            xi: vec![0.0; n],
-            a: DMatrix::zeros(n, n),
-            b: DMatrix::zeros(n, m),
-            dk_dx: std::array::from_fn(|_| DMatrix::zeros(n, n)),
-            dk_dd: std::array::from_fn(|_| DMatrix::zeros(n, q)),
-            tmp_x: DMatrix::zeros(n, n),
-            tmp_d: DMatrix::zeros(n, q),
+            rk: tangent::Rk4::new(n, m, n + q),
+            s: DMatrix::zeros(n, n + q),
         }
     }
 
     fn set_correction(&mut self, e: &DMatrix<f64>, d: &[f64]) {
         for i in 0..self.n {
             self.ed[i] = (0..self.q).map(|c| e[(i, c)] * d[c]).sum();
-        }
-    }
-
-    /// `ξ_s = x + c·k_{s−1}` (`ξ_1 = x`).
-    fn stage_point(&mut self, s: usize, c: f64, x: &[f64]) {
-        if s == 0 {
-            self.xi.copy_from_slice(x);
-        } else {
-            for ((xi, xv), kv) in self.xi.iter_mut().zip(x).zip(&self.k[s - 1]) {
-                *xi = xv + c * kv;
-            }
-        }
-    }
-
-    fn stages<F: Dynamics + ?Sized>(&mut self, f: &F, t: f64, h: f64, x: &[f64], u: &StageInput) {
-        for (s, &cs) in STAGE_C.iter().enumerate() {
-            self.stage_point(s, cs * h, x);
-            let ks = &mut self.k[s];
-            f.rhs(t + cs * h, &self.xi, u.at(cs, &mut self.u), ks);
-            ks.iter_mut().zip(&self.ed).for_each(|(k, e)| *k += e);
         }
     }
 
@@ -123,14 +78,12 @@ impl Rk4 {
         t: f64,
         h: f64,
         x: &mut [f64],
-        u: &StageInput,
+        u: &StepInput,
         d: &[f64],
     ) {
         self.set_correction(e, d);
-        self.stages(f, t, h, x, u);
-        for (i, xi) in x.iter_mut().enumerate() {
-            *xi += h / 6.0 * (0..4).map(|s| WEIGHT[s] * self.k[s][i]).sum::<f64>();
-        }
+        let g = Corrected { f, ed: &self.ed };
+        self.rk.step(&g, t, h, x, u);
     }
 
     /// `x⁺`, `Φ` and `Γ` of one step (written into `x_next`, `phi` `n × n`, `gamma`
@@ -143,7 +96,7 @@ impl Rk4 {
         t: f64,
         h: f64,
         x: &[f64],
-        u: &StageInput,
+        u: &StepInput,
         d: &[f64],
         x_next: &mut [f64],
         phi: &mut [f64],
@@ -151,50 +104,15 @@ impl Rk4 {
     ) {
         let n = self.n;
         self.set_correction(e, d);
-        for (s, &cs) in STAGE_C.iter().enumerate() {
-            self.stage_point(s, cs * h, x);
-            let ts = t + cs * h;
-            let us = u.at(cs, &mut self.u);
-            f.rhs(ts, &self.xi, us, &mut self.k[s]);
-            self.k[s]
-                .iter_mut()
-                .zip(&self.ed)
-                .for_each(|(k, e)| *k += e);
-            f.jacobians(ts, &self.xi, us, &mut self.a, &mut self.b);
-            if s == 0 {
-                self.dk_dx[0].copy_from(&self.a);
-                self.dk_dd[0].copy_from(e);
-            } else {
-                let c = cs * h;
-                // ∂ξ/∂x = I + c ∂k_{s−1}/∂x ; ∂ξ/∂d = c ∂k_{s−1}/∂d.
-                self.tmp_x.copy_from(&self.dk_dx[s - 1]);
-                self.tmp_x.scale_mut(c);
-                for i in 0..n {
-                    self.tmp_x[(i, i)] += 1.0;
-                }
-                self.tmp_d.copy_from(&self.dk_dd[s - 1]);
-                self.tmp_d.scale_mut(c);
-                let (a, tx, td) = (&self.a, &self.tmp_x, &self.tmp_d);
-                self.dk_dx[s].gemm(1.0, a, tx, 0.0);
-                self.dk_dd[s].copy_from(e);
-                self.dk_dd[s].gemm(1.0, a, td, 1.0);
-            }
-        }
-        for i in 0..n {
-            x_next[i] = x[i] + h / 6.0 * (0..4).map(|s| WEIGHT[s] * self.k[s][i]).sum::<f64>();
-        }
-        for c in 0..n {
-            for r in 0..n {
-                let v: f64 = (0..4).map(|s| WEIGHT[s] * self.dk_dx[s][(r, c)]).sum();
-                phi[c * n + r] = if r == c { 1.0 } else { 0.0 } + h / 6.0 * v;
-            }
-        }
-        for c in 0..self.q {
-            for r in 0..n {
-                let v: f64 = (0..4).map(|s| WEIGHT[s] * self.dk_dd[s][(r, c)]).sum();
-                gamma[c * n + r] = h / 6.0 * v;
-            }
-        }
+        self.s.fill(0.0);
+        self.s.fill_diagonal(1.0);
+        x_next.copy_from_slice(x);
+        let g = Corrected { f, ed: &self.ed };
+        self.rk
+            .step_with_tangents(&g, &HeldCorrection(e), t, h, x_next, &mut self.s, u);
+        let s = self.s.as_slice();
+        phi.copy_from_slice(&s[..n * n]);
+        gamma.copy_from_slice(&s[n * n..]);
     }
 }
 
@@ -238,8 +156,8 @@ mod tests {
         let mut rk = Rk4::new(2, 1, 2);
         let (t, h) = (0.4, 0.05);
         let (ua, ub) = ([0.7], [-1.9]);
-        let held = StageInput::Held(&ua);
-        let ramp = StageInput::Ramp {
+        let held = StepInput::Held(&ua);
+        let ramp = StepInput::Ramp {
             ua: &ua,
             ub: &ub,
             from: 0.25,
@@ -288,7 +206,7 @@ mod tests {
         }
     }
 
-    /// With `d = 0`, `s` steps with [`StageInput::Ramp`] over one sample interval are
+    /// With `d = 0`, `s` steps with [`StepInput::Ramp`] over one sample interval are
     /// `sysid_core`'s first-order-hold RK4 with `s` sub-steps: the same stage times and
     /// inputs, so equal to round-off (a few ulps of the O(1) state).
     #[test]
@@ -301,7 +219,7 @@ mod tests {
         let mut ours = x0;
         let h = dt / s as f64;
         for i in 0..s {
-            let u = StageInput::Ramp {
+            let u = StepInput::Ramp {
                 ua: &ua,
                 ub: &ub,
                 from: i as f64 / s as f64,
@@ -329,7 +247,7 @@ mod tests {
         // The held input differs visibly (ub − ua = −4 over 0.2 s).
         let mut held = x0;
         for i in 0..s {
-            let u = StageInput::Held(&ua);
+            let u = StepInput::Held(&ua);
             rk.step(&Pendulum, &e, ta + i as f64 * h, h, &mut held, &u, &[0.0]);
         }
         assert!((held[1] - theirs[1]).abs() > 0.1);

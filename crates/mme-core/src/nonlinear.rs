@@ -31,10 +31,11 @@ use crate::discretize::{default_substeps, substeps_for};
 use crate::error::{MmeError, Result};
 use crate::estimate::{Phases, assemble, resolve_noise};
 use crate::evaluate::{Solve, Summary};
-use crate::linearize::{Rk4, StageInput};
+use crate::linearize::Rk4;
 use crate::result::MmeOutput;
 use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains, sweep};
 use crate::tune_w::tune;
+use sysid_core::tangent::StepInput;
 
 /// A nonlinear assumed model `ẋ = f(t, x, u) + E d`, `y = C x`, with names.
 #[derive(Debug, Clone)]
@@ -191,19 +192,9 @@ struct Grid {
 impl Grid {
     /// The input over sub-step `j` given the samples `ua = u_k`, `ub = u_{k+1}` of its
     /// interval `k = j / s` (`ub` is read only for a first-order hold).
-    fn stage_input<'u>(&self, j: usize, ua: &'u [f64], ub: &'u [f64]) -> StageInput<'u> {
-        match self.hold {
-            InterSample::Zoh => StageInput::Held(ua),
-            InterSample::Foh => {
-                let s = self.substeps as f64;
-                StageInput::Ramp {
-                    ua,
-                    ub,
-                    from: (j % self.substeps) as f64 / s,
-                    per: 1.0 / s,
-                }
-            }
-        }
+    fn stage_input<'u>(&self, j: usize, ua: &'u [f64], ub: &'u [f64]) -> StepInput<'u> {
+        self.hold
+            .step_input(ua, ub, j % self.substeps, self.substeps)
     }
 }
 

@@ -64,13 +64,7 @@ impl RefineSummary {
             r.val_windows,
             r.iterations,
             r.best_iteration,
-            match r.termination {
-                nn::RefineStop::MaxIterations => "step limit reached",
-                nn::RefineStop::MuMax => "no step lowered the objective before μ hit its limit",
-                nn::RefineStop::SmallDecrease => "the objective stopped decreasing",
-                nn::RefineStop::ValidationStop => "the held-out objective stopped improving",
-                _ => "another reason",
-            },
+            crate::words::termination(Some(r.termination)),
             r.initial_train_objective(),
             r.final_train_objective(),
         );

@@ -19,6 +19,11 @@ pub fn termination(t: Option<Termination>) -> &'static str {
         Some(Termination::NotBracketed) => {
             "the target was never bracketed; the closest end of the search was used"
         }
+        Some(Termination::NoDescent) => {
+            "stopped: no damped step lowered the cost (a stationary point)"
+        }
+        Some(Termination::StoppedEarly) => "stopped early: the held-out cost stopped improving",
+        Some(Termination::Diverged) => "not run: the model diverged at the starting point",
         Some(_) => "ended for another reason",
     }
 }

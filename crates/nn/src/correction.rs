@@ -69,11 +69,15 @@ impl NetCorrection {
     ///
     /// Errors: `x`, `u` or `d` of the wrong length.
     pub fn eval_into(&self, x: &[f64], u: &[f64], d: &mut [f64], ws: &mut Workspace) -> Result<()> {
-        self.load(x, u, d.len(), ws)?;
-        self.net.forward_scaled(ws);
-        let out = self.net.output_range();
-        self.net.output_scaler().unscale_into(&ws.acts[out], d);
-        Ok(())
+        self.view().eval_into(x, u, d, ws)
+    }
+
+    /// The network borrowed as a correction.
+    pub(crate) fn view(&self) -> NetView<'_> {
+        NetView {
+            net: &self.net,
+            n_states: self.n_states,
+        }
     }
 
     /// Evaluate `d` and the Jacobians `∂d/∂x` (`q × n`) and `∂d/∂u` (`q × m`) at `(x, u)`.
@@ -112,6 +116,32 @@ impl NetCorrection {
         });
         Ok(())
     }
+}
+
+/// A borrowed network read as a correction of a model with `n_states` states: what
+/// [`NetCorrection`] evaluates through, and what nn's shooting windows simulate with (one
+/// per trial weight vector, without copying the network).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NetView<'a> {
+    pub(crate) net: &'a Mlp,
+    pub(crate) n_states: usize,
+}
+
+impl NetView<'_> {
+    /// [`NetCorrection::eval_into`].
+    pub(crate) fn eval_into(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        d: &mut [f64],
+        ws: &mut Workspace,
+    ) -> Result<()> {
+        self.load(x, u, d.len(), ws)?;
+        self.net.forward_scaled(ws);
+        let out = self.net.output_range();
+        self.net.output_scaler().unscale_into(&ws.acts[out], d);
+        Ok(())
+    }
 
     /// Check lengths, prepare `ws` and write the scaled `[x; u]` into it.
     fn load(&self, x: &[f64], u: &[f64], d_len: usize, ws: &mut Workspace) -> Result<()> {
@@ -122,11 +152,11 @@ impl NetCorrection {
                 expected: self.n_states,
             });
         }
-        if u.len() != self.n_inputs() {
+        if u.len() != self.net.n_inputs() - self.n_states {
             return Err(NnError::Length {
                 what: "correction inputs",
                 found: u.len(),
-                expected: self.n_inputs(),
+                expected: self.net.n_inputs() - self.n_states,
             });
         }
         if d_len != self.net.n_outputs() {
@@ -145,7 +175,7 @@ impl NetCorrection {
     }
 }
 
-impl Correction for NetCorrection {
+impl Correction for NetView<'_> {
     fn n_states(&self) -> usize {
         self.n_states
     }
@@ -158,8 +188,8 @@ impl Correction for NetCorrection {
         self.net.n_outputs()
     }
 
-    /// Evaluate `d = NN([x; u])`. The trait cannot return an error: slices of the wrong
-    /// length fill `d` with NaN, which the hybrid simulation reports as divergence.
+    /// Evaluate `d = NN([x; u])` in a per-thread workspace; slices of the wrong length
+    /// fill `d` with NaN, which the hybrid simulation reports as divergence.
     fn eval(&self, x: &[f64], u: &[f64], d: &mut [f64]) {
         let ok = SCRATCH.with(|cell| match cell.try_borrow_mut() {
             Ok(mut ws) => self.eval_into(x, u, d, &mut ws),
@@ -169,6 +199,26 @@ impl Correction for NetCorrection {
         if ok.is_err() {
             d.fill(f64::NAN);
         }
+    }
+}
+
+impl Correction for NetCorrection {
+    fn n_states(&self) -> usize {
+        self.view().n_states()
+    }
+
+    fn n_inputs(&self) -> usize {
+        self.view().n_inputs()
+    }
+
+    fn n_outputs(&self) -> usize {
+        self.view().n_outputs()
+    }
+
+    /// Evaluate `d = NN([x; u])`. The trait cannot return an error: slices of the wrong
+    /// length fill `d` with NaN, which the hybrid simulation reports as divergence.
+    fn eval(&self, x: &[f64], u: &[f64], d: &mut [f64]) {
+        self.view().eval(x, u, d);
     }
 }
 

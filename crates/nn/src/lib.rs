@@ -20,6 +20,6 @@ pub use sweep::{
     Selection, SweepConfig, SweepProgress, SweepResult, SweepRow, derive_seed, select, sizing_sweep,
 };
 pub use trajectory::{
-    HybridParts, RefineProgress, RefineReport, RefineStop, ShootingRecord, TrajectoryConfig,
+    HybridParts, RefineProgress, RefineReport, ShootingRecord, TrajectoryConfig,
     refine_on_trajectories,
 };

@@ -9,11 +9,15 @@
 //! every later sample of the window, divided by the channel's standard deviation. The
 //! Jacobian with respect to the flat weight vector is taken by forward differences, one
 //! simulation of all windows per weight (the networks have tens of weights), in parallel
-//! over weights and bit-identical for any thread count.
+//! over weights and bit-identical for any thread count; the solver is sysid-core's
+//! Levenberg–Marquardt.
 
-use nalgebra::{Cholesky, DMatrix, DVector};
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-use sysid_core::{Dynamics, Experiment};
+use sysid_core::{
+    AcceptedStep, Control, Dynamics, Experiment, LeastSquaresProblem, LmSettings, Scaling,
+    Termination, levenberg_marquardt,
+};
 
 use crate::error::{NnError, Result};
 use crate::mlp::Mlp;
@@ -44,15 +48,12 @@ pub struct TrajectoryConfig {
     /// Stop after this many consecutive accepted steps whose held-out objective is above
     /// the best so far. Default 5.
     pub max_fail: usize,
-    /// Initial damping relative to the largest diagonal entry of `JᵀJ` (Madsen, Nielsen &
-    /// Tingleff, *Methods for non-linear least squares problems*, 2004, §3.2). Default 1e-3.
+    /// Initial damping of the workspace's Levenberg–Marquardt
+    /// ([`sysid_core::least_squares`]), relative to its column scaling (so 1e-3 is
+    /// Marquardt's classical start). Default 1e-3.
     pub mu_initial: f64,
-    /// Factor on μ after a rejected step, > 1. Default 10.
-    pub mu_increase: f64,
-    /// Factor on μ after an accepted step, in (0, 1). Default 0.1.
-    pub mu_decrease: f64,
-    /// Give up when μ exceeds this multiple of the largest diagonal entry of `JᵀJ`.
-    /// Default 1e10.
+    /// Give up ([`Termination::NoDescent`]) when the relative damping exceeds this
+    /// without a step lowering the objective. Default 1e10.
     pub mu_max_ratio: f64,
     /// Stop when an accepted step lowers the training objective by less than this
     /// fraction. Default 1e-6.
@@ -73,8 +74,6 @@ impl Default for TrajectoryConfig {
             max_iterations: 30,
             max_fail: 5,
             mu_initial: 1e-3,
-            mu_increase: 10.0,
-            mu_decrease: 0.1,
             mu_max_ratio: 1e10,
             min_relative_decrease: 1e-6,
             substeps: 4,
@@ -104,12 +103,6 @@ impl TrajectoryConfig {
         }
         if !(self.mu_initial.is_finite() && self.mu_initial > 0.0) {
             return bad("mu_initial", self.mu_initial, "must be finite and > 0");
-        }
-        if !(self.mu_increase.is_finite() && self.mu_increase > 1.0) {
-            return bad("mu_increase", self.mu_increase, "must be finite and > 1");
-        }
-        if !(self.mu_decrease > 0.0 && self.mu_decrease < 1.0) {
-            return bad("mu_decrease", self.mu_decrease, "must be in (0, 1)");
         }
         if !(self.mu_max_ratio.is_finite() && self.mu_max_ratio > self.mu_initial) {
             return bad(
@@ -155,22 +148,6 @@ pub struct ShootingRecord<'a> {
     pub states: &'a DMatrix<f64>,
 }
 
-/// Why refinement stopped. Not improving is a reason, not an error.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-#[non_exhaustive]
-pub enum RefineStop {
-    /// [`TrajectoryConfig::max_iterations`] steps were accepted.
-    MaxIterations,
-    /// No step lowered the training objective before μ reached its limit.
-    MuMax,
-    /// An accepted step lowered the objective by less than
-    /// [`TrajectoryConfig::min_relative_decrease`].
-    SmallDecrease,
-    /// The held-out objective failed to improve [`TrajectoryConfig::max_fail`] times.
-    ValidationStop,
-}
-
 /// State after one accepted step, passed to the progress callback.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct RefineProgress {
@@ -188,8 +165,13 @@ pub struct RefineProgress {
 /// standard deviation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RefineReport {
-    /// Why it stopped.
-    pub termination: RefineStop,
+    /// Why it stopped: [`Termination::MaxIterations`] ([`TrajectoryConfig::max_iterations`]
+    /// steps accepted), [`Termination::NoDescent`] (no step lowered the training objective
+    /// before μ reached its limit), [`Termination::Converged`] (an accepted step lowered it
+    /// by at most [`TrajectoryConfig::min_relative_decrease`]) or
+    /// [`Termination::StoppedEarly`] (the held-out objective failed to improve
+    /// [`TrajectoryConfig::max_fail`] times).
+    pub termination: Termination,
     /// Accepted steps.
     pub iterations: usize,
     /// Step whose weights were returned (best held-out objective; the last step without
@@ -332,11 +314,10 @@ fn observed(records: &[ShootingRecord<'_>], windows: &[Window]) -> usize {
 /// The objective is the mean over observed window samples of `((y_meas − y_sim)/σ_o)²`,
 /// with `σ_o` the standard deviation of output channel `o` over all records. Each
 /// iteration forms the forward-difference Jacobian of the residuals (step
-/// `√ε·max(1, |θ_j|)`, start states in units of each state's standard deviation), solves
-/// `(JᵀJ + μI)δ = −Jᵀr` by Cholesky, and accepts the step only if the training objective
-/// falls (μ ← μ·`mu_decrease`), else retries with μ ← μ·`mu_increase` — so the training
-/// objective never increases. A window that diverges under trial weights rejects the
-/// step.
+/// `√ε·max(1, |θ_j|)`, start states in units of each state's standard deviation) and
+/// takes a step of the workspace's Levenberg–Marquardt ([`sysid_core::least_squares`]),
+/// which accepts a step only if the training objective falls — so the training objective
+/// never increases. A window that diverges under trial weights rejects the step.
 ///
 /// Held-out windows — every window of `val_records` when given, else every
 /// [`TrajectoryConfig::holdout_every`]-th window of `train_records` — are scored with
@@ -353,7 +334,7 @@ pub fn refine_on_trajectories<F: Dynamics>(
     train_records: &[ShootingRecord<'_>],
     val_records: &[ShootingRecord<'_>],
     config: &TrajectoryConfig,
-    mut progress: Option<&mut dyn FnMut(RefineProgress)>,
+    progress: Option<&mut dyn FnMut(RefineProgress)>,
 ) -> Result<RefineReport> {
     config.validate()?;
     check_problem(net, parts, train_records)?;
@@ -479,7 +460,6 @@ pub fn refine_on_trajectories<F: Dynamics>(
     shooter
         .residuals(net, &train_w, &starts, r.as_mut_slice(), &mut bufs)
         .map_err(|wi| diverged(&train_w[wi]))?;
-    let mut objective = r.norm_squared() / m_train as f64;
     let mut val_fitted = vec![0.0; n];
     let mut val_objective = |net: &Mlp, bufs: &mut Buffers| -> Option<f64> {
         if val_w.is_empty() {
@@ -498,13 +478,11 @@ pub fn refine_on_trajectories<F: Dynamics>(
 
     // Unknowns θ = [weights; z], start states = x̂ + σ_x ⊙ z.
     let nw = net.n_weights();
-    let n_theta = nw + x_hat.len();
-    let mut theta = DVector::zeros(n_theta);
-    theta.as_mut_slice()[..nw].copy_from_slice(net.weights());
+    let mut theta = vec![0.0; nw + x_hat.len()];
+    theta[..nw].copy_from_slice(net.weights());
     for (k, s) in starts.iter().enumerate() {
         theta[nw + k] = (s - x_hat[k]) / x_scale[k % n];
     }
-    let mut train_history = vec![objective];
     let mut val_history = Vec::new();
     let mut best = (f64::INFINITY, theta.clone(), 0usize);
     if let Some(v) = val_objective(net, &mut bufs) {
@@ -514,123 +492,55 @@ pub fn refine_on_trajectories<F: Dynamics>(
         val_history.push(v);
         best = (v, theta.clone(), 0);
     }
-
-    let mut jac = DMatrix::zeros(rows_train, n_theta);
-    let mut jtj = DMatrix::zeros(n_theta, n_theta);
-    let mut rhs = DVector::zeros(n_theta);
-    let mut trial_r = DVector::zeros(rows_train);
-    let mut trial_starts = starts.clone();
-    let mut trial_net = net.clone();
-    let mut mu: Option<f64> = None;
-    let mut fails = 0;
-    let mut iteration = 0;
-    let to_starts = |theta: &DVector<f64>, out: &mut [f64]| {
-        for (k, o) in out.iter_mut().enumerate() {
-            *o = x_hat[k] + x_scale[k % n] * theta[nw + k];
-        }
+    let mut problem = Refinement {
+        shooter: &shooter,
+        windows: &train_w,
+        x_hat: &x_hat,
+        x_scale: &x_scale,
+        dims: (n, m, q),
+        rows: rows_train,
+        m_train,
+        work: net.clone(),
+        starts: starts.clone(),
+        bufs,
+        val_objective: &mut val_objective,
+        val_history,
+        best,
+        fails: 0,
+        max_fail: config.max_fail,
+        progress,
     };
-    let termination = loop {
-        if iteration >= config.max_iterations {
-            break RefineStop::MaxIterations;
-        }
-        if fails >= config.max_fail {
-            break RefineStop::ValidationStop;
-        }
-        let lin = Linearisation {
-            shooter: &shooter,
-            net,
-            windows: &train_w,
-            starts: &starts,
-            theta: theta.as_slice(),
-            x_scale: &x_scale,
-            dims: (n, m, q),
-        };
-        lin.jacobian(&r, &mut jac);
-        jtj.gemm_tr(1.0, &jac, &jac, 0.0);
-        rhs.gemv_tr(-1.0, &jac, &r, 0.0);
-        let diag_max = (0..n_theta)
-            .map(|i| jtj[(i, i)])
-            .fold(0.0, f64::max)
-            .max(f64::MIN_POSITIVE);
-        let mut mu_now = mu.unwrap_or(config.mu_initial * diag_max);
-        let mu_max = config.mu_max_ratio * diag_max;
-        let mut accepted = None;
-        while mu_now <= mu_max {
-            let mut a = jtj.clone();
-            for i in 0..n_theta {
-                a[(i, i)] += mu_now;
-            }
-            if let Some(chol) = Cholesky::new(a) {
-                let delta = chol.solve(&rhs);
-                let trial = &theta + &delta;
-                if trial.iter().all(|v| v.is_finite()) {
-                    trial_net
-                        .weights_mut()
-                        .copy_from_slice(&trial.as_slice()[..nw]);
-                    to_starts(&trial, &mut trial_starts);
-                    if shooter
-                        .residuals(
-                            &trial_net,
-                            &train_w,
-                            &trial_starts,
-                            trial_r.as_mut_slice(),
-                            &mut bufs,
-                        )
-                        .is_ok()
-                    {
-                        let obj = trial_r.norm_squared() / m_train as f64;
-                        if obj < objective {
-                            accepted = Some((trial, obj));
-                            break;
-                        }
-                    }
-                }
-            }
-            mu_now *= config.mu_increase;
-        }
-        let Some((trial, obj)) = accepted else {
-            break RefineStop::MuMax;
-        };
-        mu = Some(mu_now * config.mu_decrease);
-        iteration += 1;
-        let decrease = (objective - obj) / objective;
-        theta = trial;
-        objective = obj;
-        std::mem::swap(&mut r, &mut trial_r);
-        std::mem::swap(&mut starts, &mut trial_starts);
-        net.weights_mut().copy_from_slice(&theta.as_slice()[..nw]);
-        train_history.push(objective);
-        let v = val_objective(net, &mut bufs);
-        if let Some(v) = v {
-            val_history.push(v);
-            if v < best.0 {
-                best = (v, theta.clone(), iteration);
-                fails = 0;
-            } else {
-                fails += 1;
-            }
-        }
-        if let Some(cb) = progress.as_mut() {
-            cb(RefineProgress {
-                iteration,
-                train_objective: objective,
-                val_objective: v,
-                mu: mu_now * config.mu_decrease,
-            });
-        }
-        if decrease < config.min_relative_decrease {
-            break RefineStop::SmallDecrease;
-        }
+    let settings = LmSettings {
+        max_iterations: config.max_iterations,
+        mu_initial: config.mu_initial,
+        mu_max: config.mu_max_ratio,
+        ftol: config.min_relative_decrease,
+        scaling: Scaling::Uniform,
+        mu_floor_factor: 0.1,
+        ..LmSettings::default()
     };
+    let solution = levenberg_marquardt(&mut problem, &theta, &settings)
+        .unwrap_or_else(|never: std::convert::Infallible| match never {});
+    let Refinement {
+        val_history, best, ..
+    } = problem;
+    let iterations = solution.report.steps.len();
     let best_iteration = if val_w.is_empty() {
-        iteration
+        net.weights_mut().copy_from_slice(&solution.theta[..nw]);
+        iterations
     } else {
-        net.weights_mut().copy_from_slice(&best.1.as_slice()[..nw]);
+        net.weights_mut().copy_from_slice(&best.1[..nw]);
         best.2
     };
+    let train_history = solution
+        .report
+        .cost_history()
+        .iter()
+        .map(|c| c / m_train as f64)
+        .collect();
     Ok(RefineReport {
-        termination,
-        iterations: iteration,
+        termination: solution.report.termination,
+        iterations,
         best_iteration,
         objective_at_estimates,
         train_history,
@@ -639,6 +549,110 @@ pub fn refine_on_trajectories<F: Dynamics>(
         val_windows: val_w.len(),
         output_scale,
     })
+}
+
+/// The weights and training-window start states as one least-squares problem, with the
+/// held-out bookkeeping after every accepted step.
+struct Refinement<'s, 'a, 'p, F, V> {
+    shooter: &'s Shooter<'a, F>,
+    windows: &'s [Window],
+    x_hat: &'s [f64],
+    x_scale: &'s [f64],
+    dims: (usize, usize, usize),
+    rows: usize,
+    m_train: usize,
+    /// The network at the point being evaluated.
+    work: Mlp,
+    /// Start states at the point being evaluated.
+    starts: Vec<f64>,
+    bufs: Buffers,
+    val_objective: &'s mut V,
+    val_history: Vec<f64>,
+    /// Lowest held-out objective, its θ and its step.
+    best: (f64, Vec<f64>, usize),
+    fails: usize,
+    max_fail: usize,
+    progress: Option<&'s mut (dyn FnMut(RefineProgress) + 'p)>,
+}
+
+impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> Refinement<'_, '_, '_, F, V> {
+    /// Load `theta` into the working network and start states.
+    fn load(&mut self, theta: &[f64]) {
+        let nw = self.work.n_weights();
+        let n = self.dims.0;
+        self.work.weights_mut().copy_from_slice(&theta[..nw]);
+        for (k, o) in self.starts.iter_mut().enumerate() {
+            *o = self.x_hat[k] + self.x_scale[k % n] * theta[nw + k];
+        }
+    }
+}
+
+impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> LeastSquaresProblem
+    for Refinement<'_, '_, '_, F, V>
+{
+    type Error = std::convert::Infallible;
+
+    fn residual_count(&self) -> usize {
+        self.rows
+    }
+
+    /// A window that diverges rejects the step.
+    fn residuals(&mut self, theta: &[f64], r: &mut [f64]) -> Result<bool, Self::Error> {
+        self.load(theta);
+        Ok(self
+            .shooter
+            .residuals(&self.work, self.windows, &self.starts, r, &mut self.bufs)
+            .is_ok())
+    }
+
+    fn jacobian(
+        &mut self,
+        theta: &[f64],
+        r: &[f64],
+        jac: &mut DMatrix<f64>,
+    ) -> Result<(), Self::Error> {
+        self.load(theta);
+        Linearisation {
+            shooter: self.shooter,
+            net: &self.work,
+            windows: self.windows,
+            starts: &self.starts,
+            theta,
+            x_scale: self.x_scale,
+            dims: self.dims,
+        }
+        .jacobian(r, jac);
+        Ok(())
+    }
+
+    /// Score the held-out windows, keep the best weights, report progress, and stop
+    /// after [`TrajectoryConfig::max_fail`] steps without a better held-out objective.
+    fn accepted(&mut self, step: &AcceptedStep<'_>) -> Control {
+        self.load(step.theta);
+        let v = (self.val_objective)(&self.work, &mut self.bufs);
+        if let Some(v) = v {
+            self.val_history.push(v);
+            if v < self.best.0 {
+                self.best = (v, step.theta.to_vec(), step.iteration);
+                self.fails = 0;
+            } else {
+                self.fails += 1;
+            }
+        }
+        if let Some(cb) = self.progress.as_mut() {
+            cb(RefineProgress {
+                iteration: step.iteration,
+                train_objective: step.cost / self.m_train as f64,
+                val_objective: v,
+                mu: step.mu,
+            });
+        }
+        if self.fails >= self.max_fail {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    }
 }
 
 /// Standard deviation of every state over all records' estimates (1 for a constant one).

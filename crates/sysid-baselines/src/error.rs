@@ -165,13 +165,6 @@ pub enum BaselineError {
         #[source]
         source: Box<dyn std::error::Error + Send + Sync + 'static>,
     },
-    /// The optimiser failed for a reason other than the problem's own errors.
-    #[error("optimiser failed")]
-    Optimiser {
-        /// The optimiser's error.
-        #[source]
-        source: Box<dyn std::error::Error + Send + Sync + 'static>,
-    },
 }
 
 /// Result alias for `sysid-baselines`.

@@ -5,7 +5,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-use sysid_core::{Dataset, LinearModel, SolveReport};
+use sysid_core::{Dataset, LinearModel, Scaling, SolveReport};
 
 use crate::discrete::SampleStep;
 use crate::error::{BaselineError, Result, check_config};
@@ -292,8 +292,9 @@ pub fn fit_oe(initial: &LinearModel, data: &Dataset, config: &OeConfig) -> Resul
         // growth over long records.
         exact_rtol: 1e-13,
         data_norm,
+        scaling: Scaling::Columns,
     };
-    let outcome = lsq::minimise(&problem, &theta0, &names, settings)?;
+    let outcome = lsq::minimise(&problem, &theta0, &names, "model", settings)?;
 
     let sse = outcome.residuals.norm_squared();
     let dof = (n_res - n_par) as f64;

@@ -20,6 +20,14 @@ pub enum Termination {
     LineSearchFailed,
     /// A bracketing search could not bracket a root; the closest end was used.
     NotBracketed,
+    /// No damping of a Levenberg–Marquardt step lowered the cost: a stationary point to
+    /// working precision, or a Jacobian that does not describe the residuals.
+    NoDescent,
+    /// The caller ended the solve after an accepted step (early stopping on held-out
+    /// data).
+    StoppedEarly,
+    /// The model could not be evaluated at the starting point.
+    Diverged,
 }
 
 /// One iteration of an iterative solve.

@@ -1,14 +1,17 @@
 //! Initial-state estimation for free-run simulation: the `x0` whose free response best
 //! fits the measured outputs over a window (as MATLAB's `compare` with an estimated
-//! initial condition). Levenberg–Marquardt on the `n` entries of `x0` with a
-//! finite-difference sensitivity of the simulated outputs.
+//! initial condition). The workspace's Levenberg–Marquardt on the `n` entries of `x0`
+//! with a finite-difference sensitivity of the simulated outputs.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
 use crate::dataset::Experiment;
 use crate::dynamics::Dynamics;
 use crate::error::{CoreError, Result};
 use crate::integrate::{Integrator, simulate_with};
+use crate::least_squares::{
+    LeastSquaresProblem, LmSettings, forward_difference, levenberg_marquardt,
+};
 
 /// Settings of [`fit_initial_state`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,42 +37,77 @@ impl Default for InitialStateFit {
     }
 }
 
-fn residuals<D: Dynamics + ?Sized>(
-    f: &D,
-    c: &DMatrix<f64>,
-    exp: &Experiment,
-    x0: &[f64],
-    opt: &InitialStateFit,
-) -> Result<DVector<f64>> {
-    let len = opt.window.min(exp.len());
-    let u = exp.inputs().columns(0, len).into_owned();
-    let xs = simulate_with(
-        f,
-        x0,
-        exp.t0(),
-        exp.dt(),
-        &u,
-        exp.intersample(),
-        &opt.integrator,
-        opt.blow_up,
-    )?;
-    let ys = c * xs;
-    let p = c.nrows();
-    let mut r = Vec::with_capacity(p * len);
-    for k in 0..len {
-        let y = exp.output(k);
-        for i in 0..p {
-            if !y[i].is_nan() {
-                r.push(y[i] - ys[(i, k)]);
+/// The free-response fit as a least-squares problem in `x0`.
+struct FreeResponse<'a, D: ?Sized> {
+    f: &'a D,
+    c: &'a DMatrix<f64>,
+    exp: &'a Experiment,
+    opt: &'a InitialStateFit,
+    /// Measured (non-missing) values in the window.
+    count: usize,
+}
+
+impl<D: Dynamics + ?Sized> FreeResponse<'_, D> {
+    /// `ỹ − C x(t_k; x0)` over the window, missing samples skipped.
+    fn residuals_into(&self, x0: &[f64], r: &mut [f64]) -> Result<()> {
+        let len = self.opt.window.min(self.exp.len());
+        let u = self.exp.inputs().columns(0, len).into_owned();
+        let xs = simulate_with(
+            self.f,
+            x0,
+            self.exp.t0(),
+            self.exp.dt(),
+            &u,
+            self.exp.intersample(),
+            &self.opt.integrator,
+            self.opt.blow_up,
+        )?;
+        let ys = self.c * xs;
+        let mut at = 0;
+        for k in 0..len {
+            for (i, y) in self.exp.output(k).iter().enumerate() {
+                if !y.is_nan() {
+                    r[at] = y - ys[(i, k)];
+                    at += 1;
+                }
             }
         }
+        Ok(())
     }
-    Ok(DVector::from_vec(r))
+}
+
+impl<D: Dynamics + ?Sized> LeastSquaresProblem for FreeResponse<'_, D> {
+    type Error = CoreError;
+
+    fn residual_count(&self) -> usize {
+        self.count
+    }
+
+    fn residuals(&mut self, x0: &[f64], r: &mut [f64]) -> Result<bool> {
+        match self.residuals_into(x0, r) {
+            Ok(()) => Ok(true),
+            Err(CoreError::Diverged { .. }) => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Forward differences, step `√ε·max(1, |x_j|)`.
+    fn jacobian(&mut self, x0: &[f64], r: &[f64], jac: &mut DMatrix<f64>) -> Result<()> {
+        forward_difference(
+            |x, out| self.residuals_into(x, out).map(|()| true),
+            x0,
+            r,
+            (f64::EPSILON.sqrt(), 1.0),
+            jac,
+        )
+    }
 }
 
 /// The initial state minimising `Σ_k ‖ỹ_k − C x(t_k; x0)‖²` over the first `window`
-/// samples (missing samples skipped), started from `guess`. A diverging trial simulation
-/// is treated as a rejected step; a diverging start is an error.
+/// samples (missing samples skipped), started from `guess`, by the workspace's
+/// Levenberg–Marquardt ([`crate::least_squares`]; relative cost decrease `1e-12`). A
+/// diverging trial simulation is treated as a rejected step; a diverging start (or a
+/// diverging perturbed simulation of the Jacobian) is an error.
 pub fn fit_initial_state<D: Dynamics + ?Sized>(
     f: &D,
     c: &DMatrix<f64>,
@@ -94,52 +132,25 @@ pub fn fit_initial_state<D: Dynamics + ?Sized>(
             expected_cols: n,
         });
     }
-    let mut x = guess.to_vec();
-    let mut r = residuals(f, c, exp, &x, opt)?;
-    let mut cost = r.norm_squared();
-    let mut mu = 1e-3;
-    for _ in 0..opt.max_iterations {
-        // Forward-difference sensitivity, step ~√ε·max(1,|x_j|).
-        let mut jac = DMatrix::zeros(r.len(), n);
-        for j in 0..n {
-            let h = f64::EPSILON.sqrt() * x[j].abs().max(1.0);
-            let mut xp = x.clone();
-            xp[j] += h;
-            let rp = residuals(f, c, exp, &xp, opt)?;
-            // r = y − ŷ, so ∂r/∂x = −∂ŷ/∂x.
-            jac.set_column(j, &((&rp - &r) / h));
-        }
-        let jtj = jac.transpose() * &jac;
-        let g = jac.transpose() * &r;
-        let mut improved = false;
-        for _ in 0..12 {
-            let mut a = jtj.clone();
-            for i in 0..n {
-                a[(i, i)] += mu * jtj[(i, i)].max(1e-12);
-            }
-            let Some(step) = a.cholesky().map(|ch| ch.solve(&g)) else {
-                mu *= 10.0;
-                continue;
-            };
-            let trial: Vec<f64> = x.iter().zip(step.iter()).map(|(xi, s)| xi - s).collect();
-            match residuals(f, c, exp, &trial, opt) {
-                Ok(rt) if rt.norm_squared() < cost => {
-                    let rel = (cost - rt.norm_squared()) / cost.max(f64::MIN_POSITIVE);
-                    x = trial;
-                    r = rt;
-                    cost = r.norm_squared();
-                    mu = (mu / 10.0).max(1e-12);
-                    improved = rel > 1e-12;
-                    break;
-                }
-                _ => mu *= 10.0,
-            }
-        }
-        if !improved {
-            break;
-        }
-    }
-    Ok(x)
+    let len = opt.window.min(exp.len());
+    let count = (0..len)
+        .map(|k| exp.output(k).iter().filter(|v| !v.is_nan()).count())
+        .sum();
+    let mut problem = FreeResponse {
+        f,
+        c,
+        exp,
+        opt,
+        count,
+    };
+    // A diverging start is an error naming where it diverged.
+    problem.residuals_into(guess, &mut vec![0.0; count])?;
+    let settings = LmSettings {
+        max_iterations: opt.max_iterations,
+        ftol: 1e-12,
+        ..LmSettings::default()
+    };
+    Ok(levenberg_marquardt(&mut problem, guess, &settings)?.theta)
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::dynamics::Dynamics;
 use crate::error::{CoreError, Result};
+use crate::tangent::{Rk4, StepInput};
 
 /// How to integrate between samples.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,10 +76,29 @@ pub enum InterSample {
     Foh,
 }
 
+impl InterSample {
+    /// The input over RK4 sub-step `j` of `substeps` across the sample interval from
+    /// input `ua` to `ub` (`ub` is read only for a first-order hold).
+    pub fn step_input<'u>(
+        self,
+        ua: &'u [f64],
+        ub: &'u [f64],
+        j: usize,
+        substeps: usize,
+    ) -> StepInput<'u> {
+        match self {
+            InterSample::Zoh => StepInput::Held(ua),
+            InterSample::Foh => StepInput::ramp(ua, ub, j, substeps),
+        }
+    }
+}
+
 /// The input along one sample interval `[t_a, t_b]`.
 trait InputPath {
     /// The input at `t`, written into `buf` when it has to be computed.
     fn at<'a>(&'a self, t: f64, buf: &'a mut [f64]) -> &'a [f64];
+    /// The input over RK4 sub-step `j` of `substeps` across the interval.
+    fn step(&self, j: usize, substeps: usize) -> StepInput<'_>;
 }
 
 /// Zero-order hold: `u_a` throughout.
@@ -87,6 +107,9 @@ struct Held<'u>(&'u [f64]);
 impl InputPath for Held<'_> {
     fn at<'a>(&'a self, _t: f64, _buf: &'a mut [f64]) -> &'a [f64] {
         self.0
+    }
+    fn step(&self, _: usize, _: usize) -> StepInput<'_> {
+        StepInput::Held(self.0)
     }
 }
 
@@ -106,6 +129,9 @@ impl InputPath for Ramp<'_> {
         }
         &buf[..self.ua.len()]
     }
+    fn step(&self, j: usize, substeps: usize) -> StepInput<'_> {
+        StepInput::ramp(self.ua, self.ub, j, substeps)
+    }
 }
 
 /// States beyond this magnitude count as a blown-up simulation.
@@ -121,6 +147,8 @@ pub struct Workspace {
     u: Vec<f64>,
     /// Last accepted adaptive step, carried between intervals.
     h_last: Option<f64>,
+    /// The RK4 step's buffers.
+    rk4: Rk4,
 }
 
 impl Workspace {
@@ -132,6 +160,7 @@ impl Workspace {
             y5: vec![0.0; n],
             u: Vec::new(),
             h_last: None,
+            rk4: Rk4::new(n, 0, 0),
         }
     }
 }
@@ -145,36 +174,7 @@ pub fn rk4_step<D: Dynamics + ?Sized>(
     u: &[f64],
     ws: &mut Workspace,
 ) {
-    rk4_path(f, t, h, x, &Held(u), ws);
-}
-
-fn rk4_path<D: Dynamics + ?Sized, P: InputPath>(
-    f: &D,
-    t: f64,
-    h: f64,
-    x: &mut [f64],
-    input: &P,
-    ws: &mut Workspace,
-) {
-    let n = x.len();
-    let Workspace { k, tmp, u: buf, .. } = ws;
-    let [k1, k2, k3, k4, ..] = k;
-    f.rhs(t, x, input.at(t, buf), k1);
-    for i in 0..n {
-        tmp[i] = x[i] + 0.5 * h * k1[i];
-    }
-    f.rhs(t + 0.5 * h, tmp, input.at(t + 0.5 * h, buf), k2);
-    for i in 0..n {
-        tmp[i] = x[i] + 0.5 * h * k2[i];
-    }
-    f.rhs(t + 0.5 * h, tmp, input.at(t + 0.5 * h, buf), k3);
-    for i in 0..n {
-        tmp[i] = x[i] + h * k3[i];
-    }
-    f.rhs(t + h, tmp, input.at(t + h, buf), k4);
-    for i in 0..n {
-        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    }
+    ws.rk4.step(f, t, h, x, &StepInput::Held(u));
 }
 
 // Dormand–Prince 5(4) tableau (Dormand & Prince 1980; Hairer, Nørsett & Wanner, Solving
@@ -280,7 +280,7 @@ fn interval_path<D: Dynamics + ?Sized, P: InputPath>(
             let s = (*substeps).max(1);
             let h = (t1 - t0) / s as f64;
             for j in 0..s {
-                rk4_path(f, t0 + j as f64 * h, h, x, input, ws);
+                ws.rk4.step(f, t0 + j as f64 * h, h, x, &input.step(j, s));
             }
             Ok(())
         }

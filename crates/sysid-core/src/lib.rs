@@ -10,8 +10,10 @@ pub mod hybrid;
 pub mod initial;
 pub mod integrate;
 pub mod judge;
+pub mod least_squares;
 pub mod linear;
 pub mod metrics;
+pub mod tangent;
 pub mod terms;
 
 pub use correlation::{Confidence, acf, confidence_bound, xcf};
@@ -26,6 +28,10 @@ pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with}
 pub use judge::{
     DEFAULT_X0_WINDOW, InitialRule, JudgeOptions, Judgement, Observation, ScoredWindow,
     judge_free_run, judge_k_step, score, score_rows,
+};
+pub use least_squares::{
+    AcceptedStep, Control, LeastSquaresProblem, LmReport, LmSettings, LmSolution, Scaling,
+    levenberg_marquardt,
 };
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};

@@ -1,8 +1,9 @@
 //! Integration tests of `sysid-core`: property tests of expressions (printing round trip,
 //! symbolic derivatives against finite differences) and of the term model's right-hand
-//! side and Jacobians.
+//! side and Jacobians, and of the RK4 step's tangents.
 
 mod expr_props;
+mod tangent;
 mod term_model;
 
 use proptest::test_runner::{Config, RngAlgorithm, RngSeed};

@@ -9,13 +9,14 @@
 //! columns for initial states; `S(0)` has the unit columns of the initial-state
 //! parameters and zeros elsewhere (Hairer, Nørsett & Wanner, *Solving ODEs I*, §I.14).
 //!
-//! `x` and `S` are advanced together by the same RK4 steps and sub-steps as the state
-//! simulation, every stage's `F_x` taken at that stage's state. The result is then the
-//! exact derivative of the discrete RK4 map ("internal differentiation", Bock 1981), not
-//! an approximation of the continuous sensitivity, so it matches central differences of
-//! the simulated residuals to their truncation error. The state part repeats the
-//! arithmetic of [`Trial`](super::Trial) and `rk4_step` operation for operation, so the
-//! trajectory is the very one the residuals were computed on.
+//! `x` and `S` are advanced together by sysid-core's RK4 step with tangents
+//! ([`sysid_core::tangent`]), the same steps and sub-steps as the state simulation, every
+//! stage's `F_x` taken at that stage's state. The result is then the exact derivative of
+//! the discrete RK4 map ("internal differentiation", Bock 1981), not an approximation of
+//! the continuous sensitivity, so it matches central differences of the simulated
+//! residuals to their truncation error. The right-hand side repeats the arithmetic of
+//! [`Trial`](super::Trial) operation for operation and the step is the one `simulate`
+//! takes, so the trajectory is the very one the residuals were computed on.
 //!
 //! `∂φ_k/∂x_v` are symbolic derivatives ([`Expr::derivative`]) built once per calibration
 //! for the states each term reads; inputs need none. Only RK4 is handled here: the
@@ -26,7 +27,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::DMatrix;
-use sysid_core::{CoreError, Dynamics, Experiment, Expr, InterSample, LinearModel, Term};
+use sysid_core::tangent::{Rk4, TangentSource};
+use sysid_core::{CoreError, Dynamics, Experiment, Expr, LinearModel, Term};
 
 use super::Problem;
 
@@ -116,121 +118,94 @@ pub(crate) struct Propagator<'a> {
     pub(crate) blow_up: f64,
 }
 
-impl Propagator<'_> {
-    /// `dx = F(x, u)` exactly as `Trial::rhs` computes it, and `ds = F_x S + F_θ`;
-    /// `phi` receives the term values.
-    #[allow(clippy::too_many_arguments)]
-    fn eval(
-        &self,
-        t: f64,
-        x: &[f64],
-        s: &[f64],
-        u: &[f64],
-        dx: &mut [f64],
-        ds: &mut [f64],
-        phi: &mut [f64],
-    ) {
-        let q = self.q;
-        let n = x.len();
-        self.linear.rhs(t, x, u, dx);
-        let a = self.linear.a();
-        for i in 0..n {
-            let row = &mut ds[i * q..(i + 1) * q];
-            row.fill(0.0);
-            for l in 0..n {
-                let ail = a[(i, l)];
-                if ail != 0.0 {
-                    for (d, sv) in row.iter_mut().zip(&s[l * q..(l + 1) * q]) {
-                        *d += ail * sv;
-                    }
-                }
-            }
-        }
-        for (k, (term, c)) in self.terms.iter().zip(self.coefficients).enumerate() {
-            phi[k] = term.expr.eval_parts(x, u);
-            let v = c * phi[k];
-            dx[term.state] += v;
-            if let Some(r) = term.into {
-                dx[r] -= v;
-            }
-            for (var, partial) in &self.partials.terms[k] {
-                let g = c * partial.eval(x, u);
-                if g == 0.0 {
-                    continue;
-                }
-                let src = &s[var * q..(var + 1) * q];
-                for (d, sv) in ds[term.state * q..(term.state + 1) * q].iter_mut().zip(src) {
-                    *d += g * sv;
-                }
-                if let Some(r) = term.into {
-                    for (d, sv) in ds[r * q..(r + 1) * q].iter_mut().zip(src) {
-                        *d -= g * sv;
-                    }
-                }
-            }
-        }
+impl Dynamics for Propagator<'_> {
+    fn n_states(&self) -> usize {
+        self.linear.n_states()
+    }
+    fn n_inputs(&self) -> usize {
+        self.linear.n_inputs()
+    }
+    /// `dx = F(x, u)` exactly as `Trial::rhs` computes it.
+    fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        super::trial_rhs(self.linear, self.terms, self.coefficients, t, x, u, dx);
+    }
+}
+
+impl TangentSource for Propagator<'_> {
+    /// The coefficient columns of `F_θ` (initial-state columns have none).
+    fn add_to(&self, _: f64, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
         for &(j, forcing) in &self.forcing {
-            let (term, value) = match forcing {
-                Forcing::Model(k) => (&self.terms[k], phi[k]),
-                Forcing::Extra(term) => (term, term.expr.eval_parts(x, u)),
+            let term = match forcing {
+                Forcing::Model(k) => &self.terms[k],
+                Forcing::Extra(term) => term,
             };
-            ds[term.state * q + j] += value;
+            let value = term.expr.eval_parts(x, u);
+            out[(term.state, j)] += value;
             if let Some(r) = term.into {
-                ds[r * q + j] -= value;
+                out[(r, j)] -= value;
             }
         }
     }
 
-    /// Simulate the first `len` samples of `exp` from `x0` with the sensitivities, calling
-    /// `at_sample(k, x, S)` at every sample (`S` row-major, `n × q`). Errors with
-    /// [`CoreError::Diverged`] as `simulate` does.
+    /// `F_x = A + Σ_k c_k (e_{s_k} − e_{r_k}) ∇_x φ_kᵀ` from the symbolic partials.
+    fn state_jacobian(&self, _: f64, x: &[f64], u: &[f64], a: &mut DMatrix<f64>) -> bool {
+        a.copy_from(self.linear.a());
+        for (k, (term, c)) in self.terms.iter().zip(self.coefficients).enumerate() {
+            for (var, partial) in &self.partials.terms[k] {
+                let g = c * partial.eval(x, u);
+                a[(term.state, *var)] += g;
+                if let Some(r) = term.into {
+                    a[(r, *var)] -= g;
+                }
+            }
+        }
+        true
+    }
+}
+
+impl Propagator<'_> {
+    /// Simulate the first `len` samples of `exp` from `x0` with the sensitivities (by
+    /// sysid-core's RK4 step with tangents), calling `at_sample(k, x, S)` at every sample
+    /// (`S` is `n × q`). Errors with [`CoreError::Diverged`] as `simulate` does.
     pub(crate) fn run(
         &self,
         exp: &Experiment,
         x0: &[f64],
         len: usize,
-        mut at_sample: impl FnMut(usize, &[f64], &[f64]),
+        mut at_sample: impl FnMut(usize, &[f64], &DMatrix<f64>),
     ) -> Result<(), CoreError> {
         let n = self.linear.n_states();
         let m = self.linear.n_inputs();
         let q = self.q;
-        let mut work = Work::new(n, q, self.terms.len());
-        work.x.copy_from_slice(x0);
+        let mut rk = Rk4::new(n, m, q);
+        let mut x = x0.to_vec();
+        let mut s = DMatrix::zeros(n, q);
         if let Some(first) = self.x0_block {
             for i in 0..n {
-                work.s[i * q + first + i] = 1.0;
+                s[(i, first + i)] = 1.0;
             }
         }
         let substeps = self.substeps.max(1);
         let inputs = exp.inputs().as_slice();
-        let foh = exp.intersample() == InterSample::Foh;
-        // Stage inputs (start, middle, end of a sub-step) of a first-order hold, computed
-        // as `sysid_core::integrate` does so that the trajectory is the simulated one.
-        let mut stage_u = [vec![0.0; m], vec![0.0; m], vec![0.0; m]];
+        let hold = exp.intersample();
         for k in 0..len.min(exp.len()) {
             if k > 0 {
                 let u = &inputs[(k - 1) * m..k * m];
+                // The last sample has no next one; a held input needs none.
+                let ub = if k < exp.len() {
+                    &inputs[k * m..(k + 1) * m]
+                } else {
+                    u
+                };
                 let ta = exp.t0() + (k - 1) as f64 * exp.dt();
                 let tb = exp.t0() + k as f64 * exp.dt();
                 let h = (tb - ta) / substeps as f64;
                 for j in 0..substeps {
                     let t = ta + j as f64 * h;
-                    if foh && k < exp.len() {
-                        let ub = &inputs[k * m..(k + 1) * m];
-                        for (buf, ts) in stage_u.iter_mut().zip([t, t + 0.5 * h, t + h]) {
-                            let frac = (ts - ta) / (tb - ta);
-                            for ((b, a), z) in buf.iter_mut().zip(u).zip(ub) {
-                                *b = a + frac * (z - a);
-                            }
-                        }
-                        let [u0, um, u1] = &stage_u;
-                        work.rk4_step(self, t, h, [u0, um, u1]);
-                    } else {
-                        work.rk4_step(self, t, h, [u, u, u]);
-                    }
+                    let input = hold.step_input(u, ub, j, substeps);
+                    rk.step_with_tangents(self, self, t, h, &mut x, &mut s, &input);
                 }
-                if let Some((state, value)) = work
-                    .x
+                if let Some((state, value)) = x
                     .iter()
                     .enumerate()
                     .find(|(_, v)| !v.is_finite() || v.abs() > self.blow_up)
@@ -242,7 +217,7 @@ impl Propagator<'_> {
                     });
                 }
             }
-            at_sample(k, &work.x, &work.s);
+            at_sample(k, &x, &s);
         }
         Ok(())
     }
@@ -273,7 +248,7 @@ impl Propagator<'_> {
                 for j in 0..q {
                     let mut cs = 0.0;
                     for i in 0..n {
-                        cs += c[(ch, i)] * s[i * q + j];
+                        cs += c[(ch, i)] * s[(i, j)];
                     }
                     put(row, j, w * cs);
                 }
@@ -281,64 +256,6 @@ impl Propagator<'_> {
             }
         })?;
         Ok(row)
-    }
-}
-
-/// Buffers of one sensitivity pass (allocated once, reused over every step).
-struct Work {
-    x: Vec<f64>,
-    tmp: Vec<f64>,
-    k: [Vec<f64>; 4],
-    s: Vec<f64>,
-    stmp: Vec<f64>,
-    ks: [Vec<f64>; 4],
-    phi: Vec<f64>,
-}
-
-impl Work {
-    fn new(n: usize, q: usize, n_terms: usize) -> Self {
-        Self {
-            x: vec![0.0; n],
-            tmp: vec![0.0; n],
-            k: std::array::from_fn(|_| vec![0.0; n]),
-            s: vec![0.0; n * q],
-            stmp: vec![0.0; n * q],
-            ks: std::array::from_fn(|_| vec![0.0; n * q]),
-            phi: vec![0.0; n_terms],
-        }
-    }
-
-    /// One RK4 step of size `h` for `x` and `S` together (same arithmetic for `x` as
-    /// `sysid_core::integrate::rk4_step`).
-    /// `u`: the input at the step's start, middle and end (all one for a held input).
-    fn rk4_step(&mut self, f: &Propagator<'_>, t: f64, h: f64, u: [&[f64]; 3]) {
-        let [k1, k2, k3, k4] = &mut self.k;
-        let [s1, s2, s3, s4] = &mut self.ks;
-        let (x, tmp, s, stmp) = (&mut self.x, &mut self.tmp, &mut self.s, &mut self.stmp);
-        let phi = &mut self.phi;
-        f.eval(t, x, s, u[0], k1, s1, phi);
-        advance(tmp, x, 0.5 * h, k1, stmp, s, s1);
-        f.eval(t + 0.5 * h, tmp, stmp, u[1], k2, s2, phi);
-        advance(tmp, x, 0.5 * h, k2, stmp, s, s2);
-        f.eval(t + 0.5 * h, tmp, stmp, u[1], k3, s3, phi);
-        advance(tmp, x, h, k3, stmp, s, s3);
-        f.eval(t + h, tmp, stmp, u[2], k4, s4, phi);
-        for i in 0..x.len() {
-            x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
-        for i in 0..s.len() {
-            s[i] += h / 6.0 * (s1[i] + 2.0 * s2[i] + 2.0 * s3[i] + s4[i]);
-        }
-    }
-}
-
-/// Stage point `tmp = x + a·k`, `stmp = s + a·ks`.
-fn advance(tmp: &mut [f64], x: &[f64], a: f64, k: &[f64], stmp: &mut [f64], s: &[f64], ks: &[f64]) {
-    for i in 0..tmp.len() {
-        tmp[i] = x[i] + a * k[i];
-    }
-    for i in 0..stmp.len() {
-        stmp[i] = s[i] + a * ks[i];
     }
 }
 

@@ -1,16 +1,21 @@
-//! The simulation side of trajectory refinement: shooting windows simulated free-run by
-//! RK4 with the network in the loop (inputs held or interpolated between samples as each
-//! record's experiment says), their scaled residuals, the fit of a window's start state,
+//! The simulation side of trajectory refinement: shooting windows of the hybrid model
+//! (sysid-core's `CorrectedModel` with the network as its correction) simulated free-run
+//! by sysid-core's RK4 step (inputs held or interpolated between samples as each record's
+//! experiment says), their scaled residuals, the fit of a window's start state,
 //! and the forward-difference Jacobian over weights and start states.
 
-use nalgebra::{Cholesky, DMatrix, DVector};
+use nalgebra::DMatrix;
 use rayon::prelude::*;
-use sysid_core::{Dynamics, InterSample};
+use sysid_core::tangent::Rk4;
+use sysid_core::{
+    CorrectedModel, Dynamics, LeastSquaresProblem, LmSettings, Termination, levenberg_marquardt,
+};
 
 use super::{HybridParts, ShootingRecord};
-use crate::mlp::{Mlp, Workspace};
+use crate::correction::NetView;
+use crate::mlp::Mlp;
 
-/// LM iterations when fitting a held-out window's start state.
+/// Levenberg–Marquardt iterations when fitting a window's start state.
 const START_FIT_ITERATIONS: usize = 20;
 
 /// A window: record, first sample, last sample (inclusive).
@@ -33,97 +38,65 @@ pub(super) struct Shooter<'a, F> {
 /// Per-thread buffers for [`Shooter::residuals`].
 pub(super) struct Buffers {
     x: Vec<f64>,
-    tmp: Vec<f64>,
-    k: [Vec<f64>; 4],
-    xu: Vec<f64>,
-    d: Vec<f64>,
-    ws: Workspace,
-    /// Interpolated inputs at the start, middle and end of an RK4 step (first-order hold).
-    u: [Vec<f64>; 3],
+    rk: Rk4,
 }
 
 impl Buffers {
-    pub(super) fn new(n: usize, m: usize, q: usize) -> Self {
+    pub(super) fn new(n: usize, m: usize, _q: usize) -> Self {
         Self {
             x: vec![0.0; n],
-            tmp: vec![0.0; n],
-            k: std::array::from_fn(|_| vec![0.0; n]),
-            xu: vec![0.0; n + m],
-            d: vec![0.0; q],
-            ws: Workspace::new(),
-            u: std::array::from_fn(|_| vec![0.0; m]),
+            rk: Rk4::new(n, m, 0),
         }
     }
 }
 
-/// The input over one RK4 step.
-#[derive(Clone, Copy)]
-enum StepInput<'u> {
-    /// Held at the sample's value (zero-order hold): every stage reads this slice.
-    Held(&'u [f64]),
-    /// Linear from `ua` (this sample) to `ub` (the next): the step's start, middle and end
-    /// lie at fractions `s` of the sample interval.
-    Ramp {
-        ua: &'u [f64],
-        ub: &'u [f64],
-        s: [f64; 3],
-    },
-}
+/// The hybrid model of one weight vector (`None` only if the parts do not fit, which
+/// `refine_on_trajectories` rules out first).
+pub(super) type Hybrid<'m, F> = Option<CorrectedModel<&'m F, NetView<'m>>>;
 
 impl<F: Dynamics> Shooter<'_, F> {
-    /// `dx = f(x, u) + E·NN([x; u])` at `x` and input `u`.
-    fn rhs(&self, net: &Mlp, x: &[f64], u: &[f64], dx: &mut [f64], b: &mut BufRest<'_>) {
-        self.parts.base.rhs(0.0, x, u, dx);
-        let n = x.len();
-        b.xu[..n].copy_from_slice(x);
-        b.xu[n..].copy_from_slice(u);
-        // Lengths are checked once in `refine_on_trajectories`.
-        if net.forward(b.xu, b.d, b.ws).is_err() {
-            dx.fill(f64::NAN);
-            return;
-        }
-        let e = self.parts.e;
-        for (j, dj) in b.d.iter().enumerate() {
-            for (i, dxi) in dx.iter_mut().enumerate() {
-                *dxi += e[(i, j)] * dj;
-            }
-        }
+    /// The hybrid model `ẋ = f(x, u) + E·NN([x; u])` with `net` as its correction.
+    pub(super) fn model<'m>(&'m self, net: &'m Mlp) -> Hybrid<'m, F> {
+        let n = self.parts.base.n_states();
+        // Shapes are checked once in `refine_on_trajectories`, so this cannot fail; a
+        // failure would read as a diverged window.
+        CorrectedModel::new(
+            self.parts.base,
+            NetView { net, n_states: n },
+            self.parts.e.clone(),
+            self.parts.c.clone(),
+            vec![String::new(); self.parts.c.nrows()],
+        )
+        .ok()
     }
 
-    /// Simulate window `w` from state `x0` and write its scaled residuals (`p` per sample
-    /// after the start; 0 where the output is not observed) into `r`. False when the
-    /// simulation diverges.
+    /// Simulate window `w` of `model` from state `x0` by sysid-core's RK4 step (inputs
+    /// held or linear between samples as the record says) and write its scaled residuals
+    /// (`p` per sample after the start; 0 where the output is not observed) into `r`.
+    /// False when the simulation diverges.
     pub(super) fn window_residuals(
         &self,
-        net: &Mlp,
+        model: &Hybrid<'_, F>,
         w: &Window,
         x0: &[f64],
         r: &mut [f64],
         b: &mut Buffers,
     ) -> bool {
+        let Some(model) = model else {
+            return false;
+        };
         let c = self.parts.c;
         let p = c.nrows();
         let exp = self.records[w.record].experiment;
         let h = exp.dt() / self.substeps as f64;
-        let steps = self.substeps as f64;
         b.x.copy_from_slice(x0);
         for (k, rk) in (w.start..w.end).zip(r.chunks_exact_mut(p)) {
-            let ua = exp.input(k);
+            // Windows end at most at the last sample, so `k + 1` exists.
+            let (ua, ub) = (exp.input(k), exp.input(k + 1));
+            let t = exp.t0() + k as f64 * exp.dt();
             for j in 0..self.substeps {
-                let input = match exp.intersample() {
-                    InterSample::Zoh => StepInput::Held(ua),
-                    // Windows end at most at the last sample, so `k + 1` exists.
-                    InterSample::Foh => StepInput::Ramp {
-                        ua,
-                        ub: exp.input(k + 1),
-                        s: [
-                            j as f64 / steps,
-                            (j as f64 + 0.5) / steps,
-                            (j + 1) as f64 / steps,
-                        ],
-                    },
-                };
-                self.rk4(net, h, input, b);
+                let input = exp.intersample().step_input(ua, ub, j, self.substeps);
+                b.rk.step(model, t + j as f64 * h, h, &mut b.x, &input);
             }
             // NaN counts as diverged too.
             if !b.x.iter().all(|v| v.abs() <= self.blow_up) {
@@ -154,11 +127,12 @@ impl<F: Dynamics> Shooter<'_, F> {
     ) -> std::result::Result<(), usize> {
         let n = b.x.len();
         let p = self.parts.c.nrows();
+        let model = self.model(net);
         let mut row = 0;
         for (wi, w) in windows.iter().enumerate() {
             let len = (w.end - w.start) * p;
             let x0 = &starts[wi * n..(wi + 1) * n];
-            if !self.window_residuals(net, w, x0, &mut r[row..row + len], b) {
+            if !self.window_residuals(&model, w, x0, &mut r[row..row + len], b) {
                 return Err(wi);
             }
             row += len;
@@ -167,10 +141,10 @@ impl<F: Dynamics> Shooter<'_, F> {
     }
 
     /// Held-out objective of one window: the sum of squared residuals minimised over its
-    /// start state (LM in the start state with the weights fixed, from `x0`, in units of
-    /// `x_scale`), so held-out windows are judged like training windows, whose starts are
-    /// free. The fitted start is written into `fitted`. Infinite when the window diverges
-    /// from `x0`.
+    /// start state (the workspace's Levenberg–Marquardt in the start state with the
+    /// weights fixed, from `x0`, forward differences of step `√ε` in units of `x_scale`),
+    /// so held-out windows are judged like training windows, whose starts are free. The
+    /// fitted start is written into `fitted`. Infinite when the window diverges from `x0`.
     pub(super) fn fitted_window_sse(
         &self,
         net: &Mlp,
@@ -180,123 +154,76 @@ impl<F: Dynamics> Shooter<'_, F> {
         b: &mut Buffers,
         fitted: &mut [f64],
     ) -> f64 {
-        let n = x0.len();
-        let rows = (w.end - w.start) * self.parts.c.nrows();
-        let mut x = x0.to_vec();
-        fitted.copy_from_slice(x0);
-        let mut r = DVector::zeros(rows);
-        let mut trial_r = DVector::zeros(rows);
-        let mut jac = DMatrix::zeros(rows, n);
-        if !self.window_residuals(net, w, &x, r.as_mut_slice(), b) {
+        let mut problem = StartFit {
+            shooter: self,
+            model: self.model(net),
+            window: w,
+            x_scale,
+            bufs: b,
+        };
+        let settings = LmSettings {
+            max_iterations: START_FIT_ITERATIONS,
+            mu_max: 1e10,
+            ftol: 1e-10,
+            ..LmSettings::default()
+        };
+        let Ok(solution) = levenberg_marquardt(&mut problem, x0, &settings);
+        if solution.report.termination == Termination::Diverged {
+            fitted.copy_from_slice(x0);
             return f64::INFINITY;
         }
-        let mut sse = r.norm_squared();
-        let mut mu = None;
-        for _ in 0..START_FIT_ITERATIONS {
-            let mut xp = x.clone();
-            for j in 0..n {
-                let h = f64::EPSILON.sqrt() * x_scale[j];
-                xp[j] = x[j] + h;
-                let col = jac.column_mut(j);
-                let mut col = col;
-                if self.window_residuals(net, w, &xp, col.as_mut_slice(), b) {
-                    for (c, r0) in col.iter_mut().zip(r.iter()) {
-                        *c = (*c - r0) / h;
-                    }
-                } else {
-                    col.fill(0.0);
-                }
-                xp[j] = x[j];
-            }
-            let jtj = jac.tr_mul(&jac);
-            let g = -jac.tr_mul(&r);
-            let diag_max = (0..n).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
-            if diag_max.is_nan() || diag_max <= 0.0 {
-                break;
-            }
-            let mut mu_now: f64 = mu.unwrap_or(1e-3 * diag_max);
-            let mut accepted = false;
-            while mu_now <= 1e10 * diag_max {
-                let mut a = jtj.clone();
-                for i in 0..n {
-                    a[(i, i)] += mu_now;
-                }
-                if let Some(chol) = Cholesky::new(a) {
-                    let delta = chol.solve(&g);
-                    let trial: Vec<f64> = x.iter().zip(delta.iter()).map(|(a, d)| a + d).collect();
-                    if self.window_residuals(net, w, &trial, trial_r.as_mut_slice(), b) {
-                        let t = trial_r.norm_squared();
-                        if t < sse {
-                            let small = sse - t < 1e-10 * sse;
-                            x = trial;
-                            sse = t;
-                            std::mem::swap(&mut r, &mut trial_r);
-                            accepted = !small;
-                            break;
-                        }
-                    }
-                }
-                mu_now *= 10.0;
-            }
-            if !accepted {
-                break;
-            }
-            mu = Some(mu_now * 0.1);
-        }
-        fitted.copy_from_slice(&x);
-        sse
-    }
-
-    /// One classical RK4 step of size `h` on `b.x`; stage 1 reads the input at the step's
-    /// start, stages 2 and 3 at its middle, stage 4 at its end.
-    fn rk4(&self, net: &Mlp, h: f64, input: StepInput<'_>, b: &mut Buffers) {
-        let Buffers {
-            x,
-            tmp,
-            k,
-            xu,
-            d,
-            ws,
-            u,
-        } = b;
-        let (u_start, u_mid, u_end): (&[f64], &[f64], &[f64]) = match input {
-            StepInput::Held(v) => (v, v, v),
-            StepInput::Ramp { ua, ub, s } => {
-                for (buf, si) in u.iter_mut().zip(s) {
-                    for ((o, a), z) in buf.iter_mut().zip(ua).zip(ub) {
-                        *o = a + si * (z - a);
-                    }
-                }
-                let [u0, u1, u2] = u;
-                (u0.as_slice(), u1.as_slice(), u2.as_slice())
-            }
-        };
-        let mut rest = BufRest { xu, d, ws };
-        let [k1, k2, k3, k4] = k;
-        self.rhs(net, x, u_start, k1, &mut rest);
-        for ((t, xi), ki) in tmp.iter_mut().zip(x.iter()).zip(k1.iter()) {
-            *t = xi + 0.5 * h * ki;
-        }
-        self.rhs(net, tmp, u_mid, k2, &mut rest);
-        for ((t, xi), ki) in tmp.iter_mut().zip(x.iter()).zip(k2.iter()) {
-            *t = xi + 0.5 * h * ki;
-        }
-        self.rhs(net, tmp, u_mid, k3, &mut rest);
-        for ((t, xi), ki) in tmp.iter_mut().zip(x.iter()).zip(k3.iter()) {
-            *t = xi + h * ki;
-        }
-        self.rhs(net, tmp, u_end, k4, &mut rest);
-        for (i, xi) in x.iter_mut().enumerate() {
-            *xi += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-        }
+        fitted.copy_from_slice(&solution.theta);
+        solution.report.final_cost()
     }
 }
 
-/// The network buffers of [`Buffers`], borrowed apart from the state buffers.
-struct BufRest<'b> {
-    xu: &'b mut [f64],
-    d: &'b mut [f64],
-    ws: &'b mut Workspace,
+/// The start state of one window as a least-squares problem, the weights fixed.
+struct StartFit<'s, 'a, F> {
+    shooter: &'s Shooter<'a, F>,
+    model: Hybrid<'s, F>,
+    window: &'s Window,
+    x_scale: &'s [f64],
+    bufs: &'s mut Buffers,
+}
+
+impl<F: Dynamics> LeastSquaresProblem for StartFit<'_, '_, F> {
+    type Error = std::convert::Infallible;
+
+    fn residual_count(&self) -> usize {
+        (self.window.end - self.window.start) * self.shooter.parts.c.nrows()
+    }
+
+    fn residuals(&mut self, x0: &[f64], r: &mut [f64]) -> Result<bool, Self::Error> {
+        Ok(self
+            .shooter
+            .window_residuals(&self.model, self.window, x0, r, self.bufs))
+    }
+
+    /// Forward differences, step `√ε·σ_j`; a diverging perturbed window gives a zero
+    /// column.
+    fn jacobian(
+        &mut self,
+        x0: &[f64],
+        r: &[f64],
+        jac: &mut DMatrix<f64>,
+    ) -> Result<(), Self::Error> {
+        let mut xp = x0.to_vec();
+        for (j, s) in self.x_scale.iter().enumerate() {
+            let h = f64::EPSILON.sqrt() * s;
+            xp[j] = x0[j] + h;
+            let mut col = jac.column_mut(j);
+            let ok = self.shooter.window_residuals(
+                &self.model,
+                self.window,
+                &xp,
+                col.as_mut_slice(),
+                self.bufs,
+            );
+            finish_column(col.as_mut_slice(), r, h, ok);
+            xp[j] = x0[j];
+        }
+        Ok(())
+    }
 }
 
 /// The current point of the training problem, for the Jacobian.
@@ -316,7 +243,7 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
     /// (the other rows are zero). Columns are computed in parallel, each with its own
     /// network copy and buffers, so the result does not depend on the thread count. A
     /// perturbed simulation that diverges leaves a zero column.
-    pub(super) fn jacobian(&self, r0: &DVector<f64>, jac: &mut DMatrix<f64>) {
+    pub(super) fn jacobian(&self, r0: &[f64], jac: &mut DMatrix<f64>) {
         let (n, m, q) = self.dims;
         let nw = self.net.n_weights();
         let p = self.shooter.parts.c.nrows();
@@ -348,7 +275,7 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
                             .shooter
                             .residuals(pert, self.windows, self.starts, col, bufs)
                             .is_ok();
-                        finish_column(col, r0.as_slice(), h, ok);
+                        finish_column(col, r0, h, ok);
                     } else {
                         let (wi, i) = ((j - nw) / n, (j - nw) % n);
                         x0.copy_from_slice(&self.starts[wi * n..(wi + 1) * n]);
@@ -359,8 +286,9 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
                         col[..a].fill(0.0);
                         col[b..].fill(0.0);
                         let seg = &mut col[a..b];
-                        let ok = self.shooter.window_residuals(self.net, w, x0, seg, bufs);
-                        finish_column(seg, &r0.as_slice()[a..b], h, ok);
+                        let model = self.shooter.model(self.net);
+                        let ok = self.shooter.window_residuals(&model, w, x0, seg, bufs);
+                        finish_column(seg, &r0[a..b], h, ok);
                     }
                 },
             );
