@@ -12,6 +12,7 @@ pub mod integrate;
 pub mod judge;
 pub mod linear;
 pub mod metrics;
+pub mod physical;
 pub mod terms;
 
 pub use correlation::{Confidence, acf, confidence_bound, xcf};
@@ -29,4 +30,8 @@ pub use judge::{
 };
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};
+pub use physical::{
+    Estimation, MAX_DOF, MechanicsSpec, Parameter, ParametricDynamics, PhysicalError,
+    PhysicalModel, PhysicalTerm,
+};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};
