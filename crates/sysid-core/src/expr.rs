@@ -17,7 +17,8 @@
 //!
 //! Numbers are decimal literals with an optional exponent (`3`, `0.5`, `.5`, `1e-3`,
 //! `2.5E+4`); a literal must be finite. Names are identifiers (a letter or `_`, then
-//! letters, digits or `_`) and must be among the declared variables. A name directly
+//! letters, digits or `_`) and must be among the declared variables, except `pi`, which
+//! is π unless a variable of that name is declared (it prints as its value). A name directly
 //! followed by `(` is a function call; the one-argument functions are [`Func`]: `sin cos
 //! tan asin acos atan exp log sqrt abs sign tanh sinh cosh`, where `log` is the natural
 //! logarithm (`ln` is accepted for it) and `sign(0) = 0` (`sgn` is accepted for it); the

@@ -287,6 +287,8 @@ impl Parser<'_> {
                     Ok((call(func, arg), Self::limit(h + 1, token.column)?))
                 } else if let Some(i) = self.variables.iter().position(|v| *v == name) {
                     Ok((Tree::Var(i), 1))
+                } else if name == "pi" {
+                    Ok((Tree::Const(std::f64::consts::PI), 1))
                 } else if Func::from_name(&name).is_some()
                     || BinOp::from_function_name(&name).is_some()
                 {

@@ -390,6 +390,7 @@ fn inverse_hyperbolic_and_two_argument_functions() {
         ("min(2, -3) + max(2, -3)", -1.0),
         ("sgn(-2) + ln(1)", -1.0),
         ("max(min(1, 2), 0.5)^2", 1.0),
+        ("2*acos(0) - pi", 0.0),
     ];
     for (text, want) in cases {
         let got = eval0(text);
@@ -399,6 +400,9 @@ fn inverse_hyperbolic_and_two_argument_functions() {
         );
     }
     assert!(Func::Asin.apply(1.5).is_nan());
+    // `pi` is π unless declared as a variable.
+    assert_eq!(parse("pi", &["x"]).constant(), Some(std::f64::consts::PI));
+    assert_eq!(parse("pi", &["pi"]).eval(&[2.0]), 2.0);
     let e = parse("min(x, y)", &["x", "y"]);
     assert!(e.eval(&[f64::NAN, 1.0]).is_nan() && e.eval(&[1.0, f64::NAN]).is_nan());
     // Printing keeps the call form and the canonical names.
