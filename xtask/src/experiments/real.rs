@@ -552,6 +552,8 @@ fn run_benchmark(
             terms: Vec::new(),
             // As the output-error fit above treated the inputs between samples.
             intersample: s.intersample,
+            parameters: Vec::new(),
+            mechanics: None,
         },
     )?;
     let (max_hidden, inits) = match ctx.mode {
