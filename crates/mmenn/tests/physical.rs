@@ -229,3 +229,82 @@ fn two_link_model_reproduces_independent_records() {
         }
     }
 }
+
+/// `predict` on a record with a jittered time column (the two-link `val.csv` re-logged at
+/// times 2 ms·(k + ε_k), |ε_k| ≤ 0.25, columns renamed as a logger would): without
+/// `--resample` the CLI fails naming the row and the flag to use; with
+/// `--resample 0.002 --map ...` it writes the prepared file and its report, and the
+/// physical model still fits the angles above 99 % free-run (linear interpolation of the
+/// angles between 2 ms rows adds at most h²/8·max|θ''| ≈ 2e-5 rad here).
+#[test]
+fn cli_resamples_jittered_time_only_when_asked() {
+    use std::process::Command;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link");
+    let table = read_table(&root.join("val.csv")).unwrap();
+    let (t, cols) = (&table.columns[0], &table.columns[1..]);
+    let dir = scratch("jitter");
+    std::fs::create_dir_all(&dir).unwrap();
+    // Deterministic jitter; values at the jittered times by linear interpolation of the
+    // record (the torques are held, so they take the value of the row before).
+    let mut lines = vec!["time,torque1,torque2,pos_meas1,pos_meas2".to_string()];
+    for k in 0..t.len() - 1 {
+        let eps = 0.25 * ((k as f64 * 1.618_033_988_7).fract() * 2.0 - 1.0);
+        let e = eps.max(0.0);
+        let tk = t[k] + e * (t[k + 1] - t[k]);
+        let lerp = |c: &Vec<f64>| c[k] + e * (c[k + 1] - c[k]);
+        lines.push(format!(
+            "{tk},{},{},{},{}",
+            cols[0][k],
+            cols[1][k],
+            lerp(&cols[2]),
+            lerp(&cols[3])
+        ));
+    }
+    let data = dir.join("jittered.csv");
+    std::fs::write(&data, lines.join("\n") + "\n").unwrap();
+    let model = root.join("model.toml");
+    let map = "t=time,tau1=torque1,tau2=torque2,theta1=pos_meas1,theta2=pos_meas2";
+    let run = |extra: &[&str], out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_mmenn"))
+            .args(["predict", "--model"])
+            .arg(&model)
+            .arg("--data")
+            .arg(&data)
+            .args(["--map", map, "--x0=-0.15,0.25,0,0", "--out"])
+            .arg(dir.join(out))
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let refused = run(&[], "plain");
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    // The error names the file as given, its row (line 3: the first jittered step) and
+    // the flag to use.
+    assert!(
+        err.contains("jittered.csv:3") && err.contains("--resample"),
+        "{err}"
+    );
+    let ok = run(&["--resample", "0.002"], "resampled");
+    let (out, err) = (
+        String::from_utf8_lossy(&ok.stdout),
+        String::from_utf8_lossy(&ok.stderr),
+    );
+    assert!(ok.status.success(), "{out}\n{err}");
+    assert!(
+        err.contains("linear interpolation") && err.contains("torque1 → tau1"),
+        "{err}"
+    );
+    let report = std::fs::read_to_string(dir.join("resampled/prepared/prepare.json")).unwrap();
+    assert!(report.contains("spacing_in"), "{report}");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("resampled/prediction.json")).unwrap(),
+    )
+    .unwrap();
+    for name in ["theta1", "theta2"] {
+        let fit = summary["free_run"]["channels"][name]["fit_percent"]
+            .as_f64()
+            .unwrap();
+        assert!(fit > 99.0, "{name}: {fit} %");
+    }
+}
