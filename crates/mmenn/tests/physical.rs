@@ -308,3 +308,31 @@ fn cli_resamples_jittered_time_only_when_asked() {
         assert!(fit > 99.0, "{name}: {fit} %");
     }
 }
+
+/// The README's physical-model example parses and is the fixture's model without the
+/// Coulomb part: same right-hand side at a few states (the fixture's `tau_c2` is 0).
+#[test]
+fn readme_example_is_the_fixture_model() {
+    let readme = include_str!("../../../README.md");
+    let start = readme.find("**Physical models.**").unwrap();
+    let block = &readme[start..];
+    let open = block.find("```toml\n").unwrap() + "```toml\n".len();
+    let text = &block[open..open + block[open..].find("```").unwrap()];
+    let example = LoadedModel::parse(Path::new("README.md"), text).unwrap();
+    let fixture = LoadedModel::parse(Path::new("double_pendulum.toml"), MODEL).unwrap();
+    for x in [
+        [0.3, -0.2, 1.0, -2.0],
+        [2.0, 1.0, -0.5, 0.7],
+        [0.0, 0.0, 0.0, 0.0],
+    ] {
+        let (mut a, mut b) = ([0.0; 4], [0.0; 4]);
+        example.dynamics.rhs(0.0, &x, &[1.5], &mut a);
+        fixture.dynamics.rhs(0.0, &x, &[1.5], &mut b);
+        for i in 0..4 {
+            assert!(
+                (a[i] - b[i]).abs() <= 1e-12 * (1.0 + b[i].abs()),
+                "{x:?}: {a:?} vs {b:?}"
+            );
+        }
+    }
+}
