@@ -1,6 +1,12 @@
 //! The CSV data file of SPEC §5: a header row, a `t` column in seconds (uniformly
 //! sampled), then inputs and measured channels. Empty cells in measured columns are missing
 //! samples; inputs and time must be complete. Several files are several experiments.
+//!
+//! A record logged otherwise is prepared explicitly ([`prepare_table`], the CLI's `--map`
+//! and `--resample DT`): columns renamed to the model's names, and a non-uniform time
+//! column linearly interpolated onto a uniform grid, with a [`PrepareReport`] saying what
+//! was done (original spacing statistics, method). Without `--resample` a non-uniform
+//! time column is an error naming the row.
 
 use std::path::{Path, PathBuf};
 
@@ -133,8 +139,8 @@ pub fn parse_table(path: &Path, bytes: &[u8]) -> Result<Table> {
     })
 }
 
-/// Check a time column: complete, increasing, uniform. Returns `(t0, dt)`.
-fn check_time(table: &Table, t: &[f64]) -> Result<(f64, f64)> {
+/// Check a time column: at least two rows, complete and increasing (errors name the row).
+fn check_increasing(table: &Table, t: &[f64]) -> Result<()> {
     if t.len() < 2 {
         return Err(table.err(
             table.lines.first().copied().unwrap_or(1),
@@ -163,6 +169,12 @@ fn check_time(table: &Table, t: &[f64]) -> Result<(f64, f64)> {
             ));
         }
     }
+    Ok(())
+}
+
+/// Check a time column: complete, increasing, uniform. Returns `(t0, dt)`.
+fn check_time(table: &Table, t: &[f64]) -> Result<(f64, f64)> {
+    check_increasing(table, t)?;
     let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
     let t_max = t[0].abs().max(t[t.len() - 1].abs());
     if !time_resolves_step(t_max, dt) {
@@ -190,6 +202,258 @@ fn check_time(table: &Table, t: &[f64]) -> Result<(f64, f64)> {
         }
     }
     Ok((t[0], dt))
+}
+
+/// How to prepare a data file before use: column renames and resampling.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PrepareOptions {
+    /// `(model name, file column)` pairs: the file's column is used under the model's
+    /// name (`t=time` maps the time column).
+    pub map: Vec<(String, String)>,
+    /// Resample onto a uniform grid with this step, s (linear interpolation).
+    pub resample: Option<f64>,
+}
+
+impl PrepareOptions {
+    /// Parse `--map` entries `name=column` (each may hold several, comma-separated).
+    pub fn parse_map(entries: &[String]) -> std::result::Result<Vec<(String, String)>, String> {
+        let mut out = Vec::new();
+        for entry in entries.iter().flat_map(|e| e.split(',')) {
+            let entry = entry.trim();
+            if entry.is_empty() {
+                continue;
+            }
+            match entry.split_once('=') {
+                Some((a, b)) if !a.trim().is_empty() && !b.trim().is_empty() => {
+                    out.push((a.trim().to_owned(), b.trim().to_owned()));
+                }
+                _ => return Err(format!("--map '{entry}': expected NAME=COLUMN")),
+            }
+        }
+        Ok(out)
+    }
+
+    /// Whether anything is to be done.
+    pub fn is_identity(&self) -> bool {
+        self.map.is_empty() && self.resample.is_none()
+    }
+}
+
+/// Statistics of a time column's spacing, s.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Spacing {
+    /// Smallest step.
+    pub min: f64,
+    /// Median step.
+    pub median: f64,
+    /// Mean step.
+    pub mean: f64,
+    /// Largest step.
+    pub max: f64,
+    /// Standard deviation of the steps.
+    pub std: f64,
+}
+
+impl Spacing {
+    /// The spacing of an increasing time column (at least two values).
+    pub fn of(t: &[f64]) -> Spacing {
+        let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+        let n = steps.len().max(1) as f64;
+        let mean = steps.iter().sum::<f64>() / n;
+        let std = (steps.iter().map(|s| (s - mean).powi(2)).sum::<f64>() / n).sqrt();
+        steps.sort_by(f64::total_cmp);
+        let median = match steps.len() {
+            0 => f64::NAN,
+            k if k % 2 == 1 => steps[k / 2],
+            k => 0.5 * (steps[k / 2 - 1] + steps[k / 2]),
+        };
+        Spacing {
+            min: steps.first().copied().unwrap_or(f64::NAN),
+            median,
+            mean,
+            max: steps.last().copied().unwrap_or(f64::NAN),
+            std,
+        }
+    }
+}
+
+/// What [`prepare_table`] did to one file.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PrepareReport {
+    /// The file.
+    pub path: PathBuf,
+    /// Columns renamed, `(model name, file column)`.
+    pub mapped: Vec<(String, String)>,
+    /// Rows read.
+    pub rows_in: usize,
+    /// Spacing of the file's time column.
+    pub spacing_in: Option<Spacing>,
+    /// Rows after resampling (equal to `rows_in` without).
+    pub rows_out: usize,
+    /// The uniform step, when resampled.
+    pub resampled_dt: Option<f64>,
+    /// How, in words.
+    pub method: String,
+}
+
+impl PrepareReport {
+    /// One line of text for the terminal and the report.
+    pub fn describe(&self) -> String {
+        let mut parts = Vec::new();
+        if !self.mapped.is_empty() {
+            let m: Vec<String> = self
+                .mapped
+                .iter()
+                .map(|(a, b)| format!("{b} → {a}"))
+                .collect();
+            parts.push(format!("columns {}", m.join(", ")));
+        }
+        if let (Some(s), Some(dt)) = (&self.spacing_in, self.resampled_dt) {
+            parts.push(format!(
+                "time steps min {:.4e} / median {:.4e} / mean {:.4e} / max {:.4e} s (std {:.2e}); \
+                 {} rows resampled to {} rows at dt = {dt} s by {}",
+                s.min, s.median, s.mean, s.max, s.std, self.rows_in, self.rows_out, self.method
+            ));
+        }
+        format!("{}: {}", self.path.display(), parts.join("; "))
+    }
+}
+
+/// Rename and resample a table as `opts` says (see the module documentation).
+///
+/// Resampling keeps `[t0, t_end]`: grid `t0 + k·dt` up to the last time; each column is
+/// linearly interpolated between the two neighbouring rows; a measured cell that is empty
+/// on either side stays empty (an input must be complete). The time column must be
+/// complete and increasing (an error names the row).
+pub fn prepare_table(mut table: Table, opts: &PrepareOptions) -> Result<(Table, PrepareReport)> {
+    for (name, col) in &opts.map {
+        let Some(j) = table.column_index(col) else {
+            return Err(table.err(1, Some(col), CsvProblem::MissingChannel(col.clone())));
+        };
+        if let Some(other) = table.column_index(name)
+            && other != j
+        {
+            // The model's name is already a column: it gives way to the mapped one.
+            table.header[other] = format!("{name}__unmapped");
+        }
+        table.header[j] = name.clone();
+    }
+    let rows_in = table.lines.len();
+    let mut report = PrepareReport {
+        path: table.path.clone(),
+        mapped: opts.map.clone(),
+        rows_in,
+        spacing_in: None,
+        rows_out: rows_in,
+        resampled_dt: None,
+        method: "none".into(),
+    };
+    let Some(dt) = opts.resample else {
+        // Not resampled: a time column that is not uniform fails here, naming the row
+        // of the file as given (not of the prepared copy).
+        if let Some(j) = table.column_index("t") {
+            check_time(&table, &table.columns[j])?;
+        }
+        return Ok((table, report));
+    };
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(table.err(
+            1,
+            Some("t"),
+            CsvProblem::Syntax(format!("--resample {dt}: the step must be positive")),
+        ));
+    }
+    let t_col = table
+        .column_index("t")
+        .ok_or_else(|| table.err(1, None, CsvProblem::NoTimeColumn))?;
+    let t = table.columns[t_col].clone();
+    check_increasing(&table, &t)?;
+    let (t0, t_end) = (t[0], t[t.len() - 1]);
+    // A grid point within a millionth of a step of the end still counts.
+    let n = ((t_end - t0) / dt + 1e-6).floor() as usize + 1;
+    let grid: Vec<f64> = (0..n).map(|k| t0 + k as f64 * dt).collect();
+    let mut columns = Vec::with_capacity(table.columns.len());
+    for (j, col) in table.columns.iter().enumerate() {
+        if j == t_col {
+            columns.push(grid.clone());
+            continue;
+        }
+        let mut out = Vec::with_capacity(n);
+        let mut i = 0;
+        for &tk in &grid {
+            while i + 2 < t.len() && t[i + 1] <= tk {
+                i += 1;
+            }
+            let (ta, tb) = (t[i], t[i + 1]);
+            let w = ((tk - ta) / (tb - ta)).clamp(0.0, 1.0);
+            // Exactly on a row: that row's value (an empty cell stays empty).
+            let v = if w <= 0.0 {
+                col[i]
+            } else if w >= 1.0 {
+                col[i + 1]
+            } else {
+                col[i] + w * (col[i + 1] - col[i])
+            };
+            out.push(v);
+        }
+        columns.push(out);
+    }
+    report.spacing_in = Some(Spacing::of(&t));
+    report.rows_out = n;
+    report.resampled_dt = Some(dt);
+    report.method = "linear interpolation between neighbouring rows".into();
+    let lines = (0..n).map(|k| k + 2).collect();
+    Ok((
+        Table {
+            path: table.path,
+            header: table.header,
+            columns,
+            lines,
+        },
+        report,
+    ))
+}
+
+/// Read a data file and prepare it ([`prepare_table`]).
+pub fn read_prepared(path: &Path, opts: &PrepareOptions) -> Result<(Table, PrepareReport)> {
+    prepare_table(read_table(path)?, opts)
+}
+
+/// Prepare data files for a command ([`prepare_table`] on each): unchanged paths when
+/// `opts` does nothing; otherwise each prepared file is written as
+/// `dir/prepared/<k>_<file name>` and the reports as `dir/prepared/prepare.json`, and the
+/// new paths are returned (in order) with the reports.
+pub fn prepare_files(
+    paths: &[PathBuf],
+    opts: &PrepareOptions,
+    dir: &Path,
+) -> Result<(Vec<PathBuf>, Vec<PrepareReport>)> {
+    if opts.is_identity() || paths.is_empty() {
+        return Ok((paths.to_vec(), Vec::new()));
+    }
+    let out = dir.join("prepared");
+    crate::atomic::ensure_dir(&out)?;
+    let mut new_paths = Vec::with_capacity(paths.len());
+    let mut reports = Vec::with_capacity(paths.len());
+    for (k, p) in paths.iter().enumerate() {
+        let (table, report) = read_prepared(p, opts)?;
+        let name = p
+            .file_name()
+            .map_or_else(|| "data.csv".into(), |n| n.to_string_lossy().into_owned());
+        let target = out.join(format!("{k}_{name}"));
+        let cols: Vec<&[f64]> = table.columns.iter().map(Vec::as_slice).collect();
+        write_csv(&target, &table.header, &cols)?;
+        new_paths.push(target);
+        reports.push(report);
+    }
+    let json = serde_json::to_string_pretty(&reports).map_err(|e| MmennError::Csv {
+        path: out.join("prepare.json"),
+        line: 0,
+        column: None,
+        problem: CsvProblem::Syntax(e.to_string()),
+    })?;
+    write_atomic(&out.join("prepare.json"), json.as_bytes())?;
+    Ok((new_paths, reports))
 }
 
 /// Turn one table into an experiment with the given input and output columns.
@@ -442,6 +706,92 @@ mod tests {
             problem(exp("t,u,y\n0,1,inf\n0.1,1,2\n")),
             (2, _, CsvProblem::Infinite)
         ));
+    }
+
+    /// A jittered time column (±30 % of a 2 ms step, seeded) is an error naming its
+    /// first off-grid row without `--resample`; resampled, a linear signal comes back
+    /// exactly (linear interpolation is exact on it), a sine within the interpolation
+    /// bound `h²/8·max|y''|`, and the report states the spacing and the method.
+    #[test]
+    fn jittered_time_is_rejected_or_resampled_explicitly() {
+        let mut state = 7_u64;
+        let mut jitter = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.6
+        };
+        let n = 500;
+        let t: Vec<f64> = (0..n).map(|k| 0.002 * (k as f64 + jitter())).collect();
+        let u: Vec<f64> = t.iter().map(|t| 1.0 + 3.0 * t).collect();
+        let y: Vec<f64> = t.iter().map(|t| (5.0 * t).sin()).collect();
+        let text = format_csv(&names(&["time", "torque", "pos"]), &[&t, &u, &y]);
+        let table = parse(&text).unwrap();
+        let map =
+            PrepareOptions::parse_map(&["t=time,u=torque".into(), "theta=pos".into()]).unwrap();
+        let mapped = PrepareOptions {
+            map: map.clone(),
+            resample: None,
+        };
+        // Renaming alone keeps the rows; a jittered time column then fails naming its row.
+        let uniform = parse("time,torque,pos\n0,1,2\n0.5,1,2\n1,1,2\n").unwrap();
+        let (plain, report) = prepare_table(uniform, &mapped).unwrap();
+        assert_eq!(plain.header, names(&["t", "u", "theta"]));
+        assert_eq!((report.rows_in, report.rows_out), (3, 3));
+        let (line, column, p) = problem(prepare_table(table.clone(), &mapped));
+        assert!(matches!(p, CsvProblem::NonUniformTime { .. }), "{p:?}");
+        assert!((3..=n + 1).contains(&line) && column.as_deref() == Some("t"));
+        assert!(p.to_string().contains("--resample"), "{p}");
+
+        let opts = PrepareOptions {
+            map,
+            resample: Some(0.002),
+        };
+        let (table, report) = prepare_table(table, &opts).unwrap();
+        let exp = table_to_experiment(&table, &names(&["u"]), &names(&["theta"])).unwrap();
+        assert!((exp.dt() - 0.002).abs() < 1e-15);
+        assert_eq!(report.rows_in, n);
+        assert_eq!(report.rows_out, table.lines.len());
+        let s = report.spacing_in.unwrap();
+        assert!(s.min < 0.002 && s.max > 0.002 && s.std > 1e-4, "{s:?}");
+        assert!(report.describe().contains("linear interpolation"));
+        assert!(report.describe().contains("torque → u"));
+        for k in 0..exp.len() {
+            let tk = exp.t0() + k as f64 * 0.002;
+            assert!(
+                (exp.input(k)[0] - (1.0 + 3.0 * tk)).abs() < 1e-12,
+                "u at {tk}"
+            );
+            // Steps up to 1.6·2 ms: h²/8·25 = 2.6e-5.
+            assert!(
+                (exp.output(k)[0] - (5.0 * tk).sin()).abs() < 2.6e-5,
+                "y at {tk}"
+            );
+        }
+        // A column the map names that the file lacks; an unmapped model name.
+        let bad = PrepareOptions {
+            map: vec![("u".into(), "tau".into())],
+            resample: None,
+        };
+        let r = prepare_table(parse("t,x\n0,1\n1,2\n").unwrap(), &bad);
+        assert!(matches!(problem(r), (1, _, CsvProblem::MissingChannel(c)) if c == "tau"));
+        assert!(PrepareOptions::parse_map(&["t".into()]).is_err());
+        // Decreasing time names the row even when resampling.
+        let r = prepare_table(
+            parse("t,x\n0,1\n0.2,2\n0.1,3\n").unwrap(),
+            &opts_resample(0.1),
+        );
+        assert!(matches!(
+            problem(r),
+            (4, _, CsvProblem::NonIncreasingTime { .. })
+        ));
+    }
+
+    fn opts_resample(dt: f64) -> PrepareOptions {
+        PrepareOptions {
+            map: Vec::new(),
+            resample: Some(dt),
+        }
     }
 
     #[test]

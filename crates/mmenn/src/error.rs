@@ -54,7 +54,8 @@ pub enum CsvProblem {
     },
     /// Time is not uniformly sampled.
     #[error(
-        "time step {step} s differs from the file's mean step {dt} s: data must be uniformly sampled"
+        "time step {step} s differs from the file's mean step {dt} s: data must be uniformly \
+         sampled (resample it explicitly with --resample DT)"
     )]
     NonUniformTime {
         /// Step found, s.
@@ -180,6 +181,20 @@ pub enum ModelProblem {
     /// The model is inconsistent (shape, non-finite entry, duplicate name).
     #[error(transparent)]
     Model(#[from] sysid_core::CoreError),
+    /// A parameter, the mechanics part or an expression in it is invalid.
+    #[error(transparent)]
+    Physical(Box<sysid_core::PhysicalError>),
+    /// A mass-matrix model was given to a step that needs the state-space form with
+    /// named terms (`M⁻¹` is not a sum of terms).
+    #[error(
+        "{what} needs a state-space model with named terms; this model has a [mechanics] \
+         part (mass-matrix form), which estimate, predict and show accept (fit, compare and \
+         discover do not yet)"
+    )]
+    Mechanical {
+        /// The step that needs the state-space form.
+        what: &'static str,
+    },
     /// The file is none of the models mmenn writes (a model-file TOML, with or without
     /// `[[terms]]`, or `fit`'s `model.json`).
     #[error("not a model mmenn reads: {why}")]
@@ -187,6 +202,12 @@ pub enum ModelProblem {
         /// What was found instead.
         why: String,
     },
+}
+
+impl From<sysid_core::PhysicalError> for ModelProblem {
+    fn from(e: sysid_core::PhysicalError) -> Self {
+        ModelProblem::Physical(Box::new(e))
+    }
 }
 
 impl From<sysid_core::TermError> for ModelProblem {

@@ -75,6 +75,29 @@ fn nonlinear_model(spec: &ModelSpec) -> Result<NonlinearModel<sysid_core::TermMo
     nonlinear_of(dynamics)
 }
 
+/// A model file with a `[mechanics]` (mass-matrix) part as mme-core's nonlinear model.
+fn nonlinear_physical(spec: &ModelSpec) -> Result<NonlinearModel<sysid_core::PhysicalModel>> {
+    let dynamics = spec.physical_model().map_err(|problem| MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    })?;
+    let lin = spec.linear.clone();
+    let names = sysid_core::ModelNames {
+        states: lin.state_names().to_vec(),
+        inputs: lin.input_names().to_vec(),
+        outputs: lin.output_names().to_vec(),
+        corrections: lin.correction_names().to_vec(),
+    };
+    Ok(NonlinearModel::new(
+        dynamics,
+        lin.c().clone(),
+        lin.e().clone(),
+        names,
+    )?)
+}
+
 /// A term model as mme-core's nonlinear model (names from its linear part).
 fn nonlinear_of(dynamics: sysid_core::TermModel) -> Result<NonlinearModel<sysid_core::TermModel>> {
     let lin = dynamics.linear();
@@ -91,6 +114,11 @@ fn nonlinear_of(dynamics: sysid_core::TermModel) -> Result<NonlinearModel<sysid_
 /// Run MME with the model file's assumed model: the exact linear sweep, or the
 /// iterated-linearisation estimator when the model has named terms.
 pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Result<MmeOutput> {
+    if spec.mechanics.is_some() {
+        let model = nonlinear_physical(spec)?;
+        return mme_core::estimate_nonlinear_with_report(&model, data, config)
+            .map_err(|e| name_terms(spec, e));
+    }
     if spec.terms.is_empty() {
         return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
     }
@@ -409,6 +437,11 @@ pub fn estimate_spec_robust(
     config: &MmeConfig,
     robust: &mme_core::RobustConfig,
 ) -> Result<mme_core::RobustOutput> {
+    if spec.mechanics.is_some() {
+        let model = nonlinear_physical(spec)?;
+        return mme_core::estimate_nonlinear_robust(&model, data, config, robust)
+            .map_err(|e| name_terms(spec, e));
+    }
     if spec.terms.is_empty() {
         return Ok(mme_core::estimate_robust(
             &spec.linear,

@@ -27,7 +27,8 @@ use std::path::{Path, PathBuf};
 use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_core::{
-    Dynamics, Experiment, Integrator, InterSample, JudgeOptions, TermModel, simulate_with,
+    Dynamics, Experiment, Integrator, InterSample, JudgeOptions, PhysicalModel, TermModel,
+    simulate_with,
 };
 pub use sysid_core::{InitialRule, Judgement, Observation, ScoredWindow};
 
@@ -43,6 +44,8 @@ pub enum ModelKind {
     Assumed,
     /// A model-file TOML with `[[terms]]` (e.g. `discover`'s `model.discovered.toml`).
     WithTerms,
+    /// A model-file TOML with `[parameters]` or a `[mechanics]` (mass-matrix) part.
+    Physical,
     /// `fit`'s `model.json`: the model file plus a network correction.
     Hybrid,
 }
@@ -52,6 +55,7 @@ impl std::fmt::Display for ModelKind {
         f.write_str(match self {
             ModelKind::Assumed => "assumed model (model file, no terms)",
             ModelKind::WithTerms => "model file with named terms",
+            ModelKind::Physical => "physical model file (named parameters, mass-matrix form)",
             ModelKind::Hybrid => "MME/NN hybrid model (model.json)",
         })
     }
@@ -65,6 +69,8 @@ pub enum ModelDynamics {
     Terms(TermModel),
     /// Linear model plus named terms plus a network correction.
     Hybrid(HybridModel),
+    /// Named parameters, terms and an optional mass-matrix part.
+    Physical(PhysicalModel),
 }
 
 impl Dynamics for ModelDynamics {
@@ -72,24 +78,28 @@ impl Dynamics for ModelDynamics {
         match self {
             ModelDynamics::Terms(m) => m.n_states(),
             ModelDynamics::Hybrid(m) => m.n_states(),
+            ModelDynamics::Physical(m) => m.n_states(),
         }
     }
     fn n_inputs(&self) -> usize {
         match self {
             ModelDynamics::Terms(m) => m.n_inputs(),
             ModelDynamics::Hybrid(m) => m.n_inputs(),
+            ModelDynamics::Physical(m) => m.n_inputs(),
         }
     }
     fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
         match self {
             ModelDynamics::Terms(m) => m.rhs(t, x, u, dx),
             ModelDynamics::Hybrid(m) => m.rhs(t, x, u, dx),
+            ModelDynamics::Physical(m) => m.rhs(t, x, u, dx),
         }
     }
     fn jacobians(&self, t: f64, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
         match self {
             ModelDynamics::Terms(m) => m.jacobians(t, x, u, a, b),
             ModelDynamics::Hybrid(m) => m.jacobians(t, x, u, a, b),
+            ModelDynamics::Physical(m) => m.jacobians(t, x, u, a, b),
         }
     }
 }
@@ -167,16 +177,23 @@ impl LoadedModel {
 
     /// A model-file model (assumed, or with named terms).
     pub fn from_spec(path: &Path, spec: ModelSpec) -> Result<Self> {
-        let terms = spec.term_model().map_err(|p| model_error(path, p))?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            kind: if spec.terms.is_empty() {
+        let (kind, dynamics) = if spec.is_physical() {
+            let model = spec.physical_model().map_err(|p| model_error(path, p))?;
+            (ModelKind::Physical, ModelDynamics::Physical(model))
+        } else {
+            let terms = spec.term_model().map_err(|p| model_error(path, p))?;
+            let kind = if spec.terms.is_empty() {
                 ModelKind::Assumed
             } else {
                 ModelKind::WithTerms
-            },
+            };
+            (kind, ModelDynamics::Terms(terms))
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            kind,
             spec,
-            dynamics: ModelDynamics::Terms(terms),
+            dynamics,
             integrator: Integrator::Rk4 { substeps: 4 },
             hybrid: None,
         })

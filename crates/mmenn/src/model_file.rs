@@ -3,14 +3,21 @@
 //! `noise_variance` (list or `"auto"`; `"auto"` when the key is left out), `units`, `intersample` (`"zoh"`, the default,
 //! or `"foh"`: how the inputs behave between samples in MME and in free-run simulation,
 //! for `mmenn estimate` and `mmenn discover`), and `[[terms]]` (`state`, `effect`, `term`, `coefficient`, and for a
-//! transfer between two equations `into`).
+//! transfer between two equations `into`; `coefficient` defaults to 1), and for physical
+//! models `[parameters]` (`name = { value, unit, bounds, fixed }`, usable by name in every
+//! expression) and `[mechanics]` (`q`, `qdot`, `mass`, `forces`: the mass-matrix form,
+//! whose states are `q` then `qdot` when `states` is left out). `A` and `B` are zero when
+//! left out.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use sysid_core::{InterSample, LinearModel, ModelNames, TermModel, TermSpec};
+use sysid_core::{
+    Estimation, InterSample, LinearModel, MechanicsSpec, ModelNames, Parameter, PhysicalModel,
+    PhysicalTerm, TermModel, TermSpec,
+};
 
 use crate::atomic::write_atomic;
 use crate::error::{MmennError, ModelProblem, Result};
@@ -28,8 +35,19 @@ impl ModelSpec {
     }
 
     /// The assumed model with its named terms, as `Dynamics` (the linear model alone when
-    /// there are no terms). Errors name the term and, for expressions, the column.
+    /// there are no terms), parameter values substituted into the expressions. Errors
+    /// name the term and, for expressions, the column; a model with a `[mechanics]` part
+    /// has no such form ([`ModelProblem::Mechanical`]: use [`ModelSpec::physical_model`]).
     pub fn term_model(&self) -> Result<TermModel, ModelProblem> {
+        if self.mechanics.is_some() {
+            return Err(ModelProblem::Mechanical { what: "this step" });
+        }
+        if !self.parameters.is_empty() {
+            return match self.physical_model()?.term_model() {
+                Some(r) => Ok(r?),
+                None => Err(ModelProblem::Mechanical { what: "this step" }),
+            };
+        }
         let specs = self.terms.iter().map(|t| TermSpec {
             state: &t.state,
             into: t.into.as_deref(),
@@ -39,6 +57,133 @@ impl ModelSpec {
         });
         Ok(TermModel::from_specs(self.linear.clone(), specs)?)
     }
+
+    /// Whether the file uses `[parameters]` or `[mechanics]` (then its dynamics is a
+    /// [`PhysicalModel`], which also gives `∂f/∂p`).
+    pub fn is_physical(&self) -> bool {
+        !self.parameters.is_empty() || self.mechanics.is_some()
+    }
+
+    /// The model as a [`PhysicalModel`]: linear part, parameters, terms and mechanics.
+    /// Errors say which parameter, term or mechanics entry is wrong.
+    pub fn physical_model(&self) -> Result<PhysicalModel, ModelProblem> {
+        let states = self.linear.state_names();
+        let position = |key: &'static str, name: &str| {
+            states
+                .iter()
+                .position(|s| s == name)
+                .ok_or_else(|| ModelProblem::UnknownName {
+                    key,
+                    name: name.to_owned(),
+                    kind: "state",
+                })
+        };
+        let mut terms = Vec::with_capacity(self.terms.len());
+        for t in &self.terms {
+            terms.push(PhysicalTerm {
+                state: position("terms.state", &t.state)?,
+                into: t
+                    .into
+                    .as_deref()
+                    .map(|r| position("terms.into", r))
+                    .transpose()?,
+                effect: &t.effect,
+                term: &t.term,
+                coefficient: t.coefficient,
+            });
+        }
+        let parameters = self
+            .parameters
+            .iter()
+            .map(ParameterEntry::parameter)
+            .collect();
+        let mechanics = self.mechanics.as_ref().map(|m| MechanicsSpec {
+            q: &m.q,
+            qdot: &m.qdot,
+            mass: &m.mass,
+            forces: &m.forces,
+        });
+        Ok(PhysicalModel::new(
+            self.linear.clone(),
+            parameters,
+            &terms,
+            mechanics,
+        )?)
+    }
+}
+
+/// A named physical parameter as written in `[parameters]`:
+/// `name = { value = 0.3, unit = "m", bounds = [0.1, 1.0], fixed = false }` (`unit`,
+/// `bounds` and `fixed` optional; a parameter is free unless `fixed = true`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParameterEntry {
+    /// Its name, usable in every expression.
+    pub name: String,
+    /// Its value.
+    pub value: f64,
+    /// Its unit, as written.
+    pub unit: Option<String>,
+    /// Lower and upper bound, if given.
+    pub bounds: Option<(f64, f64)>,
+    /// Free (estimated) or fixed.
+    pub estimation: Estimation,
+    /// Standard deviation of an estimated value (written by a parameter estimator; `None`
+    /// for a value that was not estimated).
+    pub sigma: Option<f64>,
+}
+
+impl ParameterEntry {
+    /// As `sysid_core`'s parameter (no bounds: `±inf`).
+    pub fn parameter(&self) -> Parameter {
+        let (lower, upper) = self.bounds.unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+        Parameter {
+            name: self.name.clone(),
+            value: self.value,
+            lower,
+            upper,
+            estimation: self.estimation,
+        }
+    }
+}
+
+/// The `[mechanics]` table: the mass-matrix form `M(q) q̈ = Q(q, q̇, u, p)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MechanicsEntry {
+    /// Generalized coordinates (state names).
+    pub q: Vec<String>,
+    /// Their rates (state names), in the same order.
+    pub qdot: Vec<String>,
+    /// The symmetric mass matrix, rows of expressions.
+    pub mass: Vec<Vec<String>>,
+    /// Generalized forces, one expression per coordinate.
+    pub forces: Vec<String>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ParameterToml {
+    value: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    unit: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    bounds: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "is_false")]
+    fixed: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sigma: Option<f64>,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+fn is_one(c: &f64) -> bool {
+    c.to_bits() == 1.0_f64.to_bits()
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 /// Measurement noise variance: given per measured channel, or to be estimated.
@@ -63,9 +208,10 @@ pub struct TermEntry {
     pub into: Option<String>,
     /// Catalogue name of the effect.
     pub effect: String,
-    /// The expression, in state and input names.
+    /// The expression, in state, input and parameter names.
     pub term: String,
-    /// Coefficient multiplying the expression.
+    /// Coefficient multiplying the expression (1 when left out).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
     pub coefficient: f64,
 }
 
@@ -83,6 +229,10 @@ pub struct ModelSpec {
     /// How the inputs behave between samples (`estimate`, `discover`; `fit` and
     /// `predict` hold them).
     pub intersample: InterSample,
+    /// Named physical parameters, in name order (`[parameters]`; empty when none).
+    pub parameters: Vec<ParameterEntry>,
+    /// The mass-matrix part (`[mechanics]`), if any.
+    pub mechanics: Option<MechanicsEntry>,
 }
 
 fn is_zoh(hold: &InterSample) -> bool {
@@ -99,11 +249,12 @@ enum NoiseToml {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ModelToml {
+    #[serde(default)]
     states: Vec<String>,
     #[serde(default)]
     inputs: Vec<String>,
-    #[serde(rename = "A")]
-    a: Vec<Vec<f64>>,
+    #[serde(rename = "A", default, skip_serializing_if = "Option::is_none")]
+    a: Option<Vec<Vec<f64>>>,
     #[serde(rename = "B", default, skip_serializing_if = "Option::is_none")]
     b: Option<Vec<Vec<f64>>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -120,6 +271,10 @@ struct ModelToml {
     units: BTreeMap<String, String>,
     #[serde(default, skip_serializing_if = "is_zoh")]
     intersample: InterSample,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    parameters: BTreeMap<String, ParameterToml>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    mechanics: Option<MechanicsEntry>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
 }
@@ -247,7 +402,12 @@ fn check_names(key: &'static str, names: &[String]) -> Result<(), ModelProblem> 
     Ok(())
 }
 
-fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
+fn build(mut raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
+    if raw.states.is_empty()
+        && let Some(m) = &raw.mechanics
+    {
+        raw.states = m.q.iter().chain(&m.qdot).cloned().collect();
+    }
     if raw.states.is_empty() {
         return Err(ModelProblem::NoStates);
     }
@@ -258,16 +418,13 @@ fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
     }
     let n = raw.states.len();
     let m = raw.inputs.len();
-    let a = matrix("A", &raw.a, n, n)?;
-    let b = match (&raw.b, m) {
-        (Some(b), _) => matrix("B", b, n, m)?,
-        (None, 0) => DMatrix::zeros(n, 0),
-        (None, _) => {
-            return Err(ModelProblem::MissingKey {
-                key: "B",
-                why: "the model has inputs",
-            });
-        }
+    let a = match &raw.a {
+        Some(a) => matrix("A", a, n, n)?,
+        None => DMatrix::zeros(n, n),
+    };
+    let b = match &raw.b {
+        Some(b) => matrix("B", b, n, m)?,
+        None => DMatrix::zeros(n, m),
     };
     let (c, outputs) = match (&raw.measured, &raw.c) {
         (Some(_), Some(_)) => {
@@ -356,15 +513,77 @@ fn build(raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
         corrections: raw.corrected.clone(),
     };
     let linear = LinearModel::with_names(a, b, c, e, names)?;
+    let parameters = raw
+        .parameters
+        .into_iter()
+        .map(|(name, p)| ParameterEntry {
+            name,
+            value: p.value,
+            unit: p.unit,
+            bounds: p.bounds.map(|[lo, hi]| (lo, hi)),
+            estimation: if p.fixed {
+                Estimation::Fixed
+            } else {
+                Estimation::Free
+            },
+            sigma: p.sigma,
+        })
+        .collect();
     let spec = ModelSpec {
         linear,
         noise_variance,
         units: raw.units,
         terms: raw.terms,
         intersample: raw.intersample,
+        parameters,
+        mechanics: raw.mechanics,
     };
-    spec.term_model()?;
+    if spec.is_physical() {
+        spec.physical_model()?;
+    } else {
+        spec.term_model()?;
+    }
     Ok(spec)
+}
+
+/// Line and column (1-based) of the first quoted occurrence of `expression` in `text`,
+/// plus `column` characters into it: where an expression error points in the file.
+fn locate(text: &str, expression: &str, column: usize) -> Option<(usize, usize)> {
+    let quoted = format!("\"{expression}\"");
+    let at = text
+        .find(&quoted)
+        .or_else(|| text.find(&format!("'{expression}'")))?;
+    let (line, col) = line_col(text, at);
+    Some((line, col + 1 + column))
+}
+
+/// The expression text and column an expression error in a model points at, if any.
+fn expression_of(problem: &ModelProblem) -> Option<(&str, usize)> {
+    use sysid_core::{ExprError, PhysicalError, TermError};
+    let column = |e: &ExprError| match e {
+        ExprError::Empty { column }
+        | ExprError::UnexpectedCharacter { column, .. }
+        | ExprError::InvalidNumber { column, .. }
+        | ExprError::UnknownName { column, .. }
+        | ExprError::UnknownFunction { column, .. }
+        | ExprError::UnexpectedToken { column, .. }
+        | ExprError::UnclosedParenthesis { column }
+        | ExprError::UnmatchedParenthesis { column }
+        | ExprError::TrailingInput { column, .. }
+        | ExprError::TooDeep { column, .. } => *column,
+        _ => 0,
+    };
+    match problem {
+        ModelProblem::Physical(e) => match e.as_ref() {
+            PhysicalError::Expression { text, source, .. } => Some((text, column(source))),
+            _ => None,
+        },
+        ModelProblem::Term(e) => match e.as_ref() {
+            TermError::Expression { text, source, .. } => Some((text, column(source))),
+            _ => None,
+        },
+        _ => None,
+    }
 }
 
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
@@ -395,7 +614,10 @@ pub fn parse_model(path: &Path, text: &str) -> Result<ModelSpec> {
             },
         )
     })?;
-    build(raw).map_err(|p| err(None, None, p))
+    build(raw).map_err(|p| {
+        let at = expression_of(&p).and_then(|(expr, column)| locate(text, expr, column));
+        err(at.map(|a| a.0), at.map(|a| a.1), p)
+    })
 }
 
 /// Read a model file.
@@ -451,10 +673,26 @@ pub fn format_model(spec: &ModelSpec) -> Result<String> {
             });
         }
     };
+    let parameters = spec
+        .parameters
+        .iter()
+        .map(|p| {
+            (
+                p.name.clone(),
+                ParameterToml {
+                    value: p.value,
+                    unit: p.unit.clone(),
+                    bounds: p.bounds.map(|(lo, hi)| [lo, hi]),
+                    fixed: p.estimation == Estimation::Fixed,
+                    sigma: p.sigma,
+                },
+            )
+        })
+        .collect();
     let raw = ModelToml {
         states,
         inputs: lin.input_names().to_vec(),
-        a: rows_of(lin.a()),
+        a: Some(rows_of(lin.a())),
         b: if lin.n_inputs() > 0 {
             Some(rows_of(lin.b()))
         } else {
@@ -470,6 +708,8 @@ pub fn format_model(spec: &ModelSpec) -> Result<String> {
         },
         units: spec.units.clone(),
         intersample: spec.intersample,
+        parameters,
+        mechanics: spec.mechanics.clone(),
         terms: spec.terms.clone(),
     };
     toml::to_string(&raw).map_err(|e| MmennError::Model {
@@ -692,10 +932,13 @@ noise_variance = "auto"
                 "{into}"
             );
         }
-        assert!(matches!(
-            problem(&SPEC_EXAMPLE.replace("B = [[0.0], [-1.0]]", "")),
-            ModelProblem::MissingKey { key: "B", .. }
-        ));
+        // A and B left out are zero.
+        let bare = SPEC_EXAMPLE
+            .replace("B = [[0.0], [-1.0]]", "")
+            .replace("A = [[0.0, 1.0], [-9.81, 0.0]]", "");
+        let spec = parse_model(Path::new("m.toml"), &bare).unwrap();
+        assert_eq!(spec.linear.a(), &DMatrix::zeros(2, 2));
+        assert_eq!(spec.linear.b(), &DMatrix::zeros(2, 1));
         assert!(matches!(
             problem(&SPEC_EXAMPLE.replace(
                 "measured = [\"theta\"]",

@@ -2,7 +2,13 @@
 //! units of the file and ±σ where they are known, e.g.
 //! `v' = -4.03 x - 0.2 v + 1.01 u - 0.803 (±0.01) v*abs(v)`.
 //!
-//! The model files hold no uncertainties; a discovered model's ±σ come from the
+//! A physical model file also prints its `[parameters]` as a table (value, ±σ when an
+//! estimator wrote one, unit, bounds, free or fixed) and its `[mechanics]` part: each
+//! rate equation reads `omega1' = [M⁻¹·F]_theta1`, followed by `M(q)` entry by entry and
+//! the generalized forces `F` (the `forces` expressions plus the terms on rate
+//! equations, which are generalized forces there).
+//!
+//! The model files hold no uncertainties for term coefficients; a discovered model's ±σ come from the
 //! `discovery.json` written beside it by `mmenn discover` (σ = half the 95 % interval of
 //! the free-run calibrated coefficient / 1.96), when that file is there.
 
@@ -89,6 +95,35 @@ fn push_term(line: &mut String, first: &mut bool, coefficient: f64, body: &str) 
     }
 }
 
+/// The terms entering `state`'s equation (`−` for a transfer into it), with their ±σ.
+fn push_terms(
+    line: &mut String,
+    first: &mut bool,
+    terms: &[crate::model_file::TermEntry],
+    state: &str,
+    sigmas: &TermSigmas,
+) {
+    for t in terms {
+        let sign = if t.state == state {
+            1.0
+        } else if t.into.as_deref() == Some(state) {
+            -1.0
+        } else {
+            continue;
+        };
+        let sigma = sigmas
+            .get(&(t.state.clone(), t.term.clone()))
+            .map(|s| format!("(±{}) ", number(*s)))
+            .unwrap_or_default();
+        push_term(
+            line,
+            first,
+            sign * t.coefficient,
+            &format!("{sigma}{}", expression(&t.term)),
+        );
+    }
+}
+
 fn expression(term: &str) -> String {
     if term.contains([' ', '+', '-']) {
         format!("({term})")
@@ -127,9 +162,20 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
         ));
     }
     let corrected = lin.corrected_states().unwrap_or_default();
+    let mech = spec.mechanics.as_ref();
+    let coordinate_of = |state: &str| mech.and_then(|m| m.q.iter().position(|q| q == state));
+    let rate_of = |state: &str| mech.and_then(|m| m.qdot.iter().position(|v| v == state));
     for (i, state) in lin.state_names().iter().enumerate() {
         let mut line = format!("{state}' = ");
         let mut first = true;
+        if let (Some(m), Some(k)) = (mech, coordinate_of(state)) {
+            line.push_str(&m.qdot[k]);
+            first = false;
+        }
+        if let (Some(m), Some(k)) = (mech, rate_of(state)) {
+            line.push_str(&format!("[M⁻¹·F]_{}", m.q[k]));
+            first = false;
+        }
         for (j, s) in lin.state_names().iter().enumerate() {
             let a = lin.a()[(i, j)];
             if a != 0.0 {
@@ -142,24 +188,9 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
                 push_term(&mut line, &mut first, b, u);
             }
         }
-        for t in &spec.terms {
-            let sign = if t.state == *state {
-                1.0
-            } else if t.into.as_deref() == Some(state.as_str()) {
-                -1.0
-            } else {
-                continue;
-            };
-            let sigma = sigmas
-                .get(&(t.state.clone(), t.term.clone()))
-                .map(|s| format!("(±{}) ", number(*s)))
-                .unwrap_or_default();
-            push_term(
-                &mut line,
-                &mut first,
-                sign * t.coefficient,
-                &format!("{sigma}{}", expression(&t.term)),
-            );
+        if rate_of(state).is_none() {
+            // (on a rate equation the terms are generalized forces, printed with F below)
+            push_terms(&mut line, &mut first, &spec.terms, state, sigmas);
         }
         if model.kind == ModelKind::Hybrid && corrected.contains(&i) {
             if first {
@@ -198,6 +229,12 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
             lines.push(line);
         }
     }
+    if let Some(m) = mech {
+        lines.extend(mechanics_lines(m, &spec.terms, sigmas));
+    }
+    if !spec.parameters.is_empty() {
+        lines.extend(parameter_lines(&spec.parameters));
+    }
     if let Some(h) = &model.hybrid {
         let net = &h.network;
         lines.push(format!(
@@ -216,6 +253,71 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
         lines.push("(no ±σ: the file holds none and no discovery.json is beside it)".into());
     }
     lines
+}
+
+/// `M(q)` (upper triangle, it is symmetric) and `F = Q + terms` per coordinate.
+fn mechanics_lines(
+    m: &crate::model_file::MechanicsEntry,
+    terms: &[crate::model_file::TermEntry],
+    sigmas: &TermSigmas,
+) -> Vec<String> {
+    let mut lines = vec![format!(
+        "mechanics: M(q)·[{}]' = F, q = ({})",
+        m.qdot.join(", "),
+        m.q.join(", ")
+    )];
+    for (i, row) in m.mass.iter().enumerate() {
+        for (j, e) in row.iter().enumerate().skip(i) {
+            lines.push(format!("  M[{}, {}] = {e}", m.q[i], m.q[j]));
+        }
+    }
+    for (k, q) in m.q.iter().enumerate() {
+        let mut line = format!("  F[{q}] = {}", m.forces[k]);
+        push_terms(&mut line, &mut false, terms, &m.qdot[k], sigmas);
+        lines.push(line);
+    }
+    lines
+}
+
+/// The parameter table: name, value, ±σ (`—` when not estimated), unit, bounds,
+/// free/fixed; columns aligned.
+fn parameter_lines(parameters: &[crate::model_file::ParameterEntry]) -> Vec<String> {
+    let rows: Vec<[String; 6]> = parameters
+        .iter()
+        .map(|p| {
+            [
+                p.name.clone(),
+                number(p.value),
+                p.sigma.map_or("—".into(), |s| format!("±{}", number(s))),
+                p.unit.clone().unwrap_or_else(|| "—".into()),
+                p.bounds.map_or("—".into(), |(lo, hi)| {
+                    format!("[{}, {}]", number(lo), number(hi))
+                }),
+                match p.estimation {
+                    sysid_core::Estimation::Free => "free".into(),
+                    sysid_core::Estimation::Fixed => "fixed".into(),
+                },
+            ]
+        })
+        .collect();
+    let header = ["parameter", "value", "±σ", "unit", "bounds", ""].map(String::from);
+    let mut width = [0usize; 6];
+    for r in std::iter::once(&header).chain(&rows) {
+        for (w, c) in width.iter_mut().zip(r) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    std::iter::once(&header)
+        .chain(&rows)
+        .map(|r| {
+            let cells: Vec<String> = r
+                .iter()
+                .zip(width)
+                .map(|(c, w)| format!("{c}{}", " ".repeat(w - c.chars().count())))
+                .collect();
+            format!("  {}", cells.join("  ").trim_end())
+        })
+        .collect()
 }
 
 /// Read any model and render it (see [`equations`]).

@@ -31,6 +31,8 @@ pub fn assumed_model_spec(sim: &SimulatedData) -> ModelSpec {
         terms: Vec::new(),
         // The plants hold their inputs between samples.
         intersample: sysid_core::InterSample::Zoh,
+        parameters: Vec::new(),
+        mechanics: None,
     }
 }
 

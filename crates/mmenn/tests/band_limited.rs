@@ -92,6 +92,8 @@ pub fn write_spec(path: &Path, linear: &LinearModel, hold: InterSample) {
         units: Default::default(),
         terms: vec![],
         intersample: hold,
+        parameters: Vec::new(),
+        mechanics: None,
     };
     write_model(path, &spec).unwrap();
 }

@@ -10,6 +10,7 @@ mod hidden_effects;
 mod model;
 mod monitor;
 mod never_panics;
+mod physical;
 mod real_data;
 mod reliability;
 mod simulate;

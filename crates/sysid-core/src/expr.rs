@@ -11,15 +11,21 @@
 //! product := unary (('*' | '/') unary)*          left-associative: 8/4/2 = (8/4)/2
 //! unary   := '-' unary | power                   -x^2 = -(x^2)
 //! power   := primary ('^' unary)?                right-associative: 2^3^2 = 2^(3^2)
-//! primary := number | name | function '(' sum ')' | '(' sum ')'
+//! primary := number | name | function '(' sum ')' | function2 '(' sum ',' sum ')'
+//!          | '(' sum ')'
 //! ```
 //!
 //! Numbers are decimal literals with an optional exponent (`3`, `0.5`, `.5`, `1e-3`,
 //! `2.5E+4`); a literal must be finite. Names are identifiers (a letter or `_`, then
-//! letters, digits or `_`) and must be among the declared variables. A name directly
-//! followed by `(` is a function call; the functions are [`Func`]: `sin cos tan exp log
-//! sqrt abs sign tanh`, where `log` is the natural logarithm and `sign(0) = 0`. There is
-//! no implicit multiplication (`2x` is an error) and no unary plus.
+//! letters, digits or `_`) and must be among the declared variables, except `pi`, which
+//! is π unless a variable of that name is declared (it prints as its value). A name directly
+//! followed by `(` is a function call; the one-argument functions are [`Func`]: `sin cos
+//! tan asin acos atan exp log sqrt abs sign tanh sinh cosh`, where `log` is the natural
+//! logarithm (`ln` is accepted for it) and `sign(0) = 0` (`sgn` is accepted for it); the
+//! two-argument functions are `atan2(y, x)` (the angle of the point `(x, y)`, in
+//! `(-π, π]`), `min(a, b)` and `max(a, b)` (NaN if either argument is NaN). Powers are
+//! written with `^`. There is no implicit multiplication (`2x` is an error) and no unary
+//! plus.
 //!
 //! # Values outside a function's domain
 //!
@@ -33,7 +39,10 @@
 //! points where the function is not differentiable, valid almost everywhere:
 //! `d abs(a) = sign(a)·da` (0 at `a = 0`, a subgradient); `d sign(a) = 0`;
 //! `d sqrt(a) = da/(2·sqrt(a))`, which is `+inf·da` at `a = 0`; `d a^c = c·a^(c-1)·da`
-//! for a constant exponent `c`, and `a^b·(db·log(a) + b·da/a)` otherwise (needs `a > 0`).
+//! for a constant exponent `c`, and `a^b·(db·log(a) + b·da/a)` otherwise (needs `a > 0`);
+//! `d min(a, b) = (da + db − sign(a − b)·(da − db))/2` and likewise for `max` with `+`
+//! (the mean of both slopes where `a = b`); `d asin(a) = da/sqrt(1 − a²)` is infinite at
+//! `a = ±1`.
 //!
 //! # Simplification
 //!
@@ -57,7 +66,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use parse::checked_names;
-use tree::{Op, Tree, collect_vars, compile, diff, remap, write_tree};
+use tree::{Op, Tree, collect_vars, compile, diff, remap, substitute, write_tree};
 
 mod parse;
 #[cfg(test)]
@@ -115,8 +124,8 @@ pub enum ExprError {
     },
     /// A call of a function that does not exist.
     #[error(
-        "column {column}: unknown function '{name}' (functions: sin cos tan exp log sqrt abs \
-         sign tanh)"
+        "column {column}: unknown function '{name}' (functions: sin cos tan asin acos atan \
+         exp log sqrt abs sign tanh sinh cosh; atan2(y, x) min(a, b) max(a, b))"
     )]
     UnknownFunction {
         /// Column where the function name starts.
@@ -211,11 +220,21 @@ pub enum Func {
     Sign,
     /// Hyperbolic tangent.
     Tanh,
+    /// Arc tangent, in `(-π/2, π/2)`.
+    Atan,
+    /// Arc sine, in `[-π/2, π/2]` (NaN outside `[-1, 1]`).
+    Asin,
+    /// Arc cosine, in `[0, π]` (NaN outside `[-1, 1]`).
+    Acos,
+    /// Hyperbolic sine.
+    Sinh,
+    /// Hyperbolic cosine.
+    Cosh,
 }
 
 impl Func {
     /// Every function, in the order the grammar lists them.
-    pub const ALL: [Func; 9] = [
+    pub const ALL: [Func; 14] = [
         Func::Sin,
         Func::Cos,
         Func::Tan,
@@ -225,6 +244,11 @@ impl Func {
         Func::Abs,
         Func::Sign,
         Func::Tanh,
+        Func::Atan,
+        Func::Asin,
+        Func::Acos,
+        Func::Sinh,
+        Func::Cosh,
     ];
 
     /// The name used in expressions.
@@ -239,12 +263,22 @@ impl Func {
             Func::Abs => "abs",
             Func::Sign => "sign",
             Func::Tanh => "tanh",
+            Func::Atan => "atan",
+            Func::Asin => "asin",
+            Func::Acos => "acos",
+            Func::Sinh => "sinh",
+            Func::Cosh => "cosh",
         }
     }
 
-    /// The function with this name, if any.
+    /// The function with this name (or the aliases `sgn` for `sign`, `ln` for `log`),
+    /// if any.
     pub fn from_name(name: &str) -> Option<Func> {
-        Self::ALL.into_iter().find(|f| f.name() == name)
+        match name {
+            "sgn" => Some(Func::Sign),
+            "ln" => Some(Func::Log),
+            _ => Self::ALL.into_iter().find(|f| f.name() == name),
+        }
     }
 
     /// Evaluate the function at `x`.
@@ -268,6 +302,11 @@ impl Func {
                 }
             }
             Func::Tanh => x.tanh(),
+            Func::Atan => x.atan(),
+            Func::Asin => x.asin(),
+            Func::Acos => x.acos(),
+            Func::Sinh => x.sinh(),
+            Func::Cosh => x.cosh(),
         }
     }
 }
@@ -335,6 +374,37 @@ impl Expr {
     /// # Panics
     /// If `head` and `tail` together are shorter than the highest variable index used.
     pub fn eval_parts(&self, head: &[f64], tail: &[f64]) -> f64 {
+        self.run(|i| {
+            if i < head.len() {
+                head[i]
+            } else {
+                tail[i - head.len()]
+            }
+        })
+    }
+
+    /// Evaluate with the variables split over three slices, in order: a model's states,
+    /// inputs and parameters (variable `i` is `x[i]`, then `u[i - x.len()]`, then
+    /// `p[i - x.len() - u.len()]`), without copying them into one buffer.
+    ///
+    /// # Panics
+    /// If the three slices together are shorter than the highest variable index used.
+    pub fn eval3(&self, x: &[f64], u: &[f64], p: &[f64]) -> f64 {
+        let (nx, nxu) = (x.len(), x.len() + u.len());
+        self.run(|i| {
+            if i < nx {
+                x[i]
+            } else if i < nxu {
+                u[i - nx]
+            } else {
+                p[i - nxu]
+            }
+        })
+    }
+
+    /// The postfix program on a fixed stack, variable `i` read by `var(i)`.
+    #[inline(always)]
+    fn run(&self, var: impl Fn(usize) -> f64) -> f64 {
         let mut stack = [0.0_f64; STACK];
         let mut sp = 0_usize;
         for op in self.program.iter() {
@@ -344,11 +414,7 @@ impl Expr {
                     sp += 1;
                 }
                 Op::Var(i) => {
-                    stack[sp] = if i < head.len() {
-                        head[i]
-                    } else {
-                        tail[i - head.len()]
-                    };
+                    stack[sp] = var(i);
                     sp += 1;
                 }
                 Op::Neg => stack[sp - 1] = -stack[sp - 1],
@@ -403,6 +469,24 @@ impl Expr {
             Tree::Const(c) => Some(c),
             _ => None,
         }
+    }
+
+    /// The expression with some variables replaced by constants: variable `i` becomes
+    /// `values[i]` where that is `Some` and finite (missing entries and `None` stay
+    /// variables). Constant subtrees fold as in parsing, so `substitute` of every variable
+    /// gives a [`Expr::constant`] wherever the value is finite. The variable list is
+    /// unchanged; drop the replaced names with [`Expr::with_variables`].
+    ///
+    /// ```
+    /// use sysid_core::Expr;
+    ///
+    /// let e = Expr::parse("cf*atan(100*omega)", &["omega", "cf"])?;
+    /// let bound = e.substitute(&[None, Some(0.5)]).with_variables(&["omega"])?;
+    /// assert_eq!(bound.to_string(), "0.5*atan(100*omega)");
+    /// # Ok::<(), sysid_core::ExprError>(())
+    /// ```
+    pub fn substitute(&self, values: &[Option<f64>]) -> Expr {
+        Expr::from_tree(substitute(&self.tree, values), Arc::clone(&self.names))
     }
 
     /// The same function over another variable list, matching variables by name. Fails

@@ -13,6 +13,7 @@ pub mod judge;
 pub mod least_squares;
 pub mod linear;
 pub mod metrics;
+pub mod physical;
 pub mod tangent;
 pub mod terms;
 
@@ -35,4 +36,8 @@ pub use least_squares::{
 };
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};
+pub use physical::{
+    Estimation, MAX_DOF, MechanicsSpec, Parameter, ParametricDynamics, PhysicalError,
+    PhysicalModel, PhysicalTerm,
+};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};

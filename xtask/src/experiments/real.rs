@@ -727,6 +727,8 @@ fn oe_hybrid_rows(
             terms: Vec::new(),
             // As the output-error fit above treated the inputs between samples.
             intersample: s.intersample,
+            parameters: Vec::new(),
+            mechanics: None,
         },
     )?;
     let (max_hidden, inits) = match ctx.mode {

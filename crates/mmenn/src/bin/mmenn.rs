@@ -253,6 +253,8 @@ struct CompareArgs {
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    prep: PrepArgs,
 }
 
 #[derive(Debug, Args)]
@@ -283,6 +285,8 @@ struct DiscoverArgs {
     /// Output directory.
     #[arg(long, required_unless_present = "list_effects")]
     out: Option<PathBuf>,
+    #[command(flatten)]
+    prep: PrepArgs,
 }
 
 /// Print the catalogue of named effects: name, label, term over placeholder variables,
@@ -416,6 +420,8 @@ struct FitArgs {
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    prep: PrepArgs,
 }
 
 #[derive(Debug, Args)]
@@ -446,6 +452,36 @@ struct PredictArgs {
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    prep: PrepArgs,
+}
+
+/// Data preparation shared by the commands that read data files.
+#[derive(Debug, Args)]
+struct PrepArgs {
+    /// Resample every data file onto a uniform grid with this step, s (linear
+    /// interpolation; the prepared files and a report go to OUT/prepared/). Without it a
+    /// non-uniform time column is an error naming the row.
+    #[arg(long, value_name = "DT")]
+    resample: Option<f64>,
+    /// Use file columns under the model's names, e.g. `--map t=time,theta1=pos_meas1`.
+    #[arg(long, value_name = "NAME=COLUMN,...")]
+    map: Vec<String>,
+}
+
+/// `paths` prepared as `prep` says (unchanged without `--map`/`--resample`), written
+/// under `out`; what was done is printed.
+#[allow(clippy::print_stderr)]
+fn prepared(paths: &[PathBuf], prep: &PrepArgs, out: &Path) -> Result<Vec<PathBuf>> {
+    let opts = mmenn::data_file::PrepareOptions {
+        map: mmenn::data_file::PrepareOptions::parse_map(&prep.map).map_err(anyhow::Error::msg)?,
+        resample: prep.resample,
+    };
+    let (paths, reports) = mmenn::data_file::prepare_files(paths, &opts, out)?;
+    for r in &reports {
+        eprintln!("prepared {}", r.describe());
+    }
+    Ok(paths)
 }
 
 #[derive(Debug, Args)]
@@ -469,6 +505,8 @@ struct EstimateArgs {
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    prep: PrepArgs,
 }
 
 #[derive(Debug, Args)]
@@ -578,11 +616,12 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "estimate", force, &inputs)?;
+    let data = prepared(&args.data, &args.prep, staged.path())?;
     let robust = args.robust.then(mmenn::mme_core::RobustConfig::default);
     // One spinner for the whole job (the W search inside mme-core reports no steps yet).
     let s = mmenn::progress::stage(progress, "MME estimate", || {
         mmenn::estimate::run_estimate_with(
-            &args.data,
+            &data,
             &args.model,
             &opts,
             robust.as_ref(),
@@ -698,10 +737,12 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         .chain([&args.model])
         .collect();
     let staged = stage(&args.out, "fit", force, &inputs)?;
+    let data = prepared(&args.data, &args.prep, staged.path())?;
+    let val = prepared(&args.val, &args.prep, &staged.path().join("val"))?;
     let s = mmenn::fit::run_fit_with_progress(
-        &args.data,
+        &data,
         &args.model,
-        &args.val,
+        &val,
         &opts,
         staged.path(),
         progress,
@@ -746,7 +787,8 @@ fn predict(args: PredictArgs, force: bool) -> Result<()> {
         x0_window: Some(args.x0_window),
         horizon: args.horizon,
     };
-    let s = mmenn::predict::run_predict_with(&args.model, &args.data, &opts, staged.path())?;
+    let data = prepared(std::slice::from_ref(&args.data), &args.prep, staged.path())?;
+    let s = mmenn::predict::run_predict_with(&args.model, &data[0], &opts, staged.path())?;
     staged.commit()?;
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
     if let Some(k) = &s.k_step {
@@ -785,10 +827,12 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
     let staged = stage(&a.out, "compare", force, &inputs)?;
+    let data = prepared(&a.data, &a.prep, staged.path())?;
+    let val = prepared(&a.val, &a.prep, &staged.path().join("val"))?;
     let s = mmenn::compare::run_compare_with_progress(
-        &a.data,
+        &data,
         &a.model,
-        &a.val,
+        &val,
         &opts,
         staged.path(),
         progress,
@@ -839,7 +883,9 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([model]).collect();
     let staged = stage(out, "discover", force, &inputs)?;
-    let s = mmenn::discover::run_discover(&a.data, model, &a.val, &opts, staged.path())?;
+    let data = prepared(&a.data, &a.prep, staged.path())?;
+    let val = prepared(&a.val, &a.prep, &staged.path().join("val"))?;
+    let s = mmenn::discover::run_discover(&data, model, &val, &opts, staged.path())?;
     staged.commit()?;
     println!("verdict: {}", mmenn::words::verdict(s.verdict));
     for e in &s.effects {

@@ -45,6 +45,7 @@ enum Tok {
     Caret,
     Open,
     Close,
+    Comma,
     End,
 }
 
@@ -84,6 +85,7 @@ fn lex(text: &str) -> Result<Vec<Token>, ExprError> {
             '^' => Some(Tok::Caret),
             '(' => Some(Tok::Open),
             ')' => Some(Tok::Close),
+            ',' => Some(Tok::Comma),
             _ => None,
         };
         if c.is_whitespace() {
@@ -267,7 +269,14 @@ impl Parser<'_> {
             Tok::Name(name) => {
                 self.bump();
                 let next = self.peek();
-                if next.tok == Tok::Open {
+                if next.tok == Tok::Open
+                    && let Some(op) = BinOp::from_function_name(&name)
+                {
+                    let open_column = next.column;
+                    self.bump();
+                    let (a, b, h) = self.pair(level, open_column)?;
+                    Ok((bin(op, a, b), Self::limit(h + 1, token.column)?))
+                } else if next.tok == Tok::Open {
                     let func = Func::from_name(&name).ok_or(ExprError::UnknownFunction {
                         column: token.column,
                         name,
@@ -278,7 +287,11 @@ impl Parser<'_> {
                     Ok((call(func, arg), Self::limit(h + 1, token.column)?))
                 } else if let Some(i) = self.variables.iter().position(|v| *v == name) {
                     Ok((Tree::Var(i), 1))
-                } else if Func::from_name(&name).is_some() {
+                } else if name == "pi" {
+                    Ok((Tree::Const(std::f64::consts::PI), 1))
+                } else if Func::from_name(&name).is_some()
+                    || BinOp::from_function_name(&name).is_some()
+                {
                     Err(ExprError::UnexpectedToken {
                         column: next.column,
                         found: describe(next),
@@ -305,6 +318,47 @@ impl Parser<'_> {
                 column: token.column,
                 found: describe(&token),
                 expected: OPERAND,
+            }),
+        }
+    }
+
+    /// The two arguments of a two-argument call whose `(` at `open_column` is consumed,
+    /// and its `)`; the height is the taller argument's.
+    fn pair(&mut self, level: usize, open_column: usize) -> Result<(Tree, Tree, usize), ExprError> {
+        let level = Self::limit(level + 1, open_column)?;
+        self.open += 1;
+        let (a, ha) = self.sum(level)?;
+        let next = self.peek();
+        match next.tok {
+            Tok::Comma => self.bump(),
+            Tok::End => {
+                return Err(ExprError::UnclosedParenthesis {
+                    column: open_column,
+                });
+            }
+            _ => {
+                return Err(ExprError::UnexpectedToken {
+                    column: next.column,
+                    found: describe(next),
+                    expected: "',' between the two arguments",
+                });
+            }
+        }
+        let (b, hb) = self.sum(level)?;
+        self.open -= 1;
+        let next = self.peek();
+        match next.tok {
+            Tok::Close => {
+                self.bump();
+                Ok((a, b, ha.max(hb)))
+            }
+            Tok::End => Err(ExprError::UnclosedParenthesis {
+                column: open_column,
+            }),
+            _ => Err(ExprError::UnexpectedToken {
+                column: next.column,
+                found: describe(next),
+                expected: "')' or an operator",
             }),
         }
     }

@@ -374,3 +374,114 @@ fn deep_right_nesting_fits_the_fixed_stack() {
     let want = if n.is_multiple_of(2) { 3.0 } else { 1.0 };
     assert!((e.eval(&[3.0]) - want).abs() <= 1e-15 * n as f64);
 }
+
+/// The functions added for physical models: values at points where they are exact or
+/// known in closed form, aliases, and two-argument calls.
+#[test]
+fn inverse_hyperbolic_and_two_argument_functions() {
+    let pi = std::f64::consts::PI;
+    let cases = [
+        ("atan(1)", pi / 4.0),
+        ("asin(1)", pi / 2.0),
+        ("acos(-1)", pi),
+        ("sinh(0) + cosh(0)", 1.0),
+        ("atan2(1, -1)", 3.0 * pi / 4.0),
+        ("atan2(-1, 0)", -pi / 2.0),
+        ("min(2, -3) + max(2, -3)", -1.0),
+        ("sgn(-2) + ln(1)", -1.0),
+        ("max(min(1, 2), 0.5)^2", 1.0),
+        ("2*acos(0) - pi", 0.0),
+    ];
+    for (text, want) in cases {
+        let got = eval0(text);
+        assert!(
+            (got - want).abs() <= 4.0 * f64::EPSILON,
+            "{text}: {got} vs {want}"
+        );
+    }
+    assert!(Func::Asin.apply(1.5).is_nan());
+    // `pi` is π unless declared as a variable.
+    assert_eq!(parse("pi", &["x"]).constant(), Some(std::f64::consts::PI));
+    assert_eq!(parse("pi", &["pi"]).eval(&[2.0]), 2.0);
+    let e = parse("min(x, y)", &["x", "y"]);
+    assert!(e.eval(&[f64::NAN, 1.0]).is_nan() && e.eval(&[1.0, f64::NAN]).is_nan());
+    // Printing keeps the call form and the canonical names.
+    for (text, want) in [
+        ("atan2(x,y)*2", "atan2(x, y)*2"),
+        ("-min(x, -y)", "-min(x, -y)"),
+        ("max(x + y, x*y)^2", "max(x + y, x*y)^2"),
+        ("sgn(x) + ln(y)", "sign(x) + log(y)"),
+        ("atan(x)/(1 + atan2(y, x))", "atan(x)/(1 + atan2(y, x))"),
+    ] {
+        let e = parse(text, &["x", "y"]);
+        assert_eq!(e.to_string(), want, "{text}");
+        assert_eq!(parse(want, &["x", "y"]), e, "{want}");
+    }
+    // Derivative forms.
+    for (text, var, want) in [
+        ("atan(x)", 0, "1/(1 + x^2)"),
+        ("asin(x)", 0, "1/sqrt(1 - x^2)"),
+        ("acos(x)", 0, "-1/sqrt(1 - x^2)"),
+        ("sinh(x)", 0, "cosh(x)"),
+        ("cosh(x)", 0, "sinh(x)"),
+        ("atan2(x, y)", 0, "y/(x^2 + y^2)"),
+        ("atan2(x, y)", 1, "-x/(x^2 + y^2)"),
+        ("min(x, y)", 0, "0.5*(1 - sign(x - y))"),
+        ("max(x, y)", 1, "0.5*(1 - sign(x - y))"),
+    ] {
+        let d = parse(text, &["x", "y"])
+            .derivative(var)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(d.to_string(), want, "d({text})/d{var}");
+    }
+    // Errors in two-argument calls.
+    assert_eq!(
+        err("atan2(x)", &["x"]),
+        ExprError::UnexpectedToken {
+            column: 7,
+            found: "')'".into(),
+            expected: "',' between the two arguments",
+        }
+    );
+    assert_eq!(
+        err("min(x, x", &["x"]),
+        ExprError::UnclosedParenthesis { column: 3 }
+    );
+    assert_eq!(
+        err("sin(x, x)", &["x"]),
+        ExprError::UnexpectedToken {
+            column: 5,
+            found: "','".into(),
+            expected: "')' or an operator",
+        }
+    );
+    assert!(matches!(
+        err("max", &["x"]),
+        ExprError::UnexpectedToken { .. }
+    ));
+}
+
+/// `substitute` folds constants in and `eval3` reads states, inputs and parameters from
+/// three slices like one concatenated buffer.
+#[test]
+fn substitution_and_three_slice_evaluation() {
+    let vars = ["q", "v", "u", "m", "l"];
+    let e = parse("m*l^2*v + u*cos(q) - m*9.81*l*sin(q)", &vars);
+    let (x, u, p) = ([0.3, -1.2], [0.7], [0.5, 2.0]);
+    let flat = [0.3, -1.2, 0.7, 0.5, 2.0];
+    assert_eq!(e.eval3(&x, &u, &p).to_bits(), e.eval(&flat).to_bits());
+    let bound = e.substitute(&[None, None, None, Some(0.5), Some(2.0)]);
+    assert_eq!(bound.to_string(), "2*v + u*cos(q) - 9.81*sin(q)");
+    let bound = bound
+        .with_variables(&["q", "v", "u"])
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!((bound.eval(&flat[..3]) - e.eval(&flat)).abs() <= 1e-15);
+    // Substituting every variable gives a constant; a non-finite fold stays a node.
+    let all = e.substitute(&flat.map(Some));
+    assert_eq!(
+        all.constant().map(f64::to_bits),
+        Some(e.eval(&flat).to_bits())
+    );
+    let log = parse("log(m)", &vars).substitute(&[None, None, None, Some(0.0), None]);
+    assert_eq!(log.to_string(), "log(0)");
+}

@@ -12,6 +12,12 @@ pub(super) enum BinOp {
     Mul,
     Div,
     Pow,
+    /// `atan2(a, b)`: the angle of the point `(b, a)`, in `(-π, π]`.
+    Atan2,
+    /// `min(a, b)` (NaN if either is NaN).
+    Min,
+    /// `max(a, b)` (NaN if either is NaN).
+    Max,
 }
 
 impl BinOp {
@@ -25,7 +31,28 @@ impl BinOp {
             #[allow(clippy::float_cmp)]
             BinOp::Pow if b == 2.0 => a * a,
             BinOp::Pow => a.powf(b),
+            BinOp::Atan2 => a.atan2(b),
+            BinOp::Min | BinOp::Max if a.is_nan() || b.is_nan() => f64::NAN,
+            BinOp::Min => a.min(b),
+            BinOp::Max => a.max(b),
         }
+    }
+
+    /// The function name of an operator written as a call (`atan2(a, b)`), if it is one.
+    pub(super) fn function_name(self) -> Option<&'static str> {
+        match self {
+            BinOp::Atan2 => Some("atan2"),
+            BinOp::Min => Some("min"),
+            BinOp::Max => Some("max"),
+            _ => None,
+        }
+    }
+
+    /// The two-argument function with this name, if any.
+    pub(super) fn from_function_name(name: &str) -> Option<BinOp> {
+        [BinOp::Atan2, BinOp::Min, BinOp::Max]
+            .into_iter()
+            .find(|op| op.function_name() == Some(name))
     }
 
     fn symbol(self) -> &'static str {
@@ -35,6 +62,7 @@ impl BinOp {
             BinOp::Mul => "*",
             BinOp::Div => "/",
             BinOp::Pow => "^",
+            BinOp::Atan2 | BinOp::Min | BinOp::Max => ", ",
         }
     }
 }
@@ -99,7 +127,12 @@ pub(super) fn call(f: Func, a: Tree) -> Tree {
 
 pub(super) fn bin(op: BinOp, a: Tree, b: Tree) -> Tree {
     if let (Tree::Const(x), Tree::Const(y)) = (&a, &b) {
-        let v = op.apply(*x, *y);
+        // Fold a power exactly as the compiled program evaluates it (`powi` for a small
+        // integer exponent), so folding never changes a value.
+        let v = match integer_exponent(&b) {
+            Some(n) if op == BinOp::Pow && !is(&b, 2.0) => x.powi(n),
+            _ => op.apply(*x, *y),
+        };
         if v.is_finite() {
             return Tree::Const(v);
         }
@@ -158,6 +191,7 @@ pub(super) fn bin(op: BinOp, a: Tree, b: Tree) -> Tree {
                 raw(op, a, b)
             }
         }
+        BinOp::Atan2 | BinOp::Min | BinOp::Max => raw(op, a, b),
     }
 }
 
@@ -210,6 +244,23 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                         mul(t.clone(), inner)
                     }
                 },
+                // (b·da − a·db)/(a² + b²)
+                BinOp::Atan2 => div(
+                    sub(mul(b.clone(), da), mul(a.clone(), db)),
+                    add(pow(a, Tree::Const(2.0)), pow(b, Tree::Const(2.0))),
+                ),
+                // min(a, b) = (a + b − |a − b|)/2, max(a, b) = (a + b + |a − b|)/2, so
+                // the derivative is (da + db ∓ sign(a − b)·(da − db))/2.
+                BinOp::Min | BinOp::Max => {
+                    let s = mul(call(Func::Sign, sub(a, b)), sub(da.clone(), db.clone()));
+                    let sum = add(da, db);
+                    let inner = if *op == BinOp::Min {
+                        sub(sum, s)
+                    } else {
+                        add(sum, s)
+                    };
+                    mul(Tree::Const(0.5), inner)
+                }
             }
         }
         Tree::Call(f, a) => {
@@ -228,6 +279,14 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                 Func::Abs => mul(call(Func::Sign, a), da),
                 Func::Sign => Tree::Const(0.0),
                 Func::Tanh => mul(sub(Tree::Const(1.0), pow(t.clone(), Tree::Const(2.0))), da),
+                Func::Atan => div(da, add(Tree::Const(1.0), pow(a, Tree::Const(2.0)))),
+                Func::Asin | Func::Acos => {
+                    let root = call(Func::Sqrt, sub(Tree::Const(1.0), pow(a, Tree::Const(2.0))));
+                    let da = if *f == Func::Asin { da } else { neg(da) };
+                    div(da, root)
+                }
+                Func::Sinh => mul(call(Func::Cosh, a), da),
+                Func::Cosh => mul(call(Func::Sinh, a), da),
             }
         }
     }
@@ -253,6 +312,22 @@ pub(super) fn remap(t: &Tree, map: &[Option<usize>]) -> Tree {
         Tree::Neg(a) => Tree::Neg(Box::new(remap(a, map))),
         Tree::Call(f, a) => Tree::Call(*f, Box::new(remap(a, map))),
         Tree::Bin(op, a, b) => raw(*op, remap(a, map), remap(b, map)),
+    }
+}
+
+/// Replace every variable `i` with `values[i] = Some(c)` by the constant `c`, folding
+/// through the simplifying constructors (a folded result that is not finite stays a
+/// node, as in parsing).
+pub(super) fn substitute(t: &Tree, values: &[Option<f64>]) -> Tree {
+    match t {
+        Tree::Const(c) => Tree::Const(*c),
+        Tree::Var(i) => match values.get(*i).copied().flatten() {
+            Some(c) if c.is_finite() => Tree::Const(c),
+            _ => Tree::Var(*i),
+        },
+        Tree::Neg(a) => neg(substitute(a, values)),
+        Tree::Call(f, a) => call(*f, substitute(a, values)),
+        Tree::Bin(op, a, b) => bin(*op, substitute(a, values), substitute(b, values)),
     }
 }
 
@@ -323,6 +398,7 @@ fn precedence(t: &Tree) -> u8 {
         Tree::Bin(BinOp::Add | BinOp::Sub, ..) => SUM,
         Tree::Bin(BinOp::Mul | BinOp::Div, ..) => PRODUCT,
         Tree::Bin(BinOp::Pow, ..) => POWER,
+        Tree::Bin(BinOp::Atan2 | BinOp::Min | BinOp::Max, ..) => ATOM,
     }
 }
 
@@ -361,11 +437,20 @@ pub(super) fn write_tree(t: &Tree, names: &[String], f: &mut fmt::Formatter<'_>)
             f.write_str(func.name())?;
             write_operand(a, true, names, f)
         }
+        Tree::Bin(op, a, b) if op.function_name().is_some() => {
+            f.write_str(op.function_name().unwrap_or("?"))?;
+            f.write_str("(")?;
+            write_tree(a, names, f)?;
+            f.write_str(", ")?;
+            write_tree(b, names, f)?;
+            f.write_str(")")
+        }
         Tree::Bin(op, a, b) => {
             let (left_min, right_min) = match op {
                 BinOp::Add | BinOp::Sub => (SUM, PRODUCT),
                 BinOp::Mul | BinOp::Div => (PRODUCT, POWER),
                 BinOp::Pow => (ATOM, POWER),
+                BinOp::Atan2 | BinOp::Min | BinOp::Max => (0, 0),
             };
             write_operand(a, precedence(a) < left_min, names, f)?;
             f.write_str(op.symbol())?;

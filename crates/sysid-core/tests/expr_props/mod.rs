@@ -30,6 +30,9 @@ fn text(t: &T) -> String {
             T::C(..) | T::V(_) | T::Neg(_) => format!("-{}", text(a)),
             _ => format!("-({})", text(a)),
         },
+        T::Bin('a', a, b) => format!("atan2({}, {})", text(a), text(b)),
+        T::Bin('m', a, b) => format!("min({}, {})", text(a), text(b)),
+        T::Bin('M', a, b) => format!("max({}, {})", text(a), text(b)),
         T::Bin(op, a, b) => format!("({}){op}({})", text(a), text(b)),
         T::F(f, a) => format!("{}({})", f.name(), text(a)),
     }
@@ -61,6 +64,10 @@ fn value(t: &T, v: &[f64]) -> f64 {
                 '-' => a - b,
                 '*' => a * b,
                 '/' => a / b,
+                'a' => a.atan2(b),
+                'm' | 'M' if a.is_nan() || b.is_nan() => f64::NAN,
+                'm' => a.min(b),
+                'M' => a.max(b),
                 _ if b == 2.0 => a * a,
                 _ if constant(tb) && b.fract() == 0.0 && b.abs() <= 16.0 => a.powi(b as i32),
                 _ => a.powf(b),
@@ -80,6 +87,11 @@ fn value(t: &T, v: &[f64]) -> f64 {
                 Func::Sign if a == 0.0 => 0.0,
                 Func::Sign => a.signum(),
                 Func::Tanh => a.tanh(),
+                Func::Atan => a.atan(),
+                Func::Asin => a.asin(),
+                Func::Acos => a.acos(),
+                Func::Sinh => a.sinh(),
+                Func::Cosh => a.cosh(),
             }
         }
     }
@@ -95,7 +107,7 @@ fn tree() -> impl Strategy<Value = T> {
         prop_oneof![
             inner.clone().prop_map(|a| T::Neg(Box::new(a))),
             (
-                proptest::sample::select(vec!['+', '-', '*', '/', '^']),
+                proptest::sample::select(vec!['+', '-', '*', '/', '^', 'a', 'm', 'M']),
                 inner.clone(),
                 inner.clone()
             )
@@ -167,7 +179,7 @@ fn central(e: &Expr, v: &[f64], i: usize) -> f64 {
 /// the finite-difference step (≈ 1e-5).
 type Kink = fn(f64, f64) -> bool;
 const SMOOTH: Kink = |_, _| false;
-const CASES: [(&str, Kink); 14] = [
+const CASES: [(&str, Kink); 22] = [
     ("sin(x*y) + x", SMOOTH),
     ("cos(x^2 - y)", SMOOTH),
     ("tan(x/3)*y", SMOOTH),
@@ -186,6 +198,16 @@ const CASES: [(&str, Kink); 14] = [
     ("2^(x*y) - 1e-3*x", SMOOTH),
     ("(x^2 + 1)^-1.5 - -x/(3 + y)^3", SMOOTH),
     ("sin(x) - x + y*cos(x)", SMOOTH),
+    ("atan(3*x*y) - atan(x)", SMOOTH),
+    ("asin(x/2.5)*y + acos(y/2.5 - 0.1)", SMOOTH),
+    ("sinh(x - y) + cosh(x*y/2)", SMOOTH),
+    ("atan2(y + 3, x)", SMOOTH),
+    ("atan2(x*y - 0.5, 1 + y^2)*x", SMOOTH),
+    ("min(x, y^2)*x + max(x*y, 0.5)", |x, y| {
+        (x - y * y).abs() < 1e-3 || (x * y - 0.5).abs() < 1e-3
+    }),
+    ("0.3*atan(100*x) + 0.1*y", SMOOTH),
+    ("sgn(x - 0.5)*ln(2 + y)", |x, _| (x - 0.5).abs() < 1e-3),
 ];
 
 proptest! {

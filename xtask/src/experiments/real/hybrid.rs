@@ -133,6 +133,8 @@ fn model_spec(spec: &grey::GreySpec, fit: &grey::GreyFit, noise: f64) -> ModelSp
             })
             .collect(),
         intersample: spec.intersample,
+        parameters: Vec::new(),
+        mechanics: None,
     }
 }
 
