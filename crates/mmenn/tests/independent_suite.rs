@@ -26,9 +26,9 @@ use mmenn::discover::{DiscoverOptions, run_discover};
 use serde_json::Value;
 
 /// Regression floor: the number of cases that passed on the code when it was last set
-/// (`fixtures/discovery_suite/README.md`, session 7: 40 of 40; one case of margin). Issue 15's target
+/// (`fixtures/discovery_suite/README.md`, session 8: 41 of 41; one case of margin). Issue 15's target
 /// is ≥ 90 % of the cases; the lead raises this floor as the verdicts improve.
-const PASS_FLOOR: usize = 39;
+const PASS_FLOOR: usize = 40;
 
 /// The suite must not pass vacuously.
 const MIN_CASES: usize = 24;
