@@ -290,7 +290,7 @@ pub(crate) fn gaussian_noise(
 /// One bootstrap copy of `data`: `model` simulated from `x0` by `integrator`, plus
 /// Gaussian noise of `variance` from stream `stream + e` of `seed`; missing samples stay
 /// missing.
-fn draw(
+pub(crate) fn draw(
     model: &TermModel,
     data: &Dataset,
     x0: &[Vec<f64>],

@@ -15,6 +15,7 @@ pub mod roles;
 pub mod samples;
 mod screen;
 pub mod select;
+pub mod standin;
 pub mod stats;
 #[cfg(test)]
 mod test_support;
@@ -48,4 +49,5 @@ pub use samples::{Samples, centred_corrections, samples_from_estimate};
 pub use select::{
     Design, Screened, SelectedTerm, Selection, SelectionConfig, Step, StepAction, select,
 };
+pub use standin::{StandIn, StandInConfig, gains as stand_in_gains, stand_in};
 pub use transfer::{conserved_variant, refine_with_transfers, routings, transfer_candidates};

@@ -22,6 +22,7 @@ use crate::localise::{FreeRun, LocaliseConfig, localise};
 use crate::propose::{DiscoveryConfig, FoundEffect, Verdict, propose};
 use crate::refine::{Holdout, RefineCandidate, RefineConfig, Refinement, Search};
 use crate::samples::{Samples, samples_from_estimate};
+use crate::standin::{StandIn, StandInConfig};
 use crate::{
     CalibrationConfig, Effect, InitialState, LibraryConfig, OutputWeights, StateRoles,
     build_library, calibrate, measured_values,
@@ -125,6 +126,9 @@ pub struct WorkflowConfig {
     pub holdout_fraction: f64,
     /// Whether the noise variance is given (`true`) or estimated by MME (`false`).
     pub noise_given: bool,
+    /// Reference draws of the flexible stand-in ([`crate::standin`]), which a `found` or
+    /// `none` verdict must also pass; 0 skips it. Default 12.
+    pub stand_in_draws: usize,
 }
 
 impl Default for WorkflowConfig {
@@ -137,6 +141,7 @@ impl Default for WorkflowConfig {
             min_d_drop: 0.1,
             holdout_fraction: 0.5,
             noise_given: false,
+            stand_in_draws: 12,
         }
     }
 }
@@ -188,6 +193,14 @@ pub struct Outcome {
     pub first_estimate: MmeEstimate,
     /// MME with the final model, when it ran on exactly that model.
     pub final_estimate: Option<MmeEstimate>,
+    /// The flexible stand-in on MME's `d̂` with the final model and its reference (see
+    /// [`crate::standin`]): it decides between `found`/`none` and `unexplained`, and is
+    /// evidence of what remains on an `unexplained` verdict when MME's estimate with the
+    /// final model is at hand. `None` when it did not run: an `unexplained` verdict
+    /// without that estimate, switched off, or failed (`stand_in_note` says why).
+    pub stand_in: Option<StandIn>,
+    /// Why the stand-in did not decide, when it ran and failed.
+    pub stand_in_note: Option<String>,
 }
 
 /// What judges a round's model: the records and initial-state guesses of its free-run
@@ -464,7 +477,7 @@ fn x0_of(est: &MmeEstimate) -> Vec<Vec<f64>> {
 ///
 /// MME's own failure on the assumed model is returned as the caller's error; after an
 /// accepted round, a model MME cannot handle ends the search.
-pub fn run<M: Mme>(
+pub fn run<M: Mme + Sync>(
     mme: &M,
     model: &TermModel,
     units: &BTreeMap<String, String>,
@@ -993,6 +1006,59 @@ pub fn run<M: Mme>(
             (None, None) => first_verdict.unwrap_or(Verdict::None),
         }
     };
+    // The flexible stand-in: a verdict that says nothing is left must also leave MME
+    // nothing predictable to correct.
+    let mut verdict = verdict;
+    let mut stand_in = None;
+    let mut stand_in_note = None;
+    // On an `unexplained` verdict it runs too when MME's estimate with the final model is
+    // at hand, as evidence of what remains (a predictable d̂ points at a missing law of
+    // the states and inputs; an unpredictable one at noise or disturbances); it cannot
+    // change that verdict.
+    let decides = matches!(verdict, Verdict::Found | Verdict::None);
+    if config.stand_in_draws > 0 && (decides || d_after_known) {
+        observer.stage(rounds.len(), "flexible stand-in on d̂ (reference draws)");
+        let final_est = if d_after_known {
+            Ok(result.clone())
+        } else {
+            mme.estimate(&current, data, None)
+                .or_else(|_| mme.estimate(&current, data, Some(&x0_of(&result))))
+        };
+        match final_est {
+            Ok(est) => {
+                let standin_config = StandInConfig {
+                    draws: config.stand_in_draws,
+                    trim_fraction: config.trim_fraction,
+                    seed: config.seed.wrapping_add(29),
+                    ..StandInConfig::default()
+                };
+                let rerun = |sim: &Dataset, x0: &[Vec<f64>]| {
+                    mme.estimate_fixed(&current, sim, &est.w, &est.noise_variance, None)
+                        .or_else(|_| {
+                            mme.estimate_fixed(&current, sim, &est.w, &est.noise_variance, Some(x0))
+                        })
+                        .ok()
+                };
+                match crate::standin::stand_in(&current, data, &est, &standin_config, rerun) {
+                    Ok(s) => {
+                        if decides && !s.accepts() {
+                            verdict = Verdict::Unexplained;
+                            unconfirmed.append(&mut effects);
+                        }
+                        stand_in = Some(s);
+                    }
+                    Err(e) => stand_in_note = Some(format!("the stand-in could not run: {e}")),
+                }
+                if !d_after_known {
+                    result = est;
+                    d_after_known = true;
+                }
+            }
+            Err(e) => {
+                stand_in_note = Some(format!("MME with the final model failed: {e}"));
+            }
+        }
+    }
     Ok(Outcome {
         verdict,
         effects,
@@ -1007,5 +1073,7 @@ pub fn run<M: Mme>(
         added,
         first_estimate: first,
         final_estimate: d_after_known.then_some(result),
+        stand_in,
+        stand_in_note,
     })
 }

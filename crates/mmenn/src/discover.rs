@@ -95,6 +95,17 @@ pub struct DiscoverSummary {
     /// another set of terms (partial observation), the two explanations.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ambiguity: Option<Ambiguity>,
+    /// The flexible stand-in on MME's `d̂` with the final model and its reference
+    /// (`discovery::standin`); a `found` or `none` verdict needs it accepted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stand_in: Option<discovery::StandIn>,
+    /// Why the stand-in did not decide, when it did not.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stand_in_note: Option<String>,
+    /// What the user should know about the estimated noise variance of the assumed
+    /// model's MME run (`crate::estimate::noise_warnings`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
     /// The augmented model file.
     pub model: String,
     /// Every round.
@@ -106,6 +117,9 @@ pub struct DiscoverSummary {
 struct MmeCore<'a> {
     spec: &'a ModelSpec,
     options: &'a EstimateOptions,
+    /// The noise report of the first estimate (MME with the assumed model), kept for
+    /// the warnings about an estimated noise variance.
+    first_noise: std::sync::Mutex<Option<mme_core::NoiseReport>>,
 }
 
 impl workflow::Mme for MmeCore<'_> {
@@ -121,7 +135,13 @@ impl workflow::Mme for MmeCore<'_> {
         if let Some(x0s) = start {
             config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
         }
-        Ok(estimate_term_model(model, data, &config)?.estimate)
+        let out = estimate_term_model(model, data, &config)?;
+        if let Ok(mut first) = self.first_noise.lock()
+            && first.is_none()
+        {
+            *first = Some(out.noise.clone());
+        }
+        Ok(out.estimate)
     }
 
     fn estimate_fixed(
@@ -215,6 +235,7 @@ pub fn run_discover(
     let mme = MmeCore {
         spec: &original,
         options: &opts.estimate,
+        first_noise: std::sync::Mutex::new(None),
     };
     let observer = Stages { on: opts.progress };
     let outcome = workflow::run(
@@ -265,6 +286,15 @@ pub fn run_discover(
         judge_note: outcome.judge_note,
         passengers: outcome.passengers,
         ambiguity: outcome.ambiguity,
+        stand_in: outcome.stand_in,
+        stand_in_note: outcome.stand_in_note,
+        warnings: mme
+            .first_noise
+            .lock()
+            .ok()
+            .and_then(|n| n.clone())
+            .map(|n| crate::estimate::noise_warnings(&outcome.first_estimate.output_names, &n))
+            .unwrap_or_default(),
         gap: GapPair { before, after },
         validation_gap,
         model: "model.discovered.toml".into(),

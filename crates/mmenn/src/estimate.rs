@@ -232,6 +232,43 @@ pub struct EstimateSummary {
     pub robust_passes: Option<usize>,
     /// Files written.
     pub files: Vec<String>,
+    /// What the user should know about these numbers (see [`noise_warnings`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
+}
+
+/// How much larger than the difference-based scatter an estimated noise variance may be
+/// before [`noise_warnings`] says the model's misfit was probably taken as noise.
+pub const NOISE_MISFIT_RATIO: f64 = 10.0;
+
+/// Warnings about an estimated (`auto`) noise variance: a channel whose likelihood
+/// estimate exceeds [`NOISE_MISFIT_RATIO`] × the difference-based one (normalised second
+/// differences, which see the sample-to-sample scatter and over-, not under-, estimate
+/// the noise when the signal itself curves between samples). There the likelihood has
+/// explained a deterministic misfit of the model as measurement noise, `W` is small and
+/// `d̂` says little; giving the sensor's noise variance is the remedy. Nothing for a
+/// given noise variance.
+pub fn noise_warnings(names: &[String], noise: &mme_core::NoiseReport) -> Vec<String> {
+    if noise.difference_based.len() != noise.variance.len() {
+        return Vec::new();
+    }
+    names
+        .iter()
+        .zip(noise.variance.iter().zip(&noise.difference_based))
+        .filter(|(_, (ml, diff))| {
+            diff.is_finite() && **diff > 0.0 && ml.is_finite() && **ml > NOISE_MISFIT_RATIO * **diff
+        })
+        .map(|(name, (ml, diff))| {
+            format!(
+                "{name}: the estimated noise variance {ml:.3e} is {:.0}× the sample-to-sample \
+                 scatter ({diff:.3e}, from second differences): the model's misfit was \
+                 probably taken as measurement noise, which leaves W small and d̂ near \
+                 zero. Give the sensor's noise variance (noise_variance = [...]) instead \
+                 of \"auto\".",
+                ml / diff
+            )
+        })
+        .collect()
 }
 
 fn by_name(names: &[String], v: &[f64]) -> BTreeMap<String, f64> {
@@ -581,6 +618,7 @@ pub fn compute_estimate(
         outliers,
         robust_passes,
         files,
+        warnings: noise_warnings(&est.output_names, &result.noise),
     };
     Ok(EstimateOutcome {
         summary,
@@ -659,6 +697,9 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         "Noise variance: {}.\n\n",
         crate::words::noise_method(s.noise_method)
     ));
+    for w in &s.warnings {
+        r.push_str(&format!("**Warning.** {w}\n\n"));
+    }
     match &s.w_search {
         Some(w) => r.push_str(&format!(
             "W (weight of the model correction d̂, per unit time) chosen by the covariance \
@@ -714,4 +755,32 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
     );
     r.push_str(&crate::html::figures_section(&s.files));
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn report(variance: Vec<f64>, difference_based: Vec<f64>) -> mme_core::NoiseReport {
+        mme_core::NoiseReport {
+            method: mme_core::NoiseMethod::MarginalLikelihood,
+            variance,
+            difference_based,
+            likelihood_alpha: Some(1.0),
+            neg2_log_likelihood: Some(0.0),
+            evaluations: 1,
+        }
+    }
+
+    /// Only the channel whose likelihood estimate exceeds 10× the scatter is named; a
+    /// given noise variance (no difference-based estimate) warns about nothing.
+    #[test]
+    fn noise_warnings_name_the_channel_that_took_the_misfit() {
+        let names = vec!["y".to_string(), "z".to_string()];
+        let w = noise_warnings(&names, &report(vec![1.2e-4, 2e-6], vec![1e-6, 1e-6]));
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].starts_with("y:") && w[0].contains("120×"), "{}", w[0]);
+        assert!(noise_warnings(&names, &report(vec![9e-6, 1e-6], vec![1e-6, 1e-6])).is_empty());
+        assert!(noise_warnings(&names, &report(vec![1.0, 1.0], vec![])).is_empty());
+    }
 }

@@ -307,10 +307,21 @@ fn run_case(case: &Case) -> Outcome {
     let verdict = v["verdict"].as_str().unwrap_or("?").to_string();
     let effects = claims(&v["effects"]);
     let unconfirmed = claims(&v["unconfirmed"]);
-    let (pass, reason) = match score(case, &verdict, &effects) {
+    let (pass, mut reason) = match score(case, &verdict, &effects) {
         Ok(()) => (true, String::new()),
         Err(r) => (false, r),
     };
+    // What decided, for the log: the judged cost and the stand-in against their
+    // thresholds.
+    let judged = |key: &str| {
+        let j = &v[key];
+        match (j["statistic"].as_f64(), j["threshold"].as_f64()) {
+            (Some(s), Some(t)) => format!(" {key} {s:.3}/{t:.3}"),
+            _ => String::new(),
+        }
+    };
+    reason.push_str(&judged("judgement"));
+    reason.push_str(&judged("stand_in"));
     Outcome {
         verdict,
         effects,

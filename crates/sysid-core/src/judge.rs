@@ -365,7 +365,14 @@ fn initial_state<D: Dynamics + ?Sized>(
             check_state("given initial state", x, n)?;
             return Ok((x.clone(), "given".to_string()));
         }
-        InitialRule::Fit { window } => window.unwrap_or(exp.len()).clamp(1, exp.len()),
+        InitialRule::Fit { window: Some(0) } => {
+            return Err(CoreError::InvalidArgument {
+                name: "initial-state window",
+                value: 0.0,
+                reason: "must be at least 1 sample (None fits over the whole record)",
+            });
+        }
+        InitialRule::Fit { window } => window.unwrap_or(exp.len()).min(exp.len()).max(1),
     };
     if obs.names.is_empty() {
         return Ok(match &opts.stored_state {
@@ -612,6 +619,42 @@ mod tests {
         assert_eq!(m.samples, 400);
         assert_eq!((j.scored.first, j.scored.end), (0, 400));
         assert!(j.x0_rule.contains("first 200 of 400"));
+    }
+
+    /// A window of 0 samples is an error naming the window, not silently one sample.
+    #[test]
+    fn an_empty_initial_state_window_is_an_error() {
+        let model = oscillator();
+        let exp = record(&model, &[0.7, -1.3], 50);
+        let obs = Observation::outputs(&model);
+        let err = judge_free_run(
+            &model,
+            &exp,
+            &obs,
+            &InitialRule::Fit { window: Some(0) },
+            &JudgeOptions::default(),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(
+                err,
+                CoreError::InvalidArgument {
+                    name: "initial-state window",
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        // A window longer than the record fits over the whole record.
+        let j = judge_free_run(
+            &model,
+            &exp,
+            &obs,
+            &InitialRule::Fit { window: Some(500) },
+            &JudgeOptions::default(),
+        )
+        .unwrap();
+        assert!(j.x0_rule.contains("50"), "{}", j.x0_rule);
     }
 
     #[test]

@@ -41,6 +41,15 @@ fn at_least_one(text: &str) -> std::result::Result<usize, String> {
     }
 }
 
+/// Reference draws: 0 (off) or at least 4, at most 1000.
+fn draws(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v == 0 || (4..=1000).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} draws: 0 (off) or 4 to 1000")),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
 /// Sub-steps per sample interval: 1 to `MAX_SUBSTEPS`.
 fn substeps(text: &str) -> std::result::Result<usize, String> {
     let max = mmenn::mme_core::discretize::MAX_SUBSTEPS;
@@ -279,9 +288,14 @@ struct DiscoverArgs {
     /// Most discover–augment rounds.
     #[arg(long, default_value_t = 3)]
     max_rounds: usize,
-    /// Seed of the noise-floor simulation.
+    /// Seed of the noise-floor simulation, the bootstrap judge and the stand-in's draws.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Reference draws of the flexible stand-in on d̂ (MME reruns on simulated copies of
+    /// the data); 0 skips it, and then a `found`/`none` verdict rests on the bootstrap
+    /// judge alone.
+    #[arg(long, default_value_t = 12, value_parser = draws)]
+    stand_in_draws: usize,
     /// Output directory.
     #[arg(long, required_unless_present = "list_effects")]
     out: Option<PathBuf>,
@@ -646,6 +660,9 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
         "  W diagonal: {}",
         mmenn::words::named_values(&s.w_by_correction)
     );
+    for w in &s.warnings {
+        println!("  warning: {w}");
+    }
     for o in s.outliers.iter().take(10) {
         println!(
             "  outlier: experiment {}, {} at sample {} (t = {} s): {} is {:.1} σ out",
@@ -876,6 +893,7 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
             max_rounds: a.max_rounds,
             seed: a.seed,
             holdout_fraction: a.holdout_fraction,
+            stand_in_draws: a.stand_in_draws,
             ..Default::default()
         },
         progress: !quiet,
@@ -888,6 +906,9 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
     let s = mmenn::discover::run_discover(&data, model, &val, &opts, staged.path())?;
     staged.commit()?;
     println!("verdict: {}", mmenn::words::verdict(s.verdict));
+    for w in &s.warnings {
+        println!("  warning: {w}");
+    }
     for e in &s.effects {
         println!(
             "  {} in {}: {} × {:.6} (free-run calibrated; {})",
@@ -904,12 +925,31 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
             Some(false) => " (95 % interval includes 0: not supported by the data)",
             None => "",
         };
+        let why = if s.stand_in.as_ref().is_some_and(|st| !st.accepts())
+            && s.judgement.as_ref().is_some_and(|j| j.accepts())
+        {
+            "d̂ still predictable"
+        } else {
+            "cost stays above the noise level"
+        };
         println!(
-            "  not claimed (cost stays above the noise level): {} in {}: {} × {:.6}{support}",
+            "  not claimed ({why}): {} in {}: {} × {:.6}{support}",
             e.name,
             e.equations(),
             e.term,
             e.coefficient
+        );
+    }
+    if let Some(st) = &s.stand_in {
+        println!(
+            "  flexible stand-in on d̂: held-out gain {:.4} against threshold {:.4} ({})",
+            st.statistic,
+            st.threshold,
+            if st.accepts() {
+                "nothing predictable left"
+            } else {
+                "structure remains"
+            }
         );
     }
     let show = |label: &str, g: &mmenn::discover::GapPair| {
