@@ -147,6 +147,23 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
     move |source| MmennError::Core { context, source }
 }
 
+/// The physical model of a loaded model file; any other kind is an error naming the file.
+fn physical_of(model: &LoadedModel) -> Result<&PhysicalModel> {
+    match &model.dynamics {
+        ModelDynamics::Physical(m) => Ok(m),
+        _ => Err(MmennError::Model {
+            path: model.path.clone(),
+            line: None,
+            column: None,
+            problem: ModelProblem::MissingKey {
+                key: "parameters",
+                why: "grey-box estimation calibrates the free parameters of a [parameters] \
+                      table",
+            },
+        }),
+    }
+}
+
 /// Read the model and data files, [`compute_greyest`], [`write_greyest`] into `out`.
 pub fn run_greyest(
     model_path: &Path,
@@ -156,6 +173,7 @@ pub fn run_greyest(
     progress: &dyn ProgressSink,
 ) -> Result<GreyestOutcome> {
     let model = LoadedModel::read(model_path)?;
+    physical_of(&model)?;
     let mut records = Vec::with_capacity(data.len());
     for p in data {
         let table = read_table(p)?;
@@ -191,21 +209,7 @@ pub fn compute_greyest(
     opts: &GreyestOptions,
     progress: &dyn ProgressSink,
 ) -> Result<GreyestOutcome> {
-    let physical = match &model.dynamics {
-        ModelDynamics::Physical(m) => m,
-        _ => {
-            return Err(MmennError::Model {
-                path: model.path.clone(),
-                line: None,
-                column: None,
-                problem: ModelProblem::MissingKey {
-                    key: "parameters",
-                    why: "grey-box estimation calibrates the free parameters of a \
-                          [parameters] table",
-                },
-            });
-        }
-    };
+    let physical = physical_of(model)?;
     let lin = &model.spec.linear;
     let (variances, weighting) = match &model.spec.noise_variance {
         NoiseVariance::Given(v) => (
