@@ -175,6 +175,7 @@ fn unidentifiable_rigid_body_parameters_are_reported_as_such() {
     assert!(report.contains("Not identifiable"), "{report}");
 }
 
+#[allow(clippy::result_large_err)] // the facade's own error type, as its workflows return it
 fn run(model_text: &str, data: &[PathBuf], dir: &Path) -> mmenn::Result<()> {
     let model = write(dir, "model.toml", model_text);
     run_greyest(

@@ -706,7 +706,7 @@ fn covariance(jac: &DMatrix<f64>, keep: &[usize], ratio: f64) -> (DMatrix<f64>, 
         let v = eig.eigenvectors.column(e);
         if lambda > tol {
             rank += 1;
-            inv += (&v * v.transpose()) / lambda;
+            inv.ger(1.0 / lambda, &v, &v, 1.0);
         } else {
             for (j, flag) in unidentified.iter_mut().enumerate() {
                 // A share of more than 1e-3 in a null direction: not pinned down.

@@ -4,6 +4,9 @@
 //! Jacobian from the tangent RK4 step (`∂x/∂x0` and `∂x/∂p` through
 //! [`ParametricDynamics::parameter_jacobian`]).
 
+// Index loops over tangent columns read like the Jacobian's layout they fill.
+#![allow(clippy::needless_range_loop)]
+
 use std::cell::RefCell;
 
 use nalgebra::DMatrix;
