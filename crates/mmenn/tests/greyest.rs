@@ -253,3 +253,61 @@ fn bad_input_is_a_typed_error() {
         .unwrap_or_default();
     assert!(e.contains("nan_input.csv") && e.contains("tau"), "{e}");
 }
+
+#[test]
+fn cli_calibrates_two_records_by_multiple_shooting_then_free_run() {
+    // Both independent records at once (each with its own start state), 500-sample
+    // shooting segments first; the same tolerance as the free-run test.
+    let dir = scratch("cli");
+    let model = write(&dir, "start.toml", &perturbed(false));
+    let out = dir.join("out");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .args(["--quiet", "greyest", "--model"])
+        .arg(&model)
+        .arg("--data")
+        .arg(fixture("est.csv"))
+        .arg(fixture("val.csv"))
+        .args(["--shooting", "500", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("free-run fit on"), "{stdout}");
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("greyest.json")).unwrap_or_default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let stages = json["stages"].as_array().cloned().unwrap_or_default();
+    assert_eq!(stages.len(), 2, "{json}");
+    assert!(stages.iter().all(|s| s["converged"] == true), "{json}");
+    assert_eq!(json["records"].as_array().map(Vec::len), Some(2));
+    for (k, (name, truth)) in TRUTH.iter().enumerate() {
+        let p = json["parameters"]
+            .as_array()
+            .and_then(|ps| ps.iter().find(|p| p["name"] == *name))
+            .unwrap_or_else(|| panic!("{name}"));
+        let value = p["value"].as_f64().unwrap_or(f64::NAN);
+        let sigma = p["sigma"].as_f64().unwrap_or(f64::NAN);
+        let relative = if k < 4 { 0.02 } else { 0.05 };
+        assert!(
+            (value - truth).abs() <= (4.0 * sigma).max(relative * truth),
+            "{name}: {value} ± {sigma} vs {truth}"
+        );
+    }
+    let shown = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .arg("show")
+        .arg(out.join("model.toml"))
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let text = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        text.lines()
+            .any(|l| l.trim_start().starts_with("fc2 ") && l.contains('±')),
+        "{text}"
+    );
+}
