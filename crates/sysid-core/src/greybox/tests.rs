@@ -320,3 +320,113 @@ fn missing_samples_are_skipped() {
         fit.parameters
     );
 }
+
+/// A pendulum with a gravity gain, viscous and smooth Coulomb friction as parameters:
+/// `k` bounded on both sides, `c` below only, `fc` unbounded.
+fn pendulum() -> PhysicalModel {
+    let names = ModelNames {
+        states: vec!["theta".into(), "omega".into()],
+        inputs: vec!["u".into()],
+        outputs: vec!["theta".into()],
+        corrections: Vec::new(),
+    };
+    let linear = LinearModel::with_names(
+        DMatrix::from_row_slice(2, 2, &[0.0, 1.0, 0.0, 0.0]),
+        DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
+        DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+        DMatrix::zeros(2, 0),
+        names,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut k = Parameter::new("k", 9.0);
+    k.lower = 1.0;
+    k.upper = 30.0;
+    let mut c = Parameter::new("c", 0.3);
+    c.lower = 0.0;
+    let fc = Parameter::new("fc", 0.2);
+    let term = |term| PhysicalTerm {
+        state: 1,
+        into: None,
+        effect: "force",
+        term,
+        coefficient: -1.0,
+    };
+    PhysicalModel::new(
+        linear,
+        vec![k, c, fc],
+        &[
+            term("k*sin(theta)"),
+            term("c*omega"),
+            term("fc*atan(omega/0.1)"),
+        ],
+        None,
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn the_shooting_jacobian_is_the_derivative_of_the_residuals() {
+    // Every column (transformed parameters, segment start states) and every row (output
+    // errors, continuity defects) of the exact Jacobian against central differences of
+    // the residuals, on a nonlinear model cut into three linked segments.
+    let model = pendulum();
+    let n_samples = 60;
+    let u = DMatrix::from_fn(1, n_samples, |_, k| (0.7 * k as f64 * 0.05).sin());
+    let xs = crate::integrate::simulate(
+        &model,
+        &[0.4, 0.0],
+        0.0,
+        0.05,
+        &u,
+        &crate::integrate::Integrator::Rk4 { substeps: 2 },
+        1e6,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let y = DMatrix::from_fn(1, n_samples, |_, k| xs[(0, k)] + 0.01 * (k as f64).sin());
+    let records = [Experiment::new(0.0, 0.05, u, y).unwrap_or_else(|e| panic!("{e}"))];
+    let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+    let (free, transforms, z) = free_parameters(&model).unwrap_or_else(|e| panic!("{e}"));
+    let segments = shooting_segments(&records, 20);
+    assert_eq!(segments.len(), 3);
+    let mut problem = Calibration::new(
+        &model,
+        &c,
+        vec![10.0],
+        &records,
+        free,
+        transforms,
+        segments,
+        3.0,
+        2,
+        1e6,
+    );
+    let mut theta = z;
+    // Start states off the trajectory, so the defects are not zero.
+    theta.extend_from_slice(&[0.35, 0.1, -0.2, 0.5, 0.1, -0.3]);
+    let rows = problem.rows;
+    assert_eq!(rows, 60 + 2 * 2);
+    let mut jac = DMatrix::zeros(rows, theta.len());
+    crate::least_squares::LeastSquaresProblem::jacobian(&mut problem, &theta, &[], &mut jac)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut plus = vec![0.0; rows];
+    let mut minus = vec![0.0; rows];
+    for j in 0..theta.len() {
+        let h = 1e-6 * theta[j].abs().max(1.0);
+        let mut t = theta.clone();
+        t[j] += h;
+        assert!(problem.residuals_checked(&t, &mut plus).unwrap_or(false));
+        t[j] -= 2.0 * h;
+        assert!(problem.residuals_checked(&t, &mut minus).unwrap_or(false));
+        let scale = jac.column(j).amax().max(1e-3);
+        for i in 0..rows {
+            let fd = (plus[i] - minus[i]) / (2.0 * h);
+            // Central differences: truncation O(h²·r''') and rounding O(ε·r/h) ≈ 1e-9
+            // relative; 1e-6 of the column's largest entry leaves room for both.
+            assert!(
+                (fd - jac[(i, j)]).abs() <= 1e-6 * scale,
+                "row {i}, column {j}: exact {} vs difference {fd}",
+                jac[(i, j)]
+            );
+        }
+    }
+}
