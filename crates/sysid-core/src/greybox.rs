@@ -21,7 +21,7 @@
 //! data (and whose cost surface is full of local minima), are calibrated this way. The
 //! estimates, their uncertainty and the fit always come from the free-run solve.
 //!
-//! **Bounds** by a change of variable ([`transform`]): a parameter whose optimum lies on
+//! **Bounds** by a change of variable (`greybox/transform.rs`): a parameter whose optimum lies on
 //! its bound is reported there ([`ActiveBound`]) and held fixed in the covariance.
 //!
 //! **Uncertainty.** With `J` the Jacobian of the weighted residuals along the physical
