@@ -8,6 +8,7 @@ pub mod discover;
 pub mod error;
 pub mod estimate;
 pub mod fit;
+pub mod greyest;
 pub mod html;
 pub mod model;
 pub mod model_file;

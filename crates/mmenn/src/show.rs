@@ -250,7 +250,11 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
         ));
     }
     if !spec.terms.is_empty() && sigmas.is_empty() {
-        lines.push("(no ±σ: the file holds none and no discovery.json is beside it)".into());
+        lines.push(if spec.parameters.iter().any(|p| p.sigma.is_some()) {
+            "(term coefficients without ±σ: the ±σ above are the parameters')".into()
+        } else {
+            "(no ±σ: the file holds none and no discovery.json is beside it)".into()
+        });
     }
     lines
 }

@@ -17,6 +17,10 @@ mod fit_predict_example;
 #[path = "../examples/compare.rs"]
 mod compare_example;
 
+#[allow(dead_code)]
+#[path = "../examples/greyest.rs"]
+mod greyest_example;
+
 use mmenn::ModelKind;
 
 /// MME's `d̂` follows the true missing spring force of the cubic MSD (fit % against the
@@ -72,4 +76,39 @@ fn examples_fit_predict_and_compare_agree() {
         p.hybrid,
         p.assumed
     );
+}
+
+/// Grey-box estimation on the independent two-link records: every free parameter, started
+/// 30 % high, comes back within 1 % of `truth.json` (the free-run test in `greyest.rs`
+/// states the σ-based tolerance) and the free run fits both angles above 99 %.
+#[test]
+fn example_greyest() {
+    let r = greyest_example::run().unwrap();
+    let truth = [
+        ("I1", 0.0036),
+        ("I2", 0.0011),
+        ("b1", 0.004),
+        ("b2", 0.002),
+        ("fc1", 0.012),
+        ("fc2", 0.008),
+        ("lc1", 0.14),
+        ("lc2", 0.12),
+    ];
+    assert_eq!(r.estimates.len(), truth.len());
+    for (name, value) in truth {
+        let (_, start, est, sigma) = r
+            .estimates
+            .iter()
+            .find(|e| e.0 == name)
+            .unwrap_or_else(|| panic!("{name}"));
+        assert!((start / value - 1.3).abs() < 1e-12, "{name} start {start}");
+        assert!(
+            (est - value).abs() < 0.01 * value,
+            "{name}: {est} vs {value}"
+        );
+        assert!(sigma.is_some(), "{name}");
+    }
+    for (name, fit) in &r.fit_percent {
+        assert!(*fit > 99.0, "{name}: {fit} %");
+    }
 }

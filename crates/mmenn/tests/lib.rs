@@ -6,6 +6,7 @@ mod discover;
 mod examples;
 mod fit;
 mod fit_guard;
+mod greyest;
 mod hidden_effects;
 mod model;
 mod monitor;

@@ -171,6 +171,24 @@ pub enum CoreError {
         /// Number of samples.
         len: usize,
     },
+    /// A parameter estimator was given a model with nothing to estimate.
+    #[error("the model has no free parameters (all {parameters} are fixed): nothing to estimate")]
+    NoFreeParameters {
+        /// Parameters of the model.
+        parameters: usize,
+    },
+    /// A free parameter's start value is outside its bounds (or not finite).
+    #[error("parameter '{name}' starts at {value}, outside its bounds [{lower}, {upper}]")]
+    ParameterOutsideBounds {
+        /// The parameter.
+        name: String,
+        /// Its start value.
+        value: f64,
+        /// Lower bound.
+        lower: f64,
+        /// Upper bound.
+        upper: f64,
+    },
     /// Too few valid samples for the requested statistic.
     #[error("{what}: {found} valid samples, need at least {needed}")]
     TooFewSamples {

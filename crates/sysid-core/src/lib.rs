@@ -6,6 +6,7 @@ pub mod dynamics;
 pub mod error;
 pub mod estimate;
 pub mod expr;
+pub mod greybox;
 pub mod hybrid;
 pub mod initial;
 pub mod integrate;
@@ -23,6 +24,10 @@ pub use dynamics::{Correction, Dynamics, Horizon, Model, Prediction};
 pub use error::{CoreError, Result};
 pub use estimate::{ExperimentEstimate, IterationRecord, MmeEstimate, SolveReport, Termination};
 pub use expr::{Expr, ExprError, Func};
+pub use greybox::{
+    ActiveBound, GreyboxData, GreyboxFit, GreyboxOptions, ParameterEstimate, Shooting, StageReport,
+    estimate_parameters, estimate_parameters_with,
+};
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};
 pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with};

@@ -50,6 +50,15 @@ fn draws(text: &str) -> std::result::Result<usize, String> {
     }
 }
 
+/// A count that must be at least 2.
+fn at_least_two(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v >= 2 => Ok(v),
+        Ok(_) => Err("must be at least 2".into()),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
 /// Sub-steps per sample interval: 1 to `MAX_SUBSTEPS`.
 fn substeps(text: &str) -> std::result::Result<usize, String> {
     let max = mmenn::mme_core::discretize::MAX_SUBSTEPS;
@@ -224,6 +233,9 @@ enum Command {
     Predict(PredictArgs),
     /// Print any model mmenn writes as equations (names, units, ±σ where known).
     Show(ShowArgs),
+    /// Grey-box estimation: the free [parameters] of a physical model file and each
+    /// record's start state by free-run output error, with ±σ and correlations.
+    Greyest(GreyestArgs),
     /// Compare the assumed model, linear OE, NARX and MME/NN on the same data (free-run).
     Compare(CompareArgs),
     /// Find where model and data disagree, name the missing effect, add it, show the gap shrink.
@@ -499,6 +511,33 @@ fn prepared(paths: &[PathBuf], prep: &PrepArgs, out: &Path) -> Result<Vec<PathBu
 }
 
 #[derive(Debug, Args)]
+struct GreyestArgs {
+    /// Data file(s) (CSV); several files are several records, each with its own start
+    /// state.
+    #[arg(long, required = true, num_args = 1..)]
+    data: Vec<PathBuf>,
+    /// Model file (TOML) with a [parameters] table: its free parameters are estimated
+    /// within their bounds, the fixed ones are kept.
+    #[arg(long)]
+    model: PathBuf,
+    /// Multiple shooting before the free run: segments of this many samples, each from
+    /// its own start state (for long or lightly damped records). Default: free run only.
+    #[arg(long, value_name = "SAMPLES", value_parser = at_least_two)]
+    shooting: Option<usize>,
+    /// RK4 steps per sample interval, 1 to 1000.
+    #[arg(long, default_value_t = 2, value_parser = substeps)]
+    substeps: usize,
+    /// Most Levenberg–Marquardt iterations per solve.
+    #[arg(long, default_value_t = 100, value_parser = at_least_one)]
+    max_iterations: usize,
+    /// Output directory: model.toml (estimates with sigma), greyest.json, report.md.
+    #[arg(long)]
+    out: PathBuf,
+    #[command(flatten)]
+    prep: PrepArgs,
+}
+
+#[derive(Debug, Args)]
 struct EstimateArgs {
     /// Data file(s) (CSV); several files are several experiments.
     #[arg(long, required = true, num_args = 1..)]
@@ -702,6 +741,69 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
             "the estimate did not converge ({}{detail}); the results in {} are \
              written for inspection only (see report.md)",
             mmenn::words::termination(Some(ended)),
+            args.out.display()
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+#[allow(clippy::print_stdout)]
+fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
+    let opts = mmenn::greyest::GreyestOptions {
+        segment: args.shooting,
+        substeps: args.substeps,
+        max_iterations: args.max_iterations,
+    };
+    let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
+    let staged = stage(&args.out, "greyest", force, &inputs)?;
+    let data = prepared(&args.data, &args.prep, staged.path())?;
+    let outcome = mmenn::greyest::run_greyest(&args.model, &data, &opts, staged.path(), progress)?;
+    staged.commit()?;
+    let s = &outcome.summary;
+    println!("grey-box estimate ({}):", s.weighting);
+    for p in &s.parameters {
+        let sigma = match (p.sigma, p.active_bound) {
+            (Some(v), _) => format!("± {v:.3e}"),
+            (None, Some(b)) => format!("(on its {b} bound)"),
+            (None, None) => "(not identifiable)".into(),
+        };
+        println!(
+            "  {} = {:.6e} {sigma} {}  (start {:.4e})",
+            p.name,
+            p.value,
+            p.unit.as_deref().unwrap_or(""),
+            p.start
+        );
+    }
+    for r in &s.records {
+        let fits: Vec<String> = r
+            .fit_percent
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.2} %"))
+            .collect();
+        println!("  free-run fit on {}: {}", r.file, fits.join(", "));
+    }
+    for st in &s.stages {
+        println!(
+            "  {}: {} after {} iterations, cost {:.4e} -> {:.4e}",
+            st.shooting, st.termination, st.iterations, st.initial_cost, st.final_cost
+        );
+    }
+    println!(
+        "  residual variance ratio s² = {:.4}, rank {} of {}",
+        s.residual_variance_ratio, s.rank.0, s.rank.1
+    );
+    println!(
+        "wrote model.toml, greyest.json, report.md into {}",
+        args.out.display()
+    );
+    let last = &s.stages[s.stages.len() - 1];
+    if !last.converged {
+        return Err(NotConverged(format!(
+            "the free-run solve did not converge ({}); the results in {} are written for \
+             inspection only",
+            last.termination,
             args.out.display()
         ))
         .into());
@@ -1059,6 +1161,7 @@ fn main() -> ExitCode {
         Command::Fit(a) => fit(a, force, &progress),
         Command::Predict(a) => predict(a, force),
         Command::Show(a) => show(a),
+        Command::Greyest(a) => greyest(a, force, &progress),
         Command::Compare(a) => compare(a, force, &progress),
         Command::Discover(a) => discover(a, force, cli.quiet),
         Command::Monitor(c) => monitor(c, force),

@@ -1,0 +1,500 @@
+//! `mmenn greyest`: grey-box parameter estimation of a physical model file (what MATLAB's
+//! `nlgreyest` does). The free parameters of `[parameters]` (within their bounds) and the
+//! start state of every record are calibrated by free-run output error weighted by the
+//! model's noise variances, optionally after a multiple-shooting solve
+//! ([`sysid_core::greybox`]). Writes `model.toml` (the same model with the estimates and
+//! their `sigma`, which `mmenn show` prints), `greyest.json` (estimates, σ, correlations,
+//! start states, the solver reports, fit per output and record) and `report.md`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+use sysid_core::{
+    ActiveBound, Estimation, Experiment, GreyboxData, GreyboxFit, GreyboxOptions, PhysicalModel,
+    Shooting, estimate_parameters_with,
+};
+
+use crate::atomic::{ensure_dir, write_atomic};
+use crate::data_file::{read_table, table_to_experiment};
+use crate::error::{MmennError, ModelProblem, Result};
+use crate::model::{LoadedModel, ModelDynamics};
+use crate::model_file::{ModelSpec, NoiseVariance, format_model};
+use crate::progress::{NoProgress, Progress, ProgressSink};
+
+/// Options of [`run_greyest`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GreyestOptions {
+    /// Multiple-shooting segment length in samples before the free run (`None`: free
+    /// run only).
+    pub segment: Option<usize>,
+    /// RK4 steps per sample interval. Default 2.
+    pub substeps: usize,
+    /// Most Levenberg–Marquardt iterations per solve. Default 100.
+    pub max_iterations: usize,
+}
+
+impl Default for GreyestOptions {
+    fn default() -> Self {
+        Self {
+            segment: None,
+            substeps: 2,
+            max_iterations: 100,
+        }
+    }
+}
+
+/// One parameter in `greyest.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParameterSummary {
+    /// Name.
+    pub name: String,
+    /// Unit, as the model file gives it.
+    pub unit: Option<String>,
+    /// Value the solve started from.
+    pub start: f64,
+    /// Estimate.
+    pub value: f64,
+    /// Standard deviation (`null`: on a bound or not identifiable).
+    pub sigma: Option<f64>,
+    /// Bounds, if any.
+    pub bounds: Option<(f64, f64)>,
+    /// `"lower"` or `"upper"` when the estimate sits on that bound.
+    pub active_bound: Option<&'static str>,
+}
+
+/// One record in `greyest.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RecordSummary {
+    /// The data file.
+    pub file: String,
+    /// Samples.
+    pub samples: usize,
+    /// Estimated start state by state name.
+    pub x0: BTreeMap<String, f64>,
+    /// Its σ by state name (`null` where not identifiable).
+    pub x0_sigma: BTreeMap<String, Option<f64>>,
+    /// Free-run fit % per output.
+    pub fit_percent: BTreeMap<String, f64>,
+}
+
+/// One solve in `greyest.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StageSummary {
+    /// `"multiple shooting"` or `"free run"`.
+    pub shooting: String,
+    /// Residuals.
+    pub residuals: usize,
+    /// Quantities estimated.
+    pub estimated: usize,
+    /// Why it stopped, in words.
+    pub termination: String,
+    /// Whether it converged.
+    pub converged: bool,
+    /// Iterations (Jacobians formed).
+    pub iterations: usize,
+    /// Weighted cost `Σ r²` at the start.
+    pub initial_cost: f64,
+    /// Weighted cost at the end.
+    pub final_cost: f64,
+}
+
+/// What `greyest.json` holds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GreyestSummary {
+    /// The model file read.
+    pub model: String,
+    /// How the residuals were weighted.
+    pub weighting: String,
+    /// Free parameters, in the model's order.
+    pub parameters: Vec<ParameterSummary>,
+    /// Names of the rows and columns of `correlation`.
+    pub correlation_names: Vec<String>,
+    /// Correlations of the free parameters (`null` for one without σ).
+    pub correlation: Vec<Vec<Option<f64>>>,
+    /// Per record: start state, fit.
+    pub records: Vec<RecordSummary>,
+    /// The solves, in order (the last is the free run the estimates come from).
+    pub stages: Vec<StageSummary>,
+    /// `s² = Σ r²/(N − P)` of the final free run (1 when the noise variances are right
+    /// and the model explains the data; the σ are scaled by it).
+    pub residual_variance_ratio: f64,
+    /// Rank of the normalised `JᵀJ` and its number of columns.
+    pub rank: (usize, usize),
+    /// Files written.
+    pub files: Vec<String>,
+}
+
+/// Everything `mmenn greyest` computes ([`write_greyest`] writes it).
+#[derive(Debug, Clone)]
+pub struct GreyestOutcome {
+    /// What `greyest.json` holds.
+    pub summary: GreyestSummary,
+    /// The model file with the estimates and their σ.
+    pub spec: ModelSpec,
+    /// The estimator's result.
+    pub fit: GreyboxFit<PhysicalModel>,
+}
+
+impl GreyestOutcome {
+    /// A parameter's summary by name.
+    pub fn parameter(&self, name: &str) -> Option<&ParameterSummary> {
+        self.summary.parameters.iter().find(|p| p.name == name)
+    }
+}
+
+fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennError {
+    move |source| MmennError::Core { context, source }
+}
+
+/// The physical model of a loaded model file; any other kind is an error naming the file.
+fn physical_of(model: &LoadedModel) -> Result<&PhysicalModel> {
+    match &model.dynamics {
+        ModelDynamics::Physical(m) => Ok(m),
+        _ => Err(MmennError::Model {
+            path: model.path.clone(),
+            line: None,
+            column: None,
+            problem: ModelProblem::MissingKey {
+                key: "parameters",
+                why: "grey-box estimation calibrates the free parameters of a [parameters] \
+                      table",
+            },
+        }),
+    }
+}
+
+/// Read the model and data files, [`compute_greyest`], [`write_greyest`] into `out`.
+pub fn run_greyest(
+    model_path: &Path,
+    data: &[PathBuf],
+    opts: &GreyestOptions,
+    out: &Path,
+    progress: &dyn ProgressSink,
+) -> Result<GreyestOutcome> {
+    let model = LoadedModel::read(model_path)?;
+    physical_of(&model)?;
+    let mut records = Vec::with_capacity(data.len());
+    for p in data {
+        let table = read_table(p)?;
+        let exp = table_to_experiment(
+            &table,
+            model.spec.linear.input_names(),
+            model.spec.linear.output_names(),
+        )?;
+        records.push(exp.with_intersample(model.spec.intersample));
+    }
+    let names: Vec<String> = data.iter().map(|p| p.display().to_string()).collect();
+    let mut outcome = compute_greyest(&model, &records, &names, opts, progress)?;
+    write_greyest(&mut outcome, out)?;
+    Ok(outcome)
+}
+
+/// [`compute_greyest`] without progress.
+pub fn compute_greyest_quietly(
+    model: &LoadedModel,
+    records: &[Experiment],
+    names: &[String],
+    opts: &GreyestOptions,
+) -> Result<GreyestOutcome> {
+    compute_greyest(model, records, names, opts, &NoProgress)
+}
+
+/// Calibrate `model` (a physical model file) on `records` (outputs in the model's output
+/// order, named `names` in the summary).
+pub fn compute_greyest(
+    model: &LoadedModel,
+    records: &[Experiment],
+    names: &[String],
+    opts: &GreyestOptions,
+    progress: &dyn ProgressSink,
+) -> Result<GreyestOutcome> {
+    let physical = physical_of(model)?;
+    let lin = &model.spec.linear;
+    let (variances, weighting) = match &model.spec.noise_variance {
+        NoiseVariance::Given(v) => (
+            v.clone(),
+            "each output's error divided by its noise σ (noise_variance of the model file)"
+                .to_owned(),
+        ),
+        NoiseVariance::Auto => (
+            vec![1.0; lin.n_outputs()],
+            "unweighted (noise_variance = \"auto\": give the variances to weight the \
+             outputs; σ are scaled by the residual variance either way)"
+                .to_owned(),
+        ),
+    };
+    let gopts = GreyboxOptions {
+        substeps: opts.substeps,
+        shooting: opts
+            .segment
+            .map_or(Shooting::FreeRun, |segment| Shooting::Multiple { segment }),
+        max_iterations: opts.max_iterations,
+        ..GreyboxOptions::default()
+    };
+    let data = GreyboxData {
+        c: lin.c(),
+        noise_variance: &variances,
+        records,
+        x0: &[],
+    };
+    let mut observer = |stage: &str, k: usize, cost: f64| {
+        progress.report(
+            &Progress::new(format!("grey-box estimation ({stage})"), k, None)
+                .with_note(format!("cost {cost:.4e}")),
+        );
+    };
+    let fit = estimate_parameters_with(physical, &data, &gopts, &mut observer)
+        .map_err(core("grey-box estimation"));
+    progress.finish("grey-box estimation (multiple shooting)");
+    progress.finish("grey-box estimation (free run)");
+    let fit = fit?;
+
+    let mut spec = model.spec.clone();
+    for est in &fit.parameters {
+        if let Some(entry) = spec.parameters.iter_mut().find(|p| p.name == est.name) {
+            entry.value = est.value;
+            entry.sigma = est.sigma;
+        }
+    }
+    let unit_of = |name: &str| {
+        spec.parameters
+            .iter()
+            .find(|p| p.name == name)
+            .and_then(|p| p.unit.clone())
+    };
+    let parameters = fit
+        .parameters
+        .iter()
+        .map(|p| ParameterSummary {
+            name: p.name.clone(),
+            unit: unit_of(&p.name),
+            start: p.start,
+            value: p.value,
+            sigma: p.sigma,
+            bounds: (p.lower.is_finite() || p.upper.is_finite()).then_some((p.lower, p.upper)),
+            active_bound: p.active_bound.map(|b| match b {
+                ActiveBound::Lower => "lower",
+                ActiveBound::Upper => "upper",
+            }),
+        })
+        .collect();
+    let finite = |v: f64| v.is_finite().then_some(v);
+    let nf = fit.parameters.len();
+    let correlation = (0..nf)
+        .map(|a| (0..nf).map(|b| finite(fit.correlation[(a, b)])).collect())
+        .collect();
+    let states = lin.state_names();
+    let outputs = lin.output_names();
+    let records_out = records
+        .iter()
+        .enumerate()
+        .map(|(r, exp)| RecordSummary {
+            file: names
+                .get(r)
+                .cloned()
+                .unwrap_or_else(|| format!("record {r}")),
+            samples: exp.len(),
+            x0: states
+                .iter()
+                .cloned()
+                .zip(fit.x0[r].iter().copied())
+                .collect(),
+            x0_sigma: states
+                .iter()
+                .cloned()
+                .zip(fit.x0_sigma[r].iter().map(|v| finite(*v)))
+                .collect(),
+            fit_percent: outputs
+                .iter()
+                .cloned()
+                .zip(fit.fit_percent[r].iter().copied())
+                .collect(),
+        })
+        .collect();
+    let stages = fit
+        .stages
+        .iter()
+        .map(|s| StageSummary {
+            shooting: match s.shooting {
+                Shooting::FreeRun => "free run".into(),
+                Shooting::Multiple { segment } => {
+                    format!("multiple shooting ({segment}-sample segments)")
+                }
+            },
+            residuals: s.residuals,
+            estimated: s.estimated,
+            termination: crate::words::termination(Some(s.report.termination)).to_owned(),
+            converged: s.report.termination == sysid_core::Termination::Converged,
+            iterations: s.report.iterations,
+            initial_cost: s.report.initial_cost,
+            final_cost: s.report.final_cost(),
+        })
+        .collect();
+    let summary = GreyestSummary {
+        model: model.path.display().to_string(),
+        weighting,
+        parameters,
+        correlation_names: fit.parameters.iter().map(|p| p.name.clone()).collect(),
+        correlation,
+        records: records_out,
+        stages,
+        residual_variance_ratio: fit.residual_variance_ratio,
+        rank: fit.rank,
+        files: Vec::new(),
+    };
+    Ok(GreyestOutcome { summary, spec, fit })
+}
+
+/// Write `model.toml`, `greyest.json` and `report.md` into `out` (atomically, each).
+pub fn write_greyest(outcome: &mut GreyestOutcome, out: &Path) -> Result<()> {
+    ensure_dir(out)?;
+    let files = ["model.toml", "greyest.json", "report.md"];
+    outcome.summary.files = files.iter().map(|f| (*f).to_owned()).collect();
+    write_atomic(
+        &out.join("model.toml"),
+        format!(
+            "# Grey-box estimate by `mmenn greyest` (see greyest.json, report.md): free \
+             parameters with their sigma.\n{}",
+            format_model(&outcome.spec)?
+        )
+        .as_bytes(),
+    )?;
+    let json = serde_json::to_string_pretty(&outcome.summary).map_err(|e| MmennError::Io {
+        path: out.join("greyest.json"),
+        source: std::io::Error::other(e),
+    })?;
+    write_atomic(&out.join("greyest.json"), json.as_bytes())?;
+    write_atomic(&out.join("report.md"), report(outcome).as_bytes())?;
+    Ok(())
+}
+
+fn number(v: f64) -> String {
+    crate::show::number(v)
+}
+
+/// The short report.
+pub fn report(outcome: &GreyestOutcome) -> String {
+    let s = &outcome.summary;
+    let mut md = String::from("# Grey-box parameter estimate\n\n");
+    md.push_str(&format!(
+        "Model `{}`; free parameters and the start state of every record calibrated by \
+         free-run output error ({}), Levenberg–Marquardt with exact sensitivities.\n\n",
+        s.model, s.weighting
+    ));
+    md.push_str(
+        "| parameter | start | estimate | ±σ | unit | bounds |\n|---|---|---|---|---|---|\n",
+    );
+    for p in &s.parameters {
+        let sigma = match (p.sigma, p.active_bound) {
+            (Some(v), _) => format!("±{}", number(v)),
+            (None, Some(b)) => format!("— (on its {b} bound)"),
+            (None, None) => "— (not identifiable)".into(),
+        };
+        let bounds = p.bounds.map_or("—".into(), |(lo, hi)| {
+            format!("[{}, {}]", number(lo), number(hi))
+        });
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            p.name,
+            number(p.start),
+            number(p.value),
+            sigma,
+            p.unit.as_deref().unwrap_or(""),
+            bounds
+        ));
+    }
+    let fixed: Vec<&str> = outcome
+        .spec
+        .parameters
+        .iter()
+        .filter(|p| p.estimation == Estimation::Fixed)
+        .map(|p| p.name.as_str())
+        .collect();
+    if !fixed.is_empty() {
+        md.push_str(&format!("\nFixed: {}.\n", fixed.join(", ")));
+    }
+    md.push_str(&format!(
+        "\nσ from the Gauss–Newton covariance scaled by the residual variance ratio s² = {} \
+         (rank {} of {}); residuals of sampled data are rarely white, so they are \
+         optimistic.\n",
+        number(s.residual_variance_ratio),
+        s.rank.0,
+        s.rank.1
+    ));
+    let unidentified: Vec<&str> = s
+        .parameters
+        .iter()
+        .filter(|p| p.sigma.is_none() && p.active_bound.is_none())
+        .map(|p| p.name.as_str())
+        .collect();
+    if !unidentified.is_empty() {
+        md.push_str(&format!(
+            "\n**Not identifiable from these records**: {} (JᵀJ has rank {} of {}: only \
+             combinations of them are pinned down, and their values above are one point of \
+             a valley). Fix some of them at known values (e.g. weighed masses) and estimate \
+             the rest.\n",
+            unidentified.join(", "),
+            s.rank.0,
+            s.rank.1
+        ));
+    }
+    let nf = s.correlation_names.len();
+    let mut strong = Vec::new();
+    for a in 0..nf {
+        for b in a + 1..nf {
+            if let Some(r) = s.correlation[a][b]
+                && r.abs() > 0.9
+            {
+                strong.push(format!(
+                    "{}–{} {:+.3}",
+                    s.correlation_names[a], s.correlation_names[b], r
+                ));
+            }
+        }
+    }
+    md.push_str(&if strong.is_empty() {
+        "No pair of estimates is correlated beyond ±0.9 (greyest.json has the matrix).\n".into()
+    } else {
+        format!(
+            "Strongly correlated (|r| > 0.9; the data pin down a combination): {}.\n",
+            strong.join(", ")
+        )
+    });
+    md.push_str("\n## Solves\n\n| solve | residuals | estimated | iterations | cost start | cost end | ended |\n|---|---|---|---|---|---|---|\n");
+    for st in &s.stages {
+        md.push_str(&format!(
+            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            st.shooting,
+            st.residuals,
+            st.estimated,
+            st.iterations,
+            number(st.initial_cost),
+            number(st.final_cost),
+            st.termination
+        ));
+    }
+    md.push_str("\n## Free-run fit (estimation records)\n\n");
+    for r in &s.records {
+        let fits: Vec<String> = r
+            .fit_percent
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.2} %"))
+            .collect();
+        md.push_str(&format!(
+            "- `{}` ({} samples): {}; x0 = {}\n",
+            r.file,
+            r.samples,
+            fits.join(", "),
+            r.x0.iter()
+                .map(|(k, v)| format!("{k} {}", number(*v)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    md.push_str(
+        "\nThese are fits on the records the parameters were estimated on; judge the \
+         model on other records with `mmenn predict --model model.toml`.\n",
+    );
+    md
+}

@@ -1,0 +1,432 @@
+//! The grey-box estimator against a closed form (a model linear in its parameter and
+//! start state, whose least-squares answer and covariance are ordinary least squares),
+//! an active bound, multiple shooting reaching the same optimum, and typed errors.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::*;
+use crate::dynamics::Dynamics;
+use crate::linear::{LinearModel, ModelNames};
+use crate::physical::{Parameter, PhysicalError, PhysicalModel, PhysicalTerm};
+
+/// A model whose reported parameters are tampered with (a start outside its bounds,
+/// which `PhysicalModel` itself refuses to hold).
+#[derive(Debug, Clone)]
+struct Tampered {
+    inner: PhysicalModel,
+    params: Vec<Parameter>,
+}
+
+impl Dynamics for Tampered {
+    fn n_states(&self) -> usize {
+        self.inner.n_states()
+    }
+    fn n_inputs(&self) -> usize {
+        self.inner.n_inputs()
+    }
+    fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.inner.rhs(t, x, u, dx);
+    }
+}
+
+impl ParametricDynamics for Tampered {
+    fn parameters(&self) -> &[Parameter] {
+        &self.params
+    }
+    fn with_parameters(&self, values: &[f64]) -> std::result::Result<Self, PhysicalError> {
+        Ok(self.clone()).and_then(|t| {
+            Ok(Tampered {
+                inner: t.inner.with_parameters(values)?,
+                params: t.params,
+            })
+        })
+    }
+    fn parameter_jacobian(&self, t: f64, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
+        self.inner.parameter_jacobian(t, x, u, out);
+    }
+}
+
+/// `ẋ = b·u`, `y = x`: with the input held between samples RK4 is exact, so
+/// `x_k = x0 + b·dt·Σ_{j<k} u_j`, linear in `(x0, b)`.
+fn integrator(lower: f64, upper: f64, start: f64) -> PhysicalModel {
+    integrator_with(lower, upper, start, Estimation::Free)
+}
+
+fn integrator_with(lower: f64, upper: f64, start: f64, estimation: Estimation) -> PhysicalModel {
+    let names = ModelNames {
+        states: vec!["x".into()],
+        inputs: vec!["u".into()],
+        outputs: vec!["x".into()],
+        corrections: Vec::new(),
+    };
+    let linear = LinearModel::with_names(
+        DMatrix::zeros(1, 1),
+        DMatrix::zeros(1, 1),
+        DMatrix::from_element(1, 1, 1.0),
+        DMatrix::zeros(1, 0),
+        names,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut b = Parameter::new("b", start);
+    b.lower = lower;
+    b.upper = upper;
+    b.estimation = estimation;
+    let term = PhysicalTerm {
+        state: 0,
+        into: None,
+        effect: "gain",
+        term: "b*u",
+        coefficient: 1.0,
+    };
+    PhysicalModel::new(linear, vec![b], &[term], None).unwrap_or_else(|e| panic!("{e}"))
+}
+
+const DT: f64 = 0.1;
+const N: usize = 200;
+const B_TRUE: f64 = 1.7;
+const X0_TRUE: f64 = 0.4;
+const NOISE: f64 = 0.05;
+
+/// Uniform noise in `[−NOISE, NOISE]` from a fixed-seed 64-bit LCG (Knuth's MMIX
+/// constants), so the record is the same on every platform.
+fn record() -> Experiment {
+    let mut state: u64 = 0x2545_F491_4F6C_DD1D;
+    let mut noise = || {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        NOISE * (2.0 * ((state >> 11) as f64 / (1u64 << 53) as f64) - 1.0)
+    };
+    let u = DMatrix::from_fn(1, N, |_, k| {
+        let k = k as f64;
+        (0.3 * k).sin() + 0.5 * (1.1 * k).cos()
+    });
+    let mut x = X0_TRUE;
+    let mut y = DMatrix::zeros(1, N);
+    for k in 0..N {
+        y[(0, k)] = x + noise();
+        x += B_TRUE * DT * u[(0, k)];
+    }
+    Experiment::new(0.0, DT, u, y).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Ordinary least squares of `y = x0 + b·s_k`: estimates `(x0, b)`, their covariance
+/// `SSE/(N − 2)·(XᵀX)⁻¹`.
+fn closed_form(exp: &Experiment) -> (DVector<f64>, DMatrix<f64>) {
+    let mut x = DMatrix::zeros(N, 2);
+    let mut s = 0.0;
+    for k in 0..N {
+        x[(k, 0)] = 1.0;
+        x[(k, 1)] = s;
+        s += DT * exp.input(k)[0];
+    }
+    let y = DVector::from_iterator(N, exp.outputs().row(0).iter().copied());
+    let xtx = x.transpose() * &x;
+    let inv = xtx.try_inverse().unwrap_or_else(|| panic!("singular"));
+    let beta = &inv * x.transpose() * &y;
+    let sse = (&y - &x * &beta).norm_squared();
+    (beta, inv * (sse / (N - 2) as f64))
+}
+
+fn data<'a>(c: &'a DMatrix<f64>, records: &'a [Experiment], nv: &'a [f64]) -> GreyboxData<'a> {
+    GreyboxData {
+        c,
+        noise_variance: nv,
+        records,
+        x0: &[],
+    }
+}
+
+#[test]
+fn linear_in_parameters_matches_ordinary_least_squares() {
+    let records = [record()];
+    let (beta, cov) = closed_form(&records[0]);
+    let c = DMatrix::from_element(1, 1, 1.0);
+    // The weight 1/σ² scales out of the estimate and, through s², of the covariance.
+    let nv = [NOISE * NOISE / 3.0];
+    for (lower, upper) in [
+        (f64::NEG_INFINITY, f64::INFINITY),
+        (0.0, 10.0),
+        (0.0, f64::INFINITY),
+    ] {
+        let model = integrator(lower, upper, 1.0);
+        let fit = estimate_parameters(&model, &data(&c, &records, &nv), &GreyboxOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"));
+        let p = &fit.parameters[0];
+        // A linear problem: the solve lands on the normal equations' answer to the
+        // solver's precision (relative cost decrease 1e-10 ⇒ ~1e-6 relative in θ at worst;
+        // 1e-6 of the value, well inside 1e-3 σ).
+        assert!(
+            (p.value - beta[1]).abs() < 1e-6 * beta[1].abs(),
+            "{p:?} vs {beta}"
+        );
+        assert!(
+            (fit.x0[0][0] - beta[0]).abs() < 1e-6,
+            "{:?} vs {beta}",
+            fit.x0
+        );
+        let sigma = p.sigma.unwrap_or(f64::NAN);
+        // Same Jacobian at the same point: σ agrees to the relative 1e-6 of the point.
+        assert!(
+            (sigma - cov[(1, 1)].sqrt()).abs() < 1e-4 * cov[(1, 1)].sqrt(),
+            "σ {sigma} vs {}",
+            cov[(1, 1)].sqrt()
+        );
+        assert!((fit.x0_sigma[0][0] - cov[(0, 0)].sqrt()).abs() < 1e-4 * cov[(0, 0)].sqrt());
+        assert!(p.active_bound.is_none());
+        assert_eq!(fit.rank, (2, 2));
+        assert!((fit.correlation[(0, 0)] - 1.0).abs() < 1e-12);
+        // And it is the truth within a few σ (the closed form is an unbiased estimator).
+        assert!((p.value - B_TRUE).abs() < 4.0 * sigma, "{p:?}");
+        assert!(fit.fit_percent[0][0] > 90.0, "{:?}", fit.fit_percent);
+    }
+}
+
+#[test]
+fn an_optimum_beyond_a_bound_is_reported_on_it() {
+    let records = [record()];
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [NOISE * NOISE / 3.0];
+    let model = integrator(0.0, 1.0, 0.5);
+    let fit = estimate_parameters(&model, &data(&c, &records, &nv), &GreyboxOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let p = &fit.parameters[0];
+    assert_eq!(p.active_bound, Some(ActiveBound::Upper), "{p:?}");
+    assert!((p.value - 1.0).abs() < 1e-5, "{p:?}");
+    assert!(p.sigma.is_none());
+    // The start state is still estimated, with its σ.
+    assert!(fit.x0_sigma[0][0].is_finite());
+}
+
+#[test]
+fn multiple_shooting_ends_at_the_free_run_optimum() {
+    let records = [record()];
+    let (beta, _) = closed_form(&records[0]);
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [NOISE * NOISE / 3.0];
+    let model = integrator(f64::NEG_INFINITY, f64::INFINITY, 0.2);
+    let opts = GreyboxOptions {
+        shooting: Shooting::Multiple { segment: 30 },
+        ..GreyboxOptions::default()
+    };
+    let fit = estimate_parameters(&model, &data(&c, &records, &nv), &opts)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(fit.stages.len(), 2);
+    // 200 samples in segments of 30: 7 segments, 6 links of one state each.
+    assert_eq!(fit.stages[0].estimated, 1 + 7);
+    assert_eq!(fit.stages[0].residuals, 200 + 6);
+    assert!((fit.parameters[0].value - beta[1]).abs() < 1e-6 * beta[1].abs());
+}
+
+#[test]
+fn bad_input_is_a_typed_error() {
+    let records = [record()];
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [1e-3];
+    let opts = GreyboxOptions::default();
+
+    let fixed = integrator_with(0.0, 10.0, 1.0, Estimation::Fixed);
+    let e = estimate_parameters(&fixed, &data(&c, &records, &nv), &opts).err();
+    assert!(
+        matches!(e, Some(CoreError::NoFreeParameters { parameters: 1 })),
+        "{e:?}"
+    );
+
+    let inner = integrator(0.0, 10.0, 1.0);
+    let mut params = inner.parameters().to_vec();
+    params[0].value = 11.0;
+    let outside = Tampered { inner, params };
+    let e = estimate_parameters(&outside, &data(&c, &records, &nv), &opts).err();
+    assert!(
+        matches!(&e, Some(CoreError::ParameterOutsideBounds { name, .. }) if name == "b"),
+        "{e:?}"
+    );
+
+    let model = integrator(0.0, 10.0, 1.0);
+    let e = estimate_parameters(&model, &data(&c, &records, &[1e-3, 1e-3]), &opts).err();
+    assert!(matches!(e, Some(CoreError::Length { .. })), "{e:?}");
+    let e = estimate_parameters(&model, &data(&c, &records, &[0.0]), &opts).err();
+    assert!(
+        matches!(e, Some(CoreError::NonPositiveVariance { .. })),
+        "{e:?}"
+    );
+    let c2 = DMatrix::from_element(2, 1, 1.0);
+    let e = estimate_parameters(&model, &data(&c2, &records, &[1e-3, 1e-3]), &opts).err();
+    assert!(matches!(e, Some(CoreError::Length { .. })), "{e:?}");
+    let wide = DMatrix::from_element(1, 2, 1.0);
+    let e = estimate_parameters(&model, &data(&wide, &records, &nv), &opts).err();
+    assert!(matches!(e, Some(CoreError::Shape { .. })), "{e:?}");
+    let two_inputs = [
+        Experiment::new(0.0, DT, DMatrix::zeros(2, N), records[0].outputs().clone())
+            .unwrap_or_else(|e| panic!("{e}")),
+    ];
+    let e = estimate_parameters(&model, &data(&c, &two_inputs, &nv), &opts).err();
+    assert!(matches!(e, Some(CoreError::Length { .. })), "{e:?}");
+    let bad_x0 = GreyboxData {
+        x0: &[vec![0.0, 0.0]],
+        ..data(&c, &records, &nv)
+    };
+    let e = estimate_parameters(&model, &bad_x0, &opts).err();
+    assert!(matches!(e, Some(CoreError::Length { .. })), "{e:?}");
+    // NaN outputs are missing samples; a record with none measured is an error.
+    let unmeasured = [Experiment::new(
+        0.0,
+        DT,
+        records[0].inputs().clone(),
+        DMatrix::from_element(1, N, f64::NAN),
+    )
+    .unwrap_or_else(|e| panic!("{e}"))];
+    let e = estimate_parameters(&model, &data(&c, &unmeasured, &nv), &opts).err();
+    assert!(matches!(e, Some(CoreError::TooFewSamples { .. })), "{e:?}");
+    let short = GreyboxOptions {
+        shooting: Shooting::Multiple { segment: 1 },
+        ..opts
+    };
+    let e = estimate_parameters(&model, &data(&c, &records, &nv), &short).err();
+    assert!(
+        matches!(e, Some(CoreError::InvalidArgument { .. })),
+        "{e:?}"
+    );
+}
+
+#[test]
+fn missing_samples_are_skipped() {
+    // Every third output missing: the same closed form on the remaining samples.
+    let full = record();
+    let mut y = full.outputs().clone();
+    for k in (0..N).step_by(3) {
+        y[(0, k)] = f64::NAN;
+    }
+    let records =
+        [Experiment::new(0.0, DT, full.inputs().clone(), y).unwrap_or_else(|e| panic!("{e}"))];
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [1e-3];
+    // Start state given (the first sample is missing).
+    let given = [vec![0.0]];
+    let d = GreyboxData {
+        x0: &given,
+        ..data(&c, &records, &nv)
+    };
+    let fit = estimate_parameters(
+        &integrator(f64::NEG_INFINITY, f64::INFINITY, 1.0),
+        &d,
+        &GreyboxOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(fit.stages[0].residuals, N - N.div_ceil(3));
+    assert!(
+        (fit.parameters[0].value - B_TRUE).abs() < 0.05,
+        "{:?}",
+        fit.parameters
+    );
+}
+
+/// A pendulum with a gravity gain, viscous and smooth Coulomb friction as parameters:
+/// `k` bounded on both sides, `c` below only, `fc` unbounded.
+fn pendulum() -> PhysicalModel {
+    let names = ModelNames {
+        states: vec!["theta".into(), "omega".into()],
+        inputs: vec!["u".into()],
+        outputs: vec!["theta".into()],
+        corrections: Vec::new(),
+    };
+    let linear = LinearModel::with_names(
+        DMatrix::from_row_slice(2, 2, &[0.0, 1.0, 0.0, 0.0]),
+        DMatrix::from_row_slice(2, 1, &[0.0, 1.0]),
+        DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+        DMatrix::zeros(2, 0),
+        names,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut k = Parameter::new("k", 9.0);
+    k.lower = 1.0;
+    k.upper = 30.0;
+    let mut c = Parameter::new("c", 0.3);
+    c.lower = 0.0;
+    let fc = Parameter::new("fc", 0.2);
+    let term = |term| PhysicalTerm {
+        state: 1,
+        into: None,
+        effect: "force",
+        term,
+        coefficient: -1.0,
+    };
+    PhysicalModel::new(
+        linear,
+        vec![k, c, fc],
+        &[
+            term("k*sin(theta)"),
+            term("c*omega"),
+            term("fc*atan(omega/0.1)"),
+        ],
+        None,
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn the_shooting_jacobian_is_the_derivative_of_the_residuals() {
+    // Every column (transformed parameters, segment start states) and every row (output
+    // errors, continuity defects) of the exact Jacobian against central differences of
+    // the residuals, on a nonlinear model cut into three linked segments.
+    let model = pendulum();
+    let n_samples = 60;
+    let u = DMatrix::from_fn(1, n_samples, |_, k| (0.7 * k as f64 * 0.05).sin());
+    let xs = crate::integrate::simulate(
+        &model,
+        &[0.4, 0.0],
+        0.0,
+        0.05,
+        &u,
+        &crate::integrate::Integrator::Rk4 { substeps: 2 },
+        1e6,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let y = DMatrix::from_fn(1, n_samples, |_, k| xs[(0, k)] + 0.01 * (k as f64).sin());
+    let records = [Experiment::new(0.0, 0.05, u, y).unwrap_or_else(|e| panic!("{e}"))];
+    let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+    let (free, transforms, z) = free_parameters(&model).unwrap_or_else(|e| panic!("{e}"));
+    let segments = shooting_segments(&records, 20);
+    assert_eq!(segments.len(), 3);
+    let mut problem = Calibration::new(
+        &model,
+        &c,
+        vec![10.0],
+        &records,
+        free,
+        transforms,
+        segments,
+        3.0,
+        2,
+        1e6,
+    );
+    let mut theta = z;
+    // Start states off the trajectory, so the defects are not zero.
+    theta.extend_from_slice(&[0.35, 0.1, -0.2, 0.5, 0.1, -0.3]);
+    let rows = problem.rows;
+    assert_eq!(rows, 60 + 2 * 2);
+    let mut jac = DMatrix::zeros(rows, theta.len());
+    crate::least_squares::LeastSquaresProblem::jacobian(&mut problem, &theta, &[], &mut jac)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut plus = vec![0.0; rows];
+    let mut minus = vec![0.0; rows];
+    for j in 0..theta.len() {
+        let h = 1e-6 * theta[j].abs().max(1.0);
+        let mut t = theta.clone();
+        t[j] += h;
+        assert!(problem.residuals_checked(&t, &mut plus).unwrap_or(false));
+        t[j] -= 2.0 * h;
+        assert!(problem.residuals_checked(&t, &mut minus).unwrap_or(false));
+        let scale = jac.column(j).amax().max(1e-3);
+        for i in 0..rows {
+            let fd = (plus[i] - minus[i]) / (2.0 * h);
+            // Central differences: truncation O(h²·r''') and rounding O(ε·r/h) ≈ 1e-9
+            // relative; 1e-6 of the column's largest entry leaves room for both.
+            assert!(
+                (fd - jac[(i, j)]).abs() <= 1e-6 * scale,
+                "row {i}, column {j}: exact {} vs difference {fd}",
+                jac[(i, j)]
+            );
+        }
+    }
+}
