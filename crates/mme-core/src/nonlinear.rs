@@ -25,7 +25,7 @@ use sysid_core::{
 };
 
 use crate::binding::{Binding, bind};
-use crate::config::{InitialState, IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight};
+use crate::config::{IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight, StartTrajectory};
 use crate::config::{check_iterations, check_noise, resolve_weight};
 use crate::discretize::{default_substeps, substeps_for};
 use crate::error::{MmeError, Result};
@@ -282,7 +282,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             termination: Termination::MaxIterations,
             binding,
         };
-        if let InitialState::Given(x0s) = &config.initial_state
+        if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
         {
             return Err(MmeError::Dimension {
@@ -330,9 +330,9 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 steps,
                 hold: exp.intersample(),
             });
-            let traj = match &config.initial_state {
-                InitialState::FromData => run.data_trajectory(e),
-                InitialState::Given(x0s) => {
+            let traj = match &config.start {
+                StartTrajectory::FromData => run.data_trajectory(e),
+                StartTrajectory::Given(x0s) => {
                     if x0s[e].len() != n {
                         return Err(MmeError::Dimension {
                             what: "initial state",

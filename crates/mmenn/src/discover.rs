@@ -119,7 +119,7 @@ impl workflow::Mme for MmeCore<'_> {
     ) -> Result<MmeEstimate> {
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
-            config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
+            config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
         }
         Ok(estimate_term_model(model, data, &config)?.estimate)
     }
@@ -134,7 +134,7 @@ impl workflow::Mme for MmeCore<'_> {
     ) -> Result<MmeEstimate> {
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
-            config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
+            config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
         }
         config.w = mme_core::WeightSpec::Matrix(w.clone());
         config.noise_variance = mme_core::NoiseSpec::Given(noise.to_vec());

@@ -38,7 +38,7 @@ pub use crate::predict::{
 use crate::refine::refine_network;
 pub use crate::refine::{RefineChoice, RefineSummary};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
-pub use guard::{Candidate, CandidateScore, GuardReport};
+pub use guard::{CandidateScore, GuardCandidate, GuardReport};
 
 mod choices;
 mod d_figures;
@@ -643,13 +643,13 @@ pub fn compute_fit(
     // on held-out data; the best is kept.
     let mut candidates = vec![
         (
-            guard::Candidate::PhysicsAlone,
+            guard::GuardCandidate::PhysicsAlone,
             guard::zero_network(&network)?,
         ),
-        (guard::Candidate::Network, before_refinement),
+        (guard::GuardCandidate::Network, before_refinement),
     ];
     if refinement.is_some() {
-        candidates.push((guard::Candidate::Refined, network.clone()));
+        candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
     let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
     let (guard_report, kept) = guard::choose(&spec, candidates, &held, exp0.dt(), opts.substeps)?;
@@ -666,7 +666,7 @@ pub fn compute_fit(
     // not it was kept).
     if let (Some(r), Some(_)) = (refinement.as_mut(), &validation) {
         r.validation_fit_after = guard_report
-            .score(guard::Candidate::Refined)
+            .score(guard::GuardCandidate::Refined)
             .filter(|s| s.failure.is_none())
             .map(|s| s.fit_percent.clone());
     }
