@@ -31,9 +31,10 @@ use crate::discretize::{default_substeps, substeps_for};
 use crate::error::{MmeError, Result};
 use crate::estimate::{Phases, assemble, resolve_noise};
 use crate::evaluate::{Solve, Summary};
+use crate::kernel::sweep;
 use crate::linearize::Rk4;
 use crate::result::MmeOutput;
-use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains, sweep};
+use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains};
 use crate::tune_w::tune;
 use sysid_core::tangent::StepInput;
 
