@@ -13,8 +13,22 @@ use mmenn::sysid_core::{LinearModel, Model, ModelNames};
 use nalgebra::DMatrix;
 
 use crate::data::DataSet;
-use crate::experiments::systems::{OeStart, Trajectories};
 use crate::experiments::{Ctx, FIT_SEED, Mode};
+
+/// A model's free-run states (rows = all states, NaN rows where it has no estimate) on the
+/// training and test record, or why it has none.
+pub type Trajectories = [(DMatrix<f64>, Option<String>); 2];
+
+/// Starting point of the output-error fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OeStart {
+    /// The data set's assumed (physics) model.
+    Assumed,
+    /// The double pendulum's physics linearisation about the hanging equilibrium (its
+    /// ignorance model has A = 0 and B = 0, where the input has no effect on the outputs
+    /// and the free parameters cannot be identified).
+    DoublePendulumLinearised,
+}
 
 /// One comparison model's free-run states.
 #[derive(Debug)]

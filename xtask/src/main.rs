@@ -1,10 +1,11 @@
 //! `cargo xtask reproduce [--quick] [--check] [--bless]`: regenerate the simulated benchmark
 //! data, rerun the thesis experiments, write `docs/results/`, and compare the tables with
-//! `fixtures/tables/<mode>/`.
+//! `fixtures/tables/<mode>/`. `cargo xtask cycles`: import cycles between a crate's files.
 #![doc = include_str!("../README.md")]
 
 mod baselines;
 mod check;
+mod cycles;
 mod data;
 mod experiments;
 mod fuzz;
@@ -43,6 +44,8 @@ enum Command {
     Reproduce(ReproduceArgs),
     /// Bounded libFuzzer runs of the targets in fuzz/ (nightly toolchain and cargo-fuzz).
     Fuzz(FuzzArgs),
+    /// Import cycles between the files of each crate (fails when there is one).
+    Cycles,
 }
 
 #[derive(Debug, Args)]
@@ -426,5 +429,6 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Reproduce(args) => reproduce(args),
         Command::Fuzz(args) => fuzz::fuzz(&workspace_root(), &args.targets, args.seconds),
+        Command::Cycles => cycles::cycles(&workspace_root()),
     }
 }

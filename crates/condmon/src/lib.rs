@@ -25,6 +25,8 @@ pub use features::{
     stack, weight_names,
 };
 pub use pca::{ComponentSelection, Pca};
-pub use pipeline::{FittedPreprocessing, Preprocessing, Reduction, Scaling, TrainedPipeline};
+pub use pipeline::{
+    FeatureScaling, FittedPreprocessing, Preprocessing, Reduction, TrainedPipeline,
+};
 pub use standardise::Standardiser;
 pub use table::{ErrorTable, error_table};

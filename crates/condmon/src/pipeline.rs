@@ -12,7 +12,7 @@ use crate::standardise::Standardiser;
 
 /// Feature scaling before everything else.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub enum Scaling {
+pub enum FeatureScaling {
     /// Use the features as they are.
     None,
     /// z-scores with the training rows' mean and standard deviation (see
@@ -35,7 +35,7 @@ pub enum Reduction {
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct Preprocessing {
     /// Scaling step.
-    pub scaling: Scaling,
+    pub scaling: FeatureScaling,
     /// Reduction step.
     pub reduction: Reduction,
 }
@@ -44,7 +44,7 @@ impl Preprocessing {
     /// Standardise, then PCA keeping `fraction` of the variance (thesis: 0.90 / 0.95).
     pub fn pca_fraction(fraction: f64) -> Self {
         Self {
-            scaling: Scaling::Standardise,
+            scaling: FeatureScaling::Standardise,
             reduction: Reduction::Pca(ComponentSelection::VarianceFraction(fraction)),
         }
     }
@@ -52,8 +52,8 @@ impl Preprocessing {
     /// Column label for error tables, e.g. `no PCA`, `after PCA (95 % variance)`.
     pub fn label(&self) -> String {
         let scale = match self.scaling {
-            Scaling::None => ", unscaled",
-            Scaling::Standardise => "",
+            FeatureScaling::None => ", unscaled",
+            FeatureScaling::Standardise => "",
         };
         match self.reduction {
             Reduction::None => format!("no PCA{scale}"),
@@ -84,8 +84,8 @@ impl FittedPreprocessing {
     /// Errors: see [`Standardiser::fit`] and [`Pca::fit`].
     pub fn fit(config: &Preprocessing, x: &DMatrix<f64>) -> Result<Self> {
         let (standardiser, z) = match config.scaling {
-            Scaling::None => (None, None),
-            Scaling::Standardise => {
+            FeatureScaling::None => (None, None),
+            FeatureScaling::Standardise => {
                 let s = Standardiser::fit(x)?;
                 let z = s.transform(x)?;
                 (Some(s), Some(z))

@@ -117,7 +117,7 @@ impl Default for IterationOptions {
 
 /// Starting trajectory of the nonlinear estimator (ignored by the linear one).
 #[derive(Debug, Clone, PartialEq, Default)]
-pub enum InitialState {
+pub enum StartTrajectory {
     /// From the data: at each sample, the minimum-norm state reproducing the observed
     /// outputs (`x = C⁺ỹ`, unmeasured directions 0, a missing sample keeps the previous
     /// value), with `d = 0`. Not a trajectory of the model, so the first Gauss–Newton step
@@ -144,7 +144,7 @@ pub struct MmeConfig {
     /// Iteration budget of the nonlinear estimator (ignored by the linear one).
     pub iterations: IterationOptions,
     /// Starting trajectory of the nonlinear estimator (ignored by the linear one).
-    pub initial_state: InitialState,
+    pub start: StartTrajectory,
 }
 
 /// A `W` validated against the number of corrections: either fixed, or a shape to scale.

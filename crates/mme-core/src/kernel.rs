@@ -1,5 +1,6 @@
-//! The generic sweep kernel (see [`crate::sweep`] for the recursion), with the
-//! steady-state shortcut for time-invariant steps.
+//! The generic sweep kernel (see [`crate::sweep`] for the recursion and its vocabulary),
+//! with the steady-state shortcut for time-invariant steps, and [`sweep`], which runs it
+//! on fixed-size matrices for small problems.
 //!
 //! **Steady state.** With time-invariant `Φ, Γ` and the same set of observed channels at
 //! every sample, the backward Riccati recursion for `P` converges to a fixed point (the
@@ -14,12 +15,14 @@
 //! enter only `q`, so they never invalidate the table.
 
 use nalgebra::allocator::Allocator;
-use nalgebra::{DefaultAllocator, Dim, MatrixView, MatrixViewMut, OMatrix, OVector, U1};
+use nalgebra::{
+    DMatrix, DefaultAllocator, Dim, Dyn, MatrixView, MatrixViewMut, OMatrix, OVector, U1, U2, U4,
+};
 
 use crate::error::{MmeError, Result};
 use crate::sweep::{
-    LogDet, Problem, SteadyState, Steps, SweepOut, Workspace, backward_sub, cholesky_in_place,
-    forward_sub, symmetrize,
+    LogDet, Problem, SteadyState, StepModel, Steps, SweepOut, Workspace, backward_sub,
+    cholesky_in_place, forward_sub, symmetrize,
 };
 
 /// Relative max-norm change of `P` between consecutive samples below which the recursion
@@ -73,7 +76,7 @@ struct Episode {
     table: usize,
 }
 
-/// Run one sweep; see [`crate::sweep::sweep`].
+/// Run one sweep; see [`sweep`].
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run<D: Dim, Q: Dim, S: Steps<D, Q>>(
     d: D,
@@ -400,4 +403,143 @@ where
     }
     phases.reverse();
     Some(Table { phases, p_pre: pm })
+}
+
+/// Run the sweep; write states at samples (`n × N`, column-major) into `states` and the
+/// correction pieces (`q × (N−1)s`) into `corrections`.
+pub(crate) fn sweep(
+    pr: &Problem,
+    model: &StepModel,
+    ws: &mut Workspace,
+    states: &mut [f64],
+    corrections: &mut [f64],
+    logdet: LogDet,
+) -> Result<SweepOut> {
+    debug_assert_eq!(states.len(), pr.n * pr.samples);
+    debug_assert_eq!(corrections.len(), pr.q * pr.pieces());
+    macro_rules! go {
+        ($d:expr, $q:expr) => {
+            match model {
+                StepModel::Lti {
+                    ad,
+                    ed,
+                    bd,
+                    inputs,
+                    in_map,
+                    ramp,
+                } => {
+                    let src = LtiSteps {
+                        phi: ad.as_slice(),
+                        gamma: ed.as_slice(),
+                        bd,
+                        inputs,
+                        in_map,
+                        ramp: *ramp,
+                        s: pr.substeps,
+                        d: $d,
+                        qd: $q,
+                    };
+                    run($d, $q, pr, &src, ws, states, corrections, logdet)
+                }
+                StepModel::Tv { phi, gamma, offset } => {
+                    let src = TvSteps {
+                        phi,
+                        gamma,
+                        offset,
+                        n: pr.n,
+                        q: pr.q,
+                        d: $d,
+                        qd: $q,
+                    };
+                    run($d, $q, pr, &src, ws, states, corrections, logdet)
+                }
+            }
+        };
+    }
+    match (pr.n, pr.q) {
+        (2, 1) => go!(U2, U1),
+        (2, 2) => go!(U2, U2),
+        (4, 1) => go!(U4, U1),
+        (4, 2) => go!(U4, U2),
+        (n, q) => go!(Dyn(n), Dyn(q)),
+    }
+}
+
+struct LtiSteps<'a, D, Q> {
+    phi: &'a [f64],
+    gamma: &'a [f64],
+    bd: &'a DMatrix<f64>,
+    inputs: &'a DMatrix<f64>,
+    in_map: &'a [usize],
+    ramp: Option<&'a DMatrix<f64>>,
+    s: usize,
+    d: D,
+    qd: Q,
+}
+
+impl<D: Dim, Q: Dim> Steps<D, Q> for LtiSteps<'_, D, Q> {
+    const TIME_INVARIANT: bool = true;
+    #[inline]
+    fn phi(&self, _j: usize) -> MatrixView<'_, f64, D, D> {
+        MatrixView::from_slice_generic(self.phi, self.d, self.d)
+    }
+    #[inline]
+    fn gamma(&self, _j: usize) -> MatrixView<'_, f64, D, Q> {
+        MatrixView::from_slice_generic(self.gamma, self.d, self.qd)
+    }
+    #[inline]
+    fn offset(&self, j: usize, out: &mut [f64]) {
+        let k = j / self.s;
+        out.iter_mut().for_each(|o| *o = 0.0);
+        let Some(ramp) = self.ramp else {
+            for (l, &row) in self.in_map.iter().enumerate() {
+                let u = self.inputs[(row, k)];
+                for (i, o) in out.iter_mut().enumerate() {
+                    *o += self.bd[(i, l)] * u;
+                }
+            }
+            return;
+        };
+        // First-order hold: sub-step `i` of interval `k` spans the fractions
+        // `[i/s, (i+1)/s]` of the ramp from `u_k` to `u_{k+1}` (`k + 1 < N` because
+        // `j < (N−1)s`).
+        let i = j - k * self.s;
+        let (f0, f1) = (i as f64 / self.s as f64, (i + 1) as f64 / self.s as f64);
+        for (l, &row) in self.in_map.iter().enumerate() {
+            let (ua, ub) = (self.inputs[(row, k)], self.inputs[(row, k + 1)]);
+            let u0 = ua + f0 * (ub - ua);
+            let du = (f1 - f0) * (ub - ua);
+            for (r, o) in out.iter_mut().enumerate() {
+                *o += self.bd[(r, l)] * u0 + ramp[(r, l)] * du;
+            }
+        }
+    }
+}
+
+struct TvSteps<'a, D, Q> {
+    phi: &'a [f64],
+    gamma: &'a [f64],
+    offset: &'a [f64],
+    n: usize,
+    q: usize,
+    d: D,
+    qd: Q,
+}
+
+impl<D: Dim, Q: Dim> Steps<D, Q> for TvSteps<'_, D, Q> {
+    const TIME_INVARIANT: bool = false;
+    #[inline]
+    fn phi(&self, j: usize) -> MatrixView<'_, f64, D, D> {
+        let nn = self.n * self.n;
+        MatrixView::from_slice_generic(&self.phi[j * nn..(j + 1) * nn], self.d, self.d)
+    }
+    #[inline]
+    fn gamma(&self, j: usize) -> MatrixView<'_, f64, D, Q> {
+        let nq = self.n * self.q;
+        MatrixView::from_slice_generic(&self.gamma[j * nq..(j + 1) * nq], self.d, self.qd)
+    }
+    #[inline]
+    fn offset(&self, j: usize, out: &mut [f64]) {
+        out.copy_from_slice(&self.offset[j * self.n..(j + 1) * self.n]);
+    }
 }

@@ -18,7 +18,7 @@ pub mod tune_w;
 pub mod update;
 
 pub use config::{
-    AutoWeight, InitialState, IterationOptions, MmeConfig, NoiseSpec, WeightShape, WeightSpec,
+    AutoWeight, IterationOptions, MmeConfig, NoiseSpec, StartTrajectory, WeightShape, WeightSpec,
 };
 pub use discretize::default_substeps;
 pub use error::{MmeError, Result};

@@ -8,7 +8,8 @@ use crate::binding::{Binding, bind};
 use crate::discretize::{Discrete, discretize_all};
 use crate::error::Result;
 use crate::evaluate::{Solve, Summary};
-use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, sweep};
+use crate::kernel::sweep;
+use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace};
 
 /// A linear assumed model bound to a dataset, with buffers for the estimates.
 #[derive(Debug, Clone)]

@@ -25,17 +25,20 @@ use sysid_core::{
 };
 
 use crate::binding::{Binding, bind};
-use crate::config::{InitialState, IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight};
+use crate::config::{IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight, StartTrajectory};
 use crate::config::{check_iterations, check_noise, resolve_weight};
 use crate::discretize::{default_substeps, substeps_for};
 use crate::error::{MmeError, Result};
 use crate::estimate::{Phases, assemble, resolve_noise};
 use crate::evaluate::{Solve, Summary};
+use crate::kernel::sweep;
 use crate::linearize::Rk4;
 use crate::result::MmeOutput;
-use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains, sweep};
+use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains};
 use crate::tune_w::tune;
 use sysid_core::tangent::StepInput;
+
+mod start;
 
 /// A nonlinear assumed model `ẋ = f(t, x, u) + E d`, `y = C x`, with names.
 #[derive(Debug, Clone)]
@@ -282,7 +285,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             termination: Termination::MaxIterations,
             binding,
         };
-        if let InitialState::Given(x0s) = &config.initial_state
+        if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
         {
             return Err(MmeError::Dimension {
@@ -330,9 +333,9 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 steps,
                 hold: exp.intersample(),
             });
-            let traj = match &config.initial_state {
-                InitialState::FromData => run.data_trajectory(e),
-                InitialState::Given(x0s) => {
+            let traj = match &config.start {
+                StartTrajectory::FromData => run.data_trajectory(e),
+                StartTrajectory::Given(x0s) => {
                     if x0s[e].len() != n {
                         return Err(MmeError::Dimension {
                             what: "initial state",
@@ -369,102 +372,6 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             .iter()
             .map(|&row| exp.inputs()[(row, k)])
             .collect()
-    }
-
-    /// Minimum-norm state reproducing the observed outputs at sample `k` (0 if none).
-    fn data_states(&self, e: usize, k: usize) -> Vec<f64> {
-        let exp = &self.data.experiments()[e];
-        let n = self.model.dynamics.n_states();
-        let rows: Vec<usize> = (0..self.binding.outputs.len())
-            .filter(|&i| !exp.outputs()[(self.binding.outputs[i], k)].is_nan())
-            .collect();
-        if rows.is_empty() {
-            return vec![0.0; n];
-        }
-        let c = DMatrix::from_fn(rows.len(), n, |r, j| self.model.c[(rows[r], j)]);
-        let y = nalgebra::DVector::from_iterator(
-            rows.len(),
-            rows.iter()
-                .map(|&i| exp.outputs()[(self.binding.outputs[i], k)]),
-        );
-        match c.pseudo_inverse(1e-12) {
-            Ok(pinv) => (pinv * y).iter().copied().collect(),
-            Err(_) => vec![0.0; n],
-        }
-    }
-
-    /// Data-based start: `C⁺ỹ` at samples (previous value where nothing is observed),
-    /// linear between samples, `d = 0`.
-    fn data_trajectory(&self, e: usize) -> Traj {
-        let g = self.grids[e];
-        let n = self.model.dynamics.n_states();
-        let exp = &self.data.experiments()[e];
-        let mut at: Vec<Vec<f64>> = Vec::with_capacity(g.samples);
-        for k in 0..g.samples {
-            let any = self
-                .binding
-                .outputs
-                .iter()
-                .any(|&row| !exp.outputs()[(row, k)].is_nan());
-            let v = if any || k == 0 {
-                self.data_states(e, k)
-            } else {
-                at[k - 1].clone()
-            };
-            at.push(v);
-        }
-        let mut x = vec![0.0; n * (g.steps + 1)];
-        for j in 0..=g.steps {
-            let k = (j / g.substeps).min(g.samples - 1);
-            let frac = (j - k * g.substeps) as f64 / g.substeps as f64;
-            let next = (k + 1).min(g.samples - 1);
-            for i in 0..n {
-                x[j * n + i] = at[k][i] + frac * (at[next][i] - at[k][i]);
-            }
-        }
-        Traj {
-            x,
-            d: vec![0.0; self.model.e.ncols() * g.steps],
-            consistent: false,
-        }
-    }
-
-    fn open_loop(&mut self, e: usize, x0: &[f64]) -> Result<Traj> {
-        let g = self.grids[e];
-        let (n, q) = (self.model.dynamics.n_states(), self.model.e.ncols());
-        let mut x = vec![0.0; n * (g.steps + 1)];
-        x[..n].copy_from_slice(x0);
-        let zero = vec![0.0; q];
-        let mut cur = x0.to_vec();
-        for j in 0..g.steps {
-            let (ua, ub) = self.interval_inputs(e, j);
-            let t = g.t0 + j as f64 * g.h;
-            self.rk.step(
-                &self.model.dynamics,
-                &self.model.e,
-                t,
-                g.h,
-                &mut cur,
-                &g.stage_input(j, &ua, &ub),
-                &zero,
-            );
-            if let Some(state) = cur
-                .iter()
-                .position(|v| !v.is_finite() || v.abs() > self.opts.blow_up)
-            {
-                return Err(MmeError::Diverged {
-                    experiment: e,
-                    time: t + g.h,
-                    state,
-                });
-            }
-            x[(j + 1) * n..(j + 2) * n].copy_from_slice(&cur);
-        }
-        Ok(Traj {
-            x,
-            d: vec![0.0; q * g.steps],
-            consistent: true,
-        })
     }
 
     /// Residuals and correction cost of a trajectory.

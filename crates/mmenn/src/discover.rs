@@ -133,7 +133,7 @@ impl workflow::Mme for MmeCore<'_> {
     ) -> Result<MmeEstimate> {
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
-            config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
+            config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
         }
         let out = estimate_term_model(model, data, &config)?;
         if let Ok(mut first) = self.first_noise.lock()
@@ -154,7 +154,7 @@ impl workflow::Mme for MmeCore<'_> {
     ) -> Result<MmeEstimate> {
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
-            config.initial_state = mme_core::InitialState::Given(x0s.to_vec());
+            config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
         }
         config.w = mme_core::WeightSpec::Matrix(w.clone());
         config.noise_variance = mme_core::NoiseSpec::Given(noise.to_vec());

@@ -1,6 +1,6 @@
 //! `mmenn fit` and `mmenn predict`: the MME/NN hybrid model (thesis ch. 4). MME gives
 //! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; by default its weights are then refined
-//! on the training trajectories (thesis §7.1; [`crate::refine`]); the plant model
+//! on the training trajectories (thesis §7.1; [`RefineSummary`]); the plant model
 //! `ẋ = f(x, u) + E·NN(x, u)` then predicts free-run from an initial state. Every step
 //! (MME, network selection, refinement, free runs, `predict`) treats the inputs between
 //! samples as the model file's `intersample` says; `model.json` keeps the model file, so
@@ -16,157 +16,34 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
-use nn::{Mlp, NetCorrection, SweepConfig, SweepRow};
-use serde::{Deserialize, Serialize};
-use sysid_core::{
-    ChannelMetrics, CorrectedModel, Dataset, Experiment, Horizon, MmeEstimate, TermModel,
-};
+use nn::{Mlp, SweepConfig, SweepRow};
+use serde::Serialize;
+use sysid_core::{Dataset, Experiment, MmeEstimate};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::write_csv;
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
-use crate::model::{
-    InitialRule, Judgement, LoadedModel, ModelDynamics, ModelKind, ScoredWindow, judge_free_run,
-};
-use crate::model_file::{ModelSpec, format_model, parse_model};
+/// `model.json` lives in [`crate::hybrid`]; these names stay reachable from here.
+pub use crate::hybrid::{HYBRID_FORMAT, HybridFile, HybridModel, hybrid_model};
+/// The free-run report is the judge's ([`crate::model`]); it stays reachable from here.
+pub use crate::model::FreeRunReport;
+use crate::model::{InitialRule, Judgement, LoadedModel, ModelDynamics, ModelKind, judge_free_run};
+use crate::model_file::{ModelSpec, format_model};
 use crate::plot::{Figure, Series};
 /// `predict` lives in [`crate::predict`]; these names stay reachable from here.
 pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
-use crate::refine::refine_network;
-pub use crate::refine::{RefineChoice, RefineSummary};
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
-pub use guard::{Candidate, CandidateScore, GuardReport};
+pub use guard::{CandidateScore, GuardCandidate, GuardReport};
+use trajectory::refine_network;
+pub use trajectory::{RefineChoice, RefineSummary};
 
 mod choices;
 mod d_figures;
 mod guard;
-
-/// Format tag of `model.json`.
-pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
-
-/// The hybrid model as saved in `model.json`: the assumed model (model-file TOML text, with
-/// its `intersample`), the trained network, the training initial state and the integration
-/// settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct HybridFile {
-    /// Always [`HYBRID_FORMAT`].
-    pub format: String,
-    /// The assumed model, in the model-file format.
-    pub model_toml: String,
-    /// The network `(x, u) → d` (inputs: states then inputs; outputs: corrections).
-    pub network: Mlp,
-    /// Initial state of the training record (MME's `x̂(t0)`).
-    pub x0: Vec<f64>,
-    /// Sample period of the training data, s.
-    pub dt: f64,
-    /// RK4 sub-steps per sample interval in free-run simulation.
-    pub substeps: usize,
-}
-
-/// The completed plant model: assumed dynamics (with named terms) plus the network.
-pub type HybridModel = CorrectedModel<TermModel, NetCorrection>;
-
-impl HybridFile {
-    /// Parse and check `model.json` text (`path` only names the file in errors): the
-    /// format tag, `dt` finite and > 0, `substeps` in `1..=MAX_SUBSTEPS`, the model-file
-    /// part, an initial state of finite numbers, one per state.
-    pub fn parse(path: &Path, text: &str) -> Result<Self> {
-        let problem = |line, column, message: String| MmennError::Model {
-            path: path.to_path_buf(),
-            line,
-            column,
-            problem: crate::error::ModelProblem::Syntax { message },
-        };
-        let file: HybridFile = serde_json::from_str(text)
-            .map_err(|e| problem(Some(e.line()), Some(e.column()), e.to_string()))?;
-        if file.format != HYBRID_FORMAT {
-            return Err(problem(
-                None,
-                None,
-                format!("format is '{}', expected '{HYBRID_FORMAT}'", file.format),
-            ));
-        }
-        if !(file.dt.is_finite() && file.dt > 0.0) {
-            return Err(problem(
-                None,
-                None,
-                format!("dt = {} must be finite and > 0", file.dt),
-            ));
-        }
-        if !(1..=mme_core::discretize::MAX_SUBSTEPS).contains(&file.substeps) {
-            return Err(problem(
-                None,
-                None,
-                format!(
-                    "substeps = {} must be in 1..={}",
-                    file.substeps,
-                    mme_core::discretize::MAX_SUBSTEPS
-                ),
-            ));
-        }
-        let n = file.spec()?.linear.n_states();
-        if file.x0.len() != n || file.x0.iter().any(|v| !v.is_finite()) {
-            return Err(problem(
-                None,
-                None,
-                format!("x0 must hold {n} finite numbers, got {:?}", file.x0),
-            ));
-        }
-        Ok(file)
-    }
-
-    /// The model-file part (its `intersample` is how `predict` treats the inputs between
-    /// samples).
-    pub fn spec(&self) -> Result<ModelSpec> {
-        parse_model(Path::new("model.json:model_toml"), &self.model_toml)
-    }
-
-    /// Build the simulatable hybrid model.
-    pub fn model(&self) -> Result<HybridModel> {
-        let spec = self.spec()?;
-        hybrid_model(&spec, self.network.clone(), &self.x0, self.substeps)
-    }
-}
-
-fn model_problem(problem: crate::error::ModelProblem) -> MmennError {
-    MmennError::Model {
-        path: "<model>".into(),
-        line: None,
-        column: None,
-        problem,
-    }
-}
-
-/// Build `ẋ = f(x, u) + E·NN(x, u)` from a model file and a network.
-pub fn hybrid_model(
-    spec: &ModelSpec,
-    network: Mlp,
-    x0: &[f64],
-    substeps: usize,
-) -> Result<HybridModel> {
-    let lin = &spec.linear;
-    let base = spec.term_model().map_err(model_problem)?;
-    let corr = NetCorrection::new(network, lin.n_states())?;
-    let mut model = CorrectedModel::new(
-        base,
-        corr,
-        lin.e().clone(),
-        lin.c().clone(),
-        lin.output_names().to_vec(),
-    )
-    .map_err(|source| MmennError::Core {
-        context: "building the hybrid model",
-        source,
-    })?;
-    model.x0 = x0.to_vec();
-    model.integrator = sysid_core::Integrator::Rk4 {
-        substeps: substeps.max(1),
-    };
-    Ok(model)
-}
+mod trajectory;
 
 /// Options of [`run_fit`].
 #[derive(Debug, Clone, PartialEq)]
@@ -289,35 +166,6 @@ pub fn training_pairs(
         DMatrix::from_column_slice(n + m, count, &cols_x),
         DMatrix::from_column_slice(q, count, &cols_d),
     )
-}
-
-/// Free-run metrics of a model per judged channel of one record, by the one judge
-/// ([`crate::model::judge_free_run`]).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct FreeRunReport {
-    /// Always free-run simulation.
-    pub horizon: Horizon,
-    /// Initial state used.
-    pub x0: Vec<f64>,
-    /// How the initial state was obtained (the judge's rule, in words).
-    pub x0_source: String,
-    /// The samples scored.
-    pub scored: ScoredWindow,
-    /// Metrics per channel present in the data.
-    pub channels: BTreeMap<String, ChannelMetrics>,
-}
-
-impl FreeRunReport {
-    /// The report of a free-run judgement.
-    pub fn of(j: &Judgement) -> Self {
-        Self {
-            horizon: j.horizon,
-            x0: j.x0.clone(),
-            x0_source: j.x0_rule.clone(),
-            scored: j.scored,
-            channels: j.channels.clone(),
-        }
-    }
 }
 
 /// The hybrid model of a model file, a network, a stored initial state and sub-steps, as
@@ -643,13 +491,13 @@ pub fn compute_fit(
     // on held-out data; the best is kept.
     let mut candidates = vec![
         (
-            guard::Candidate::PhysicsAlone,
+            guard::GuardCandidate::PhysicsAlone,
             guard::zero_network(&network)?,
         ),
-        (guard::Candidate::Network, before_refinement),
+        (guard::GuardCandidate::Network, before_refinement),
     ];
     if refinement.is_some() {
-        candidates.push((guard::Candidate::Refined, network.clone()));
+        candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
     let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
     let (guard_report, kept) = guard::choose(&spec, candidates, &held, exp0.dt(), opts.substeps)?;
@@ -666,7 +514,7 @@ pub fn compute_fit(
     // not it was kept).
     if let (Some(r), Some(_)) = (refinement.as_mut(), &validation) {
         r.validation_fit_after = guard_report
-            .score(guard::Candidate::Refined)
+            .score(guard::GuardCandidate::Refined)
             .filter(|s| s.failure.is_none())
             .map(|s| s.fit_percent.clone());
     }

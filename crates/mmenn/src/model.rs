@@ -2,7 +2,7 @@
 //! one free-run judge.
 //!
 //! [`LoadedModel::read`] tells the formats apart by content: text whose first non-blank
-//! character is `{` is `fit`'s hybrid `model.json` (format tag [`crate::fit::HYBRID_FORMAT`]);
+//! character is `{` is `fit`'s hybrid `model.json` (format tag [`crate::hybrid::HYBRID_FORMAT`]);
 //! anything else is read as a model-file TOML (an assumed model, with or without
 //! `[[terms]]`, e.g. `discover`'s `model.discovered.toml`). Either way the result simulates
 //! itself free-run, the inputs between samples as the model's `intersample` says.
@@ -22,19 +22,49 @@
 //!   missing measurements skipped;
 //! - **metrics**: fit %, R², RMSE and error variance per judged channel.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_core::{
-    Dynamics, Experiment, Integrator, InterSample, JudgeOptions, PhysicalModel, TermModel,
-    simulate_with,
+    ChannelMetrics, Dynamics, Experiment, Horizon, Integrator, InterSample, JudgeOptions,
+    PhysicalModel, TermModel, simulate_with,
 };
 pub use sysid_core::{InitialRule, Judgement, Observation, ScoredWindow};
 
 use crate::error::{MmennError, ModelProblem, Result};
-use crate::fit::{HybridFile, HybridModel};
+use crate::hybrid::{HybridFile, HybridModel};
 use crate::model_file::{ModelSpec, parse_model};
+
+/// Free-run metrics of a model per judged channel of one record, by the one judge
+/// ([`judge_free_run`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FreeRunReport {
+    /// Always free-run simulation.
+    pub horizon: Horizon,
+    /// Initial state used.
+    pub x0: Vec<f64>,
+    /// How the initial state was obtained (the judge's rule, in words).
+    pub x0_source: String,
+    /// The samples scored.
+    pub scored: ScoredWindow,
+    /// Metrics per channel present in the data.
+    pub channels: BTreeMap<String, ChannelMetrics>,
+}
+
+impl FreeRunReport {
+    /// The report of a free-run judgement.
+    pub fn of(j: &Judgement) -> Self {
+        Self {
+            horizon: j.horizon,
+            x0: j.x0.clone(),
+            x0_source: j.x0_rule.clone(),
+            scored: j.scored,
+            channels: j.channels.clone(),
+        }
+    }
+}
 
 /// Which of mmenn's model files a model came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -14,10 +14,9 @@ use sysid_core::{ChannelMetrics, Dataset, Experiment};
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::{Table, read_table, table_to_experiment, write_csv};
 use crate::error::Result;
-use crate::fit::FreeRunReport;
 use crate::model::{
-    InitialRule, Judgement, LoadedModel, ModelKind, Observation, ScoredWindow, judge_free_run,
-    judge_k_step,
+    FreeRunReport, InitialRule, Judgement, LoadedModel, ModelKind, Observation, ScoredWindow,
+    judge_free_run, judge_k_step,
 };
 use crate::plot::{Figure, Series};
 

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use mmenn::data_file::{read_table, write_csv};
-use mmenn::fit::{Candidate, FitOptions, HiddenChoice, RefineChoice, run_fit};
+use mmenn::fit::{FitOptions, GuardCandidate, HiddenChoice, RefineChoice, run_fit};
 use mmenn::model::LoadedModel;
 use mmenn::predict::{InitialChoice, PredictOptions, compute_predict};
 
@@ -86,13 +86,13 @@ fn guard_keeps_the_physics_alone_on_data_the_physics_generated() {
     // Three candidates judged on the held-out last fifth of the training record.
     assert_eq!(g.candidates.len(), 3, "{g:?}");
     assert!(g.held_out.contains("last fifth"), "{}", g.held_out);
-    let physics = g.score(Candidate::PhysicsAlone).unwrap();
+    let physics = g.score(GuardCandidate::PhysicsAlone).unwrap();
     let physics_error = physics.held_out_error.unwrap();
     // The physics generated the data: its free run is exact up to the initial-state fit
     // (independent of the guard: the same model simulated the data), so the relative
     // error is at round-off level.
     assert!(physics_error < 1e-4, "physics alone: {physics_error}");
-    assert_eq!(g.chosen, Candidate::PhysicsAlone, "{}", g.reason);
+    assert_eq!(g.chosen, GuardCandidate::PhysicsAlone, "{}", g.reason);
     // The kept model is the physics: the training free run is as exact.
     let train = s.train.channels["x"].fit_percent;
     assert!(train > 99.99, "training free-run fit {train} %");

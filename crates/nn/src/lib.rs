@@ -17,7 +17,8 @@ pub use lm::{EpochInfo, StopReason, TrainReport, split_indices, train_lm};
 pub use mlp::{Architecture, Mlp, Workspace};
 pub use scaling::{CONSTANT_CHANNEL_RTOL, Scaler};
 pub use sweep::{
-    Selection, SweepConfig, SweepProgress, SweepResult, SweepRow, derive_seed, select, sizing_sweep,
+    SizingRule, SweepConfig, SweepProgress, SweepResult, SweepRow, derive_seed, select,
+    sizing_sweep,
 };
 pub use trajectory::{
     HybridParts, RefineProgress, RefineReport, ShootingRecord, TrajectoryConfig,

@@ -12,9 +12,11 @@ use serde::{Deserialize, Serialize};
 
 mod kernel;
 mod normal;
+mod part;
 mod schedule;
 
-use normal::{Cutoff, Linearisation, Part, Use};
+use normal::{Cutoff, Linearisation, Use};
+use part::Part;
 use schedule::Schedule;
 
 use crate::config::{Acceleration, Damping, ErrorSpace, LmConfig, ValidationSplit};

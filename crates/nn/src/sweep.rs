@@ -23,7 +23,7 @@ use crate::mlp::Mlp;
 /// that only add units for an insignificant gain.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
-pub struct Selection {
+pub struct SizingRule {
     /// Relative band above the best test MSE, ≥ 0. Default 0.1: with `N_test` samples the
     /// test MSE of equally good networks scatters by about `√(2/N_test)` relative (χ²
     /// spread), which is 10 % at 200 test samples.
@@ -32,7 +32,7 @@ pub struct Selection {
     pub abs_tolerance: f64,
 }
 
-impl Default for Selection {
+impl Default for SizingRule {
     fn default() -> Self {
         Self {
             rel_tolerance: 0.1,
@@ -55,7 +55,7 @@ pub struct SweepConfig {
     /// therefore the same for all runs).
     pub lm: LmConfig,
     /// How the reported network is chosen.
-    pub selection: Selection,
+    pub selection: SizingRule,
 }
 
 impl Default for SweepConfig {
@@ -65,7 +65,7 @@ impl Default for SweepConfig {
             inits: 10,
             seed: 0,
             lm: LmConfig::default(),
-            selection: Selection::default(),
+            selection: SizingRule::default(),
         }
     }
 }
@@ -187,7 +187,7 @@ pub fn derive_seed(base: u64, hidden: usize, init: usize) -> u64 {
 }
 
 /// Train `inits` networks of each size in `config.hidden_sizes` on the training data,
-/// evaluate each on the test data, and choose one by [`Selection`].
+/// evaluate each on the test data, and choose one by [`SizingRule`].
 ///
 /// Data are `channels × samples`. Every network's scalers are fitted to the training
 /// data. Runs are spread over the current rayon pool; each run depends only on its seed,
@@ -277,8 +277,8 @@ pub fn sizing_sweep(
     })
 }
 
-/// Apply the [`Selection`] rule to a sweep table; `None` if no row has a finite test MSE.
-pub fn select(rows: &[SweepRow], rule: &Selection) -> Option<usize> {
+/// Apply the [`SizingRule`] to a sweep table; `None` if no row has a finite test MSE.
+pub fn select(rows: &[SweepRow], rule: &SizingRule) -> Option<usize> {
     let best = rows
         .iter()
         .map(|r| r.test_mse)
@@ -324,7 +324,7 @@ mod tests {
             row(5, 0, 1.0),
             row(4, 0, f64::NAN),
         ];
-        let rule = Selection {
+        let rule = SizingRule {
             rel_tolerance: 0.1,
             abs_tolerance: 0.0,
         };
@@ -333,7 +333,7 @@ mod tests {
         assert_eq!(
             select(
                 &rows,
-                &Selection {
+                &SizingRule {
                     rel_tolerance: 0.0,
                     abs_tolerance: 0.0
                 }

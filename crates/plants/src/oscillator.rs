@@ -13,8 +13,8 @@ use sysid_core::{Dynamics, LinearModel};
 
 use crate::error::{PlantError, Result};
 use crate::params::{ParamInfo, Parameters, non_negative, param_table, positive};
-use crate::recipe::Recipe;
 use crate::signals::{Excitation, Multisine};
+use crate::system::Recipe;
 use crate::system::{RecipeSpec, TruthSystem, selection_model, unit_map};
 
 /// Registry name.

@@ -8,8 +8,8 @@ use sysid_core::{Dynamics, LinearModel};
 
 use crate::error::Result;
 use crate::params::{ParamInfo, Parameters, non_negative, param_table, positive};
-use crate::recipe::Recipe;
 use crate::signals::{Excitation, Sine};
+use crate::system::Recipe;
 use crate::system::{RecipeSpec, TruthSystem, selection_model, unit_map};
 
 /// Registry name.

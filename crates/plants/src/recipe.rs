@@ -3,11 +3,8 @@
 //! parameter overrides) into noisy data, the noise-free truth and the assumed model.
 
 use std::collections::BTreeMap;
-use std::fmt;
-use std::str::FromStr;
 
 use nalgebra::DMatrix;
-use serde::{Deserialize, Serialize};
 use sysid_core::integrate::DEFAULT_BLOW_UP;
 use sysid_core::{Channel, Dataset, DpOptions, Experiment, Integrator, LinearModel, simulate};
 
@@ -20,42 +17,10 @@ use crate::oscillator::{self, Oscillator, OscillatorParams};
 use crate::params::{ParamInfo, Parameters};
 use crate::pendulum::{self, Pendulum, PendulumParams};
 use crate::signals::SampleGrid;
+pub use crate::system::Recipe;
 use crate::system::TruthSystem;
 use crate::two_tank::{self, TwoTank, TwoTankParams};
 use crate::van_der_pol::{self, VanDerPol, VanDerPolParams};
-
-/// Which experiment of a system to generate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Recipe {
-    /// The training (estimation) experiment.
-    #[default]
-    Train,
-    /// The test (validation) experiment: a different input and initial state.
-    Test,
-}
-
-impl fmt::Display for Recipe {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Recipe::Train => "train",
-            Recipe::Test => "test",
-        })
-    }
-}
-
-impl FromStr for Recipe {
-    type Err = PlantError;
-    fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "train" => Ok(Recipe::Train),
-            "test" => Ok(Recipe::Test),
-            other => Err(PlantError::UnknownRecipe {
-                name: other.to_string(),
-            }),
-        }
-    }
-}
 
 /// What [`systems`] tells about one registered system.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,16 +1,51 @@
 //! The [`TruthSystem`] trait every plant implements (truth dynamics, assumed linear model,
-//! truth correction, units, recipes), the [`TruthCorrection`] adapter to
+//! truth correction, units, recipes: [`Recipe`] says which), the [`TruthCorrection`] adapter to
 //! `sysid_core::Correction`, and helpers shared by the plants.
 
 use std::collections::BTreeMap;
+use std::fmt;
+use std::str::FromStr;
 
 use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
 use sysid_core::{Correction, Dynamics, LinearModel, ModelNames};
 
-use crate::error::Result;
+use crate::error::{PlantError, Result};
 use crate::params::ParamInfo;
-use crate::recipe::Recipe;
 use crate::signals::Excitation;
+
+/// Which experiment of a system to generate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Recipe {
+    /// The training (estimation) experiment.
+    #[default]
+    Train,
+    /// The test (validation) experiment: a different input and initial state.
+    Test,
+}
+
+impl fmt::Display for Recipe {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Recipe::Train => "train",
+            Recipe::Test => "test",
+        })
+    }
+}
+
+impl FromStr for Recipe {
+    type Err = PlantError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "train" => Ok(Recipe::Train),
+            "test" => Ok(Recipe::Test),
+            other => Err(PlantError::UnknownRecipe {
+                name: other.to_string(),
+            }),
+        }
+    }
+}
 
 /// What one recipe (training or test experiment) of a plant consists of.
 #[derive(Debug, Clone, PartialEq)]

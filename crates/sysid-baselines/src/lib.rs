@@ -39,7 +39,7 @@ pub use narx::{
 };
 pub use narx_model::NarxModel;
 pub use oe::{
-    InitialStateFit, OeConfig, OeFit, ParameterEstimate, Stability, StabilityVerdict, fit_oe,
+    InitialStateTreatment, OeConfig, OeFit, ParameterEstimate, Stability, StabilityVerdict, fit_oe,
 };
 pub use oe_model::{OeModel, X0Policy};
 pub use projection::RegressorProjection;

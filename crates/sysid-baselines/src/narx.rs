@@ -25,7 +25,7 @@ pub enum NetworkChoice {
         restarts: usize,
     },
     /// The sizing sweep of `nn` (thesis §3.1) on the regressors: the last `test_fraction`
-    /// of each experiment's rows is its test set, and `nn`'s [`nn::Selection`] rule picks
+    /// of each experiment's rows is its test set, and `nn`'s [`nn::SizingRule`] picks
     /// the network by one-step test MSE.
     Sweep {
         /// Sweep settings (sizes, initialisations, seed, training).

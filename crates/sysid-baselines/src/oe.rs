@@ -17,7 +17,7 @@ use crate::oe_sim::{OeProblem, X0Layout};
 /// How the initial state of each experiment is treated while fitting.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum InitialStateFit {
+pub enum InitialStateTreatment {
     /// Estimated jointly with the model (`n` extra parameters per experiment), started
     /// from a least-squares estimate on the first samples under the initial model.
     #[default]
@@ -35,8 +35,8 @@ pub struct OeConfig {
     /// Free entries, named `"A[i,j]"` / `"B[i,j]"` (0-based). Default: none (then only
     /// initial states are fitted, if estimated).
     pub free: Vec<String>,
-    /// Initial states. Default [`InitialStateFit::Estimate`].
-    pub initial_state: InitialStateFit,
+    /// Initial states. Default [`InitialStateTreatment::Estimate`].
+    pub initial_state: InitialStateTreatment,
     /// Iteration budget of the trust-region solver. Default 200.
     pub max_iterations: u64,
     /// Stop when every scaled-gradient component is at most this times `‖r‖` (cosine of
@@ -52,7 +52,7 @@ impl Default for OeConfig {
     fn default() -> Self {
         Self {
             free: Vec::new(),
-            initial_state: InitialStateFit::Estimate,
+            initial_state: InitialStateTreatment::Estimate,
             max_iterations: 200,
             gradient_tolerance: 1e-10,
             cost_tolerance: 1e-14,
@@ -232,9 +232,9 @@ pub fn fit_oe(initial: &LinearModel, data: &Dataset, config: &OeConfig) -> Resul
     }
     let n = initial.n_states();
     let layout = match &config.initial_state {
-        InitialStateFit::Estimate => X0Layout::Estimated,
-        InitialStateFit::Zero => X0Layout::Fixed(vec![DVector::zeros(n); experiments.len()]),
-        InitialStateFit::Given(x0s) => {
+        InitialStateTreatment::Estimate => X0Layout::Estimated,
+        InitialStateTreatment::Zero => X0Layout::Fixed(vec![DVector::zeros(n); experiments.len()]),
+        InitialStateTreatment::Given(x0s) => {
             if x0s.len() != experiments.len() {
                 return Err(BaselineError::Dimension {
                     what: "given initial states vs experiments",

@@ -8,7 +8,22 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{CoreError, Result};
-use crate::integrate::InterSample;
+
+/// How inputs behave between samples (the `InterSample` property of MATLAB's `iddata`).
+///
+/// A record of a band-limited input (a multisine through a reconstruction filter) is
+/// neither held nor stepped between samples; holding it delays it by half a sample,
+/// which near a resonance a few samples per period long is a large phase error (on the
+/// Silverbox record, 2nd-order free-run RMSE 15.5 mV held against 8.3 mV interpolated).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InterSample {
+    /// Held at the sample's value until the next sample (zero-order hold).
+    #[default]
+    Zoh,
+    /// Linear from each sample to the next (first-order hold).
+    Foh,
+}
 
 /// Relative tolerance on the sample step when checking that a time vector is uniform.
 ///

@@ -6,9 +6,10 @@
 
 use nalgebra::DMatrix;
 
+use crate::dataset::InterSample;
 use crate::dynamics::{Correction, Dynamics, Horizon, Model, Prediction};
 use crate::error::{CoreError, Result};
-use crate::integrate::{Integrator, InterSample, simulate, simulate_with};
+use crate::integrate::{Integrator, simulate, simulate_with};
 
 /// `ẋ = f(x, u) + E·g(x, u)`, `y = C x`, with a free-run initial state.
 #[derive(Debug, Clone)]

@@ -19,7 +19,7 @@ pub mod tangent;
 pub mod terms;
 
 pub use correlation::{Confidence, acf, confidence_bound, xcf};
-pub use dataset::{Channel, Dataset, Experiment};
+pub use dataset::{Channel, Dataset, Experiment, InterSample};
 pub use dynamics::{Correction, Dynamics, Horizon, Model, Prediction};
 pub use error::{CoreError, Result};
 pub use estimate::{ExperimentEstimate, IterationRecord, MmeEstimate, SolveReport, Termination};
@@ -30,7 +30,7 @@ pub use greybox::{
 };
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};
-pub use integrate::{DpOptions, Integrator, InterSample, simulate, simulate_with};
+pub use integrate::{DpOptions, Integrator, simulate, simulate_with};
 pub use judge::{
     DEFAULT_X0_WINDOW, InitialRule, JudgeOptions, Judgement, Observation, ScoredWindow,
     judge_free_run, judge_k_step, score, score_rows,

@@ -512,7 +512,7 @@ mod tests {
                 0.0,
                 h,
                 &u,
-                crate::integrate::InterSample::Foh,
+                crate::dataset::InterSample::Foh,
                 &crate::integrate::Integrator::Rk4 { substeps: 400 },
                 1e9,
             )

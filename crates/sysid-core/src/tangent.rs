@@ -18,6 +18,7 @@
 
 use nalgebra::DMatrix;
 
+use crate::dataset::InterSample;
 use crate::dynamics::Dynamics;
 
 /// The input over one RK4 step.
@@ -58,13 +59,31 @@ impl StepInput<'_> {
 
     /// The input of sub-step `j` of `substeps` across a sample interval over which it
     /// runs linearly from `ua` to `ub` (see also
-    /// [`InterSample::step_input`](crate::integrate::InterSample::step_input)).
+    /// [`InterSample::step_input`](InterSample::step_input)).
     pub fn ramp<'u>(ua: &'u [f64], ub: &'u [f64], j: usize, substeps: usize) -> StepInput<'u> {
         StepInput::Ramp {
             ua,
             ub,
             from: j as f64 / substeps as f64,
             per: 1.0 / substeps as f64,
+        }
+    }
+}
+
+// `InterSample` is the dataset's word; its RK4 input lives with the step.
+impl InterSample {
+    /// The input over RK4 sub-step `j` of `substeps` across the sample interval from
+    /// input `ua` to `ub` (`ub` is read only for a first-order hold).
+    pub fn step_input<'u>(
+        self,
+        ua: &'u [f64],
+        ub: &'u [f64],
+        j: usize,
+        substeps: usize,
+    ) -> StepInput<'u> {
+        match self {
+            InterSample::Zoh => StepInput::Held(ua),
+            InterSample::Foh => StepInput::ramp(ua, ub, j, substeps),
         }
     }
 }
@@ -81,14 +100,6 @@ pub trait TangentSource {
     fn state_jacobian(&self, _t: f64, _x: &[f64], _u: &[f64], _a: &mut DMatrix<f64>) -> bool {
         false
     }
-}
-
-/// No direct dependence: tangents with respect to initial states only.
-#[derive(Debug, Clone, Copy)]
-pub struct InitialStatesOnly;
-
-impl TangentSource for InitialStatesOnly {
-    fn add_to(&self, _: f64, _: &[f64], _: &[f64], _: &mut DMatrix<f64>) {}
 }
 
 const STAGE_C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];

@@ -17,7 +17,7 @@ use mmenn::sysid_core::{ChannelMetrics, channel_metrics};
 use nalgebra::DMatrix;
 
 use super::{Ctx, FIT_SEED, Job, Mode, Outcome, line, row};
-use crate::baselines::{self, BaselineRun};
+use crate::baselines::{self, BaselineRun, OeStart, Trajectories};
 use crate::data::{DataSet, Record, find};
 use crate::table::{Column, Table, Tolerance};
 
@@ -43,17 +43,6 @@ struct Ch5 {
     extra_lags: Option<usize>,
     /// Where the output-error model starts.
     oe_start: OeStart,
-}
-
-/// Starting point of the output-error fit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum OeStart {
-    /// The data set's assumed (physics) model.
-    Assumed,
-    /// The double pendulum's physics linearisation about the hanging equilibrium (its
-    /// ignorance model has A = 0 and B = 0, where the input has no effect on the outputs
-    /// and the free parameters cannot be identified).
-    DoublePendulumLinearised,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -323,10 +312,6 @@ fn predict_states(model: &LoadedModel, rec: &Record, out: &Path) -> Result<DMatr
     write_predict(&outcome, out)?;
     Ok(outcome.free.states)
 }
-
-/// A model's free-run states (rows = all states, NaN rows where it has no estimate) on the
-/// training and test record, or why it has none.
-pub type Trajectories = [(DMatrix<f64>, Option<String>); 2];
 
 fn failed(n: usize, len: usize, why: String) -> (DMatrix<f64>, Option<String>) {
     (DMatrix::from_element(n, len, f64::NAN), Some(why))

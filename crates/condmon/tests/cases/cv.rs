@@ -3,8 +3,9 @@
 //! single runs and serialisable.
 
 use condmon::{
-    ClassifierSpec, CvConfig, CvScheme, ErrorTable, KnnConfig, LdaConfig, Preprocessing, QdaConfig,
-    Reduction, Scaling, TrainedPipeline, cross_validate, error_table, folds_for, stratified_folds,
+    ClassifierSpec, CvConfig, CvScheme, ErrorTable, FeatureScaling, KnnConfig, LdaConfig,
+    Preprocessing, QdaConfig, Reduction, TrainedPipeline, cross_validate, error_table, folds_for,
+    stratified_folds,
 };
 use nalgebra::DMatrix;
 
@@ -64,7 +65,7 @@ fn leave_one_out_matches_hand_computation() {
         ..CvConfig::default()
     };
     let knn = KnnConfig { k: 1 };
-    for scaling in [Scaling::None, Scaling::Standardise] {
+    for scaling in [FeatureScaling::None, FeatureScaling::Standardise] {
         // Standardising a single feature is a monotone affine map: same neighbours.
         let pre = Preprocessing {
             scaling,

@@ -1,7 +1,7 @@
 //! Every configuration and data error is a typed error naming what is wrong.
 
 use mme_core::{
-    AutoWeight, InitialState, MmeConfig, MmeError, NoiseSpec, NonlinearModel, WeightShape,
+    AutoWeight, MmeConfig, MmeError, NoiseSpec, NonlinearModel, StartTrajectory, WeightShape,
     WeightSpec, estimate, estimate_nonlinear,
 };
 use nalgebra::DMatrix;
@@ -146,7 +146,7 @@ fn dimension_mismatches_are_typed() {
     let nl =
         NonlinearModel::new(model(), model().c().clone(), model().e().clone(), names()).unwrap();
     let config = MmeConfig {
-        initial_state: InitialState::Given(vec![vec![1.0]]),
+        start: StartTrajectory::Given(vec![vec![1.0]]),
         ..given(WeightSpec::Scalar(1.0), vec![0.1])
     };
     let r = estimate_nonlinear(&nl, &d, &config);

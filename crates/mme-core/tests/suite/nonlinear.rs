@@ -2,7 +2,7 @@
 //! stationarity of the true cost, an exact pendulum model, and the automatic W.
 
 use mme_core::{
-    InitialState, MmeConfig, NoiseSpec, NonlinearModel, WeightSpec, estimate,
+    MmeConfig, NoiseSpec, NonlinearModel, StartTrajectory, WeightSpec, estimate,
     estimate_nonlinear_with_report, estimate_with_report,
 };
 use nalgebra::DMatrix;
@@ -290,7 +290,7 @@ fn automatic_w_with_a_nonlinear_model_missing_its_damping() {
     let config = MmeConfig {
         noise_variance: NoiseSpec::Given(vec![sigma * sigma]),
         substeps: Some(1),
-        initial_state: InitialState::Given(vec![vec![0.8, 0.0]]),
+        start: StartTrajectory::Given(vec![vec![0.8, 0.0]]),
         ..MmeConfig::default()
     };
     let out = estimate_nonlinear_with_report(&pendulum_model(0.0), &data, &config).unwrap();

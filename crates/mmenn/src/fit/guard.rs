@@ -16,7 +16,7 @@ use crate::model_file::ModelSpec;
 /// A model `fit` may keep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum Candidate {
+pub enum GuardCandidate {
     /// The assumed model alone: the network's output is held at zero.
     PhysicsAlone,
     /// The network as trained on MME's `d̂`, before trajectory refinement.
@@ -25,7 +25,7 @@ pub enum Candidate {
     Refined,
 }
 
-impl Candidate {
+impl GuardCandidate {
     /// The candidate in words.
     pub fn describe(self) -> &'static str {
         match self {
@@ -40,7 +40,7 @@ impl Candidate {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CandidateScore {
     /// Which model.
-    pub candidate: Candidate,
+    pub candidate: GuardCandidate,
     /// Mean over the judged channels of `‖y − ŷ‖ / ‖y − mean y‖` (`1 − fit % / 100`),
     /// or `None` when the free run failed.
     pub held_out_error: Option<f64>,
@@ -60,7 +60,7 @@ pub struct GuardReport {
     /// Every candidate's score, in the order physics alone, network, refined.
     pub candidates: Vec<CandidateScore>,
     /// The candidate kept.
-    pub chosen: Candidate,
+    pub chosen: GuardCandidate,
     /// Why, in words.
     pub reason: String,
     /// Whether refinement made the held-out free run worse than the network before it
@@ -70,7 +70,7 @@ pub struct GuardReport {
 
 impl GuardReport {
     /// The score of `candidate`, when it was judged.
-    pub fn score(&self, candidate: Candidate) -> Option<&CandidateScore> {
+    pub fn score(&self, candidate: GuardCandidate) -> Option<&CandidateScore> {
         self.candidates.iter().find(|s| s.candidate == candidate)
     }
 
@@ -187,7 +187,7 @@ pub(crate) fn zero_network(like: &Mlp) -> Result<Mlp> {
     )?)
 }
 
-fn score(candidate: Candidate, judged: Result<Judgement>) -> CandidateScore {
+fn score(candidate: GuardCandidate, judged: Result<Judgement>) -> CandidateScore {
     match judged {
         Ok(j) => {
             let fits: Vec<f64> = j.channels.values().map(|m| m.fit_percent).collect();
@@ -228,7 +228,7 @@ fn score(candidate: Candidate, judged: Result<Judgement>) -> CandidateScore {
 /// later one is kept only when strictly better.
 pub(crate) fn choose(
     spec: &ModelSpec,
-    candidates: Vec<(Candidate, Mlp)>,
+    candidates: Vec<(GuardCandidate, Mlp)>,
     held: &HeldOut,
     dt: f64,
     substeps: usize,
@@ -247,13 +247,16 @@ pub(crate) fn choose(
             best = Some(i);
         }
     }
-    let error_of = |c: Candidate| {
+    let error_of = |c: GuardCandidate| {
         scores
             .iter()
             .find(|s| s.candidate == c)
             .and_then(|s| s.held_out_error)
     };
-    let refinement_hurt = match (error_of(Candidate::Network), error_of(Candidate::Refined)) {
+    let refinement_hurt = match (
+        error_of(GuardCandidate::Network),
+        error_of(GuardCandidate::Refined),
+    ) {
         (Some(before), Some(after)) => Some(after > before),
         _ => None,
     };
@@ -357,25 +360,33 @@ mod tests {
         let (report, kept) = choose(
             &spec,
             vec![
-                (Candidate::PhysicsAlone, zero_network(&blow_up).unwrap()),
-                (Candidate::Network, blow_up.clone()),
-                (Candidate::Refined, constant(0.3)),
+                (
+                    GuardCandidate::PhysicsAlone,
+                    zero_network(&blow_up).unwrap(),
+                ),
+                (GuardCandidate::Network, blow_up.clone()),
+                (GuardCandidate::Refined, constant(0.3)),
             ],
             &held,
             0.05,
             4,
         )
         .unwrap();
-        let net = report.score(Candidate::Network).unwrap();
+        let net = report.score(GuardCandidate::Network).unwrap();
         assert!(net.held_out_error.is_none());
         let why = net.failure.as_deref().unwrap();
         assert!(why.contains("diverged at t = "), "{why}");
         // A constant offset of 0.3 moves the steady state from 1 to 1.3: worse than the
         // exact physics, which is kept.
-        assert_eq!(report.chosen, Candidate::PhysicsAlone, "{}", report.reason);
+        assert_eq!(
+            report.chosen,
+            GuardCandidate::PhysicsAlone,
+            "{}",
+            report.reason
+        );
         assert!(
             report
-                .score(Candidate::PhysicsAlone)
+                .score(GuardCandidate::PhysicsAlone)
                 .unwrap()
                 .held_out_error
                 .unwrap()
@@ -412,18 +423,18 @@ mod tests {
             &spec,
             vec![
                 (
-                    Candidate::PhysicsAlone,
+                    GuardCandidate::PhysicsAlone,
                     zero_network(&constant(0.5)).unwrap(),
                 ),
-                (Candidate::Network, constant(0.5)),
-                (Candidate::Refined, constant(0.8)),
+                (GuardCandidate::Network, constant(0.5)),
+                (GuardCandidate::Refined, constant(0.8)),
             ],
             &held,
             0.05,
             4,
         )
         .unwrap();
-        assert_eq!(report.chosen, Candidate::Network, "{}", report.reason);
+        assert_eq!(report.chosen, GuardCandidate::Network, "{}", report.reason);
         assert_eq!(report.refinement_hurt, Some(true));
         assert!(
             report

@@ -4,7 +4,7 @@
 
 use nalgebra::DMatrix;
 
-use super::normal::Part;
+use super::part::{BLOCK, Part};
 use crate::mlp::{Mlp, tanh};
 
 /// Forward pass of samples `k0..k0 + kb` of `part` through a one-hidden-layer network into
@@ -121,7 +121,7 @@ pub(super) fn single_layer_jacobian(
 }
 
 /// A block of ones (the bias columns' entries).
-const ONES: [f64; super::normal::BLOCK] = [1.0; super::normal::BLOCK];
+const ONES: [f64; BLOCK] = [1.0; BLOCK];
 
 /// `Σ a_k b_k` with eight running sums (lane `k mod 8`) added at the end in a fixed order:
 /// independent additions that pipeline and vectorise where one running sum would wait on

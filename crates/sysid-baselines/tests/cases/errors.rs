@@ -187,7 +187,7 @@ fn unidentifiable_parameter_is_named() {
     .unwrap();
     let config = OeConfig {
         free: vec!["A[0,0]".into(), "A[1,1]".into()],
-        initial_state: sysid_baselines::InitialStateFit::Zero,
+        initial_state: sysid_baselines::InitialStateTreatment::Zero,
         ..OeConfig::default()
     };
     match fit_oe(&decoupled, &data, &config) {

@@ -3,7 +3,7 @@
 
 use nalgebra::DMatrix;
 use sysid_baselines::{
-    InitialStateFit, OeConfig, OeModel, Stability, StabilityVerdict, X0Policy, fit_oe,
+    InitialStateTreatment, OeConfig, OeModel, Stability, StabilityVerdict, X0Policy, fit_oe,
 };
 use sysid_core::{Model, Termination};
 
@@ -106,7 +106,7 @@ fn given_initial_state_is_used() {
     let start = oscillator(TRUE_A10, TRUE_A11, 1.0);
     let config = OeConfig {
         free: vec!["B[1,0]".into()],
-        initial_state: InitialStateFit::Given(vec![TRUE_X0.to_vec()]),
+        initial_state: InitialStateTreatment::Given(vec![TRUE_X0.to_vec()]),
         ..OeConfig::default()
     };
     let fit = fit_oe(&start, &data, &config).unwrap();

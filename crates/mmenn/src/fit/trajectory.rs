@@ -9,8 +9,8 @@ use nn::{HybridParts, Mlp, RefineReport, ShootingRecord, TrajectoryConfig};
 use serde::Serialize;
 use sysid_core::{Dataset, MmeEstimate};
 
+use super::{FitOptions, hybrid_loaded, judge_outputs};
 use crate::error::{MmennError, Result};
-use crate::fit::{FitOptions, hybrid_loaded, judge_outputs};
 use crate::model_file::ModelSpec;
 
 /// Whether `fit` refines the network on trajectories after training it on `d̂`.
@@ -103,7 +103,7 @@ fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<ShootingRecord<'
 /// the validation records (with MME's `x̂` of them) decide when to stop, when given. The
 /// validation free-run fit % of the `d̂`-trained network is recorded first, to say later
 /// whether refinement helped.
-pub(crate) fn refine_network(
+pub(super) fn refine_network(
     spec: &ModelSpec,
     network: &mut Mlp,
     (est, data): (&MmeEstimate, &Dataset),

@@ -1,0 +1,389 @@
+//! The command line of `mmenn`: global flags, subcommands and their arguments (clap).
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+use mmenn::plants::Recipe;
+
+/// Hybrid nonlinear system identification: Minimum Model Error estimation + neural networks.
+///
+/// Every command writes its --out folder all-or-nothing: into a fresh folder beside it,
+/// put in place at the end. An existing --out folder is replaced only when it holds the
+/// results of the same command (or with --force). Errors are printed without a backtrace
+/// unless --debug is given or MMENN_BACKTRACE is set. Exit status: 0 success, 1 error,
+/// 3 results written but the estimator did not converge (2: bad arguments).
+#[derive(Debug, Parser)]
+#[command(name = "mmenn", version, about)]
+pub(crate) struct Cli {
+    /// Print errors with their full detail (and a backtrace when RUST_BACKTRACE=1).
+    #[arg(long, global = true)]
+    pub(crate) debug: bool,
+    /// Replace an existing --out folder even when it holds another command's results or
+    /// files mmenn did not write (never one holding an input file).
+    #[arg(long, global = true)]
+    pub(crate) force: bool,
+    /// Print no progress (bars on a terminal, periodic lines otherwise) on stderr.
+    #[arg(long, short, global = true)]
+    pub(crate) quiet: bool,
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+/// A count that must be at least 1.
+fn at_least_one(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v >= 1 => Ok(v),
+        Ok(_) => Err("must be at least 1".into()),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
+/// Reference draws: 0 (off) or at least 4, at most 1000.
+fn draws(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v == 0 || (4..=1000).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} draws: 0 (off) or 4 to 1000")),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
+/// A count that must be at least 2.
+fn at_least_two(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v >= 2 => Ok(v),
+        Ok(_) => Err("must be at least 2".into()),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
+/// Sub-steps per sample interval: 1 to `MAX_SUBSTEPS`.
+fn substeps(text: &str) -> std::result::Result<usize, String> {
+    let max = mmenn::mme_core::discretize::MAX_SUBSTEPS;
+    match text.trim().parse::<u64>() {
+        Ok(v) if (1..=max as u64).contains(&v) => Ok(v as usize),
+        Ok(v) => Err(format!("{v} is outside 1..={max}")),
+        Err(e) => Err(format!("'{text}' is not a whole number ({e})")),
+    }
+}
+
+/// A fraction in [0, 1).
+fn fraction(text: &str) -> std::result::Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..1.0).contains(&v) => Ok(v),
+        Ok(v) => Err(format!("{v} is not a fraction in [0, 1)")),
+        Err(e) => Err(format!("'{text}' is not a number ({e})")),
+    }
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum Command {
+    /// Simulate a built-in system: writes data.csv, truth.csv and model.toml.
+    Simulate(SimulateArgs),
+    /// Minimum Model Error estimate: smooth states and the model correction d(t).
+    Estimate(EstimateArgs),
+    /// Fit the MME/NN hybrid model: MME, network sizing sweep, free-run validation.
+    Fit(FitArgs),
+    /// Free-run (and k-step) prediction of any model mmenn writes on new data.
+    Predict(PredictArgs),
+    /// Print any model mmenn writes as equations (names, units, ±σ where known).
+    Show(ShowArgs),
+    /// Grey-box estimation: the free [parameters] of a physical model file and each
+    /// record's start state by free-run output error, with ±σ and correlations.
+    Greyest(GreyestArgs),
+    /// Compare the assumed model, linear OE, NARX and MME/NN on the same data (free-run).
+    Compare(CompareArgs),
+    /// Find where model and data disagree, name the missing effect, add it, show the gap shrink.
+    Discover(DiscoverArgs),
+    /// Condition monitoring from identified models.
+    #[command(subcommand)]
+    Monitor(MonitorCommand),
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct CompareArgs {
+    /// Estimation data file(s) (CSV).
+    #[arg(long, required = true, num_args = 1..)]
+    pub(crate) data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// Validation data file(s).
+    #[arg(long, num_args = 1..)]
+    pub(crate) val: Vec<PathBuf>,
+    /// NARX delays (default: suggested from PACF/XCF).
+    #[arg(long)]
+    pub(crate) narx_lags: Option<usize>,
+    /// Largest network of the MME/NN sizing sweep.
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
+    pub(crate) max_hidden: usize,
+    /// Initialisations per network size (MME/NN).
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
+    pub(crate) inits: usize,
+    /// How the MME/NN networks are trained: trainlm or accelerated (as `fit --training`).
+    #[arg(long, default_value = "trainlm")]
+    pub(crate) training: mmenn::fit::Training,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    #[command(flatten)]
+    pub(crate) prep: PrepArgs,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct DiscoverArgs {
+    /// List the catalogue of named effects (term, where it may enter) and exit.
+    #[arg(long)]
+    pub(crate) list_effects: bool,
+    /// Estimation data file(s) (CSV).
+    #[arg(long, required_unless_present = "list_effects", num_args = 1..)]
+    pub(crate) data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long, required_unless_present = "list_effects")]
+    pub(crate) model: Option<PathBuf>,
+    /// Validation data file(s): they judge the free-run search's candidate sets and get
+    /// their own before/after gap.
+    #[arg(long, num_args = 1..)]
+    pub(crate) val: Vec<PathBuf>,
+    /// Without --val: fraction at the end of every estimation record held out to judge
+    /// the free-run search (0: judge on the estimation records).
+    #[arg(long, default_value_t = 0.5, value_parser = fraction)]
+    pub(crate) holdout_fraction: f64,
+    /// Most discover–augment rounds.
+    #[arg(long, default_value_t = 3)]
+    pub(crate) max_rounds: usize,
+    /// Seed of the noise-floor simulation, the bootstrap judge and the stand-in's draws.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Reference draws of the flexible stand-in on d̂ (MME reruns on simulated copies of
+    /// the data); 0 skips it, and then a `found`/`none` verdict rests on the bootstrap
+    /// judge alone.
+    #[arg(long, default_value_t = 12, value_parser = draws)]
+    pub(crate) stand_in_draws: usize,
+    /// Output directory.
+    #[arg(long, required_unless_present = "list_effects")]
+    pub(crate) out: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) prep: PrepArgs,
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum MonitorCommand {
+    /// Identify every labelled record and train the classifiers.
+    Train(MonitorTrainArgs),
+    /// Identify one record and classify its condition.
+    Classify(MonitorClassifyArgs),
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct MonitorTrainArgs {
+    /// A condition and its records: NAME=FILE[,FILE…] (repeat per condition).
+    #[arg(long = "class", required = true)]
+    pub(crate) classes: Vec<String>,
+    /// Model file (TOML).
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// Features: raw, canonical, physical or canonical+physical.
+    #[arg(long, default_value = "canonical+physical")]
+    pub(crate) features: mmenn::monitor::FeatureKind,
+    /// Hidden units of each record's network.
+    #[arg(long, default_value_t = 3, value_parser = at_least_one)]
+    pub(crate) hidden: usize,
+    /// Seed of the networks.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct MonitorClassifyArgs {
+    /// Directory written by `monitor train`.
+    #[arg(long)]
+    pub(crate) monitor: PathBuf,
+    /// Data file to classify.
+    #[arg(long)]
+    pub(crate) data: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct FitArgs {
+    /// Training data file(s) (CSV).
+    #[arg(long, required = true, num_args = 1..)]
+    pub(crate) data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// Validation data file(s): the sweep's test set and a free-run check.
+    #[arg(long, num_args = 1..)]
+    pub(crate) val: Vec<PathBuf>,
+    /// Hidden units: "auto" (sizing sweep 1–10 × inits) or a number.
+    #[arg(long, default_value = "auto")]
+    pub(crate) hidden: mmenn::fit::HiddenChoice,
+    /// Initialisations per network size.
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
+    pub(crate) inits: usize,
+    /// Largest network of the automatic sizing sweep.
+    #[arg(long, default_value_t = 10, value_parser = at_least_one)]
+    pub(crate) max_hidden: usize,
+    /// How networks are trained: trainlm (MATLAB's schedule, the thesis) or accelerated
+    /// (trainlm for 10 steps, then gain ratio with geodesic acceleration).
+    #[arg(long, default_value = "trainlm")]
+    pub(crate) training: mmenn::fit::Training,
+    /// Update the assumed model by regression on d̂ first: none or regression (thesis §4.3.3).
+    #[arg(long, default_value = "none")]
+    pub(crate) update_model: mmenn::fit::ModelUpdateChoice,
+    /// How the network is picked from the sweep: d-mse (thesis rule on the test MSE of d)
+    /// or free-run (smallest free-run output error of the hybrid model on the training data).
+    #[arg(long, default_value = "d-mse")]
+    pub(crate) select: mmenn::fit::NetworkSelection,
+    /// Refine the network on trajectories after training on d̂: none or trajectory
+    /// (multiple-shooting LM on the free-run output error; thesis §7.1).
+    #[arg(long, default_value = "trajectory")]
+    pub(crate) refine: mmenn::fit::RefineChoice,
+    /// Samples per shooting window of the trajectory refinement.
+    #[arg(long, default_value_t = 100, value_parser = at_least_one)]
+    pub(crate) refine_window: usize,
+    /// Correction weight W for MME: "auto" or a positive number.
+    #[arg(long, default_value = "auto")]
+    pub(crate) w: mmenn::estimate::WeightChoice,
+    /// Seed of every random choice.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Output directory.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    #[command(flatten)]
+    pub(crate) prep: PrepArgs,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct ShowArgs {
+    /// Model: a model file (TOML, with or without [[terms]]), model.discovered.toml, or
+    /// fit's model.json.
+    pub(crate) model: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct PredictArgs {
+    /// Model: a model file (TOML, with or without [[terms]]), model.discovered.toml, or
+    /// fit's model.json (told apart by content).
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// Data file with the inputs (and, optionally, state or output columns to compare with).
+    #[arg(long)]
+    pub(crate) data: PathBuf,
+    /// Initial state, comma-separated (default: fitted to the first samples of this record).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true)]
+    pub(crate) x0: Option<Vec<f64>>,
+    /// Samples used to fit the initial state (from the start of the record).
+    #[arg(long, default_value_t = 200, value_parser = at_least_one)]
+    pub(crate) x0_window: usize,
+    /// Also predict k steps ahead (beside the free run, labelled).
+    #[arg(long, value_parser = at_least_one)]
+    pub(crate) horizon: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    #[command(flatten)]
+    pub(crate) prep: PrepArgs,
+}
+
+/// Data preparation shared by the commands that read data files.
+#[derive(Debug, Args)]
+pub(crate) struct PrepArgs {
+    /// Resample every data file onto a uniform grid with this step, s (linear
+    /// interpolation; the prepared files and a report go to OUT/prepared/). Without it a
+    /// non-uniform time column is an error naming the row.
+    #[arg(long, value_name = "DT")]
+    pub(crate) resample: Option<f64>,
+    /// Use file columns under the model's names, e.g. `--map t=time,theta1=pos_meas1`.
+    #[arg(long, value_name = "NAME=COLUMN,...")]
+    pub(crate) map: Vec<String>,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct GreyestArgs {
+    /// Data file(s) (CSV); several files are several records, each with its own start
+    /// state.
+    #[arg(long, required = true, num_args = 1..)]
+    pub(crate) data: Vec<PathBuf>,
+    /// Model file (TOML) with a [parameters] table: its free parameters are estimated
+    /// within their bounds, the fixed ones are kept.
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// Multiple shooting before the free run: segments of this many samples, each from
+    /// its own start state (for long or lightly damped records). Default: free run only.
+    #[arg(long, value_name = "SAMPLES", value_parser = at_least_two)]
+    pub(crate) shooting: Option<usize>,
+    /// RK4 steps per sample interval, 1 to 1000.
+    #[arg(long, default_value_t = 2, value_parser = substeps)]
+    pub(crate) substeps: usize,
+    /// Most Levenberg–Marquardt iterations per solve.
+    #[arg(long, default_value_t = 100, value_parser = at_least_one)]
+    pub(crate) max_iterations: usize,
+    /// Output directory: model.toml (estimates with sigma), greyest.json, report.md.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    #[command(flatten)]
+    pub(crate) prep: PrepArgs,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct EstimateArgs {
+    /// Data file(s) (CSV); several files are several experiments.
+    #[arg(long, required = true, num_args = 1..)]
+    pub(crate) data: Vec<PathBuf>,
+    /// Model file (TOML).
+    #[arg(long)]
+    pub(crate) model: PathBuf,
+    /// Correction weight W: "auto" (covariance constraint) or a positive number (W = value·I).
+    #[arg(long, default_value = "auto")]
+    pub(crate) w: mmenn::estimate::WeightChoice,
+    /// Robust estimate: Huber weights (c = 2σ) by iterating the exact sweep on
+    /// pseudo-observations, so a few wild samples cannot move W; outliers are reported.
+    #[arg(long)]
+    pub(crate) robust: bool,
+    /// Sub-steps per sample interval, 1 to 1000 (default: chosen from the model).
+    #[arg(long, value_parser = substeps)]
+    pub(crate) substeps: Option<usize>,
+    /// Output directory.
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+    #[command(flatten)]
+    pub(crate) prep: PrepArgs,
+}
+
+#[derive(Debug, Args)]
+pub(crate) struct SimulateArgs {
+    /// List the systems, their parameters and recipes, and exit.
+    #[arg(long)]
+    pub(crate) list: bool,
+    /// System name (see --list).
+    #[arg(long, required_unless_present = "list")]
+    pub(crate) system: Option<String>,
+    /// Recipe: train or test (a different input signal).
+    #[arg(long, default_value = "train")]
+    pub(crate) recipe: Recipe,
+    /// Measurement noise variance per measured channel (overrides the system's default).
+    #[arg(long)]
+    pub(crate) noise_variance: Option<f64>,
+    /// Sample rate, Hz (overrides the system's default).
+    #[arg(long)]
+    pub(crate) fs: Option<f64>,
+    /// Seed of every random choice (noise, random inputs).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Duration, s (overrides the recipe's default).
+    #[arg(long)]
+    pub(crate) duration: Option<f64>,
+    /// Parameter override NAME=VALUE (repeatable; see --list).
+    #[arg(long = "param", value_name = "NAME=VALUE")]
+    pub(crate) params: Vec<String>,
+    /// Output directory.
+    #[arg(long, required_unless_present = "list")]
+    pub(crate) out: Option<PathBuf>,
+}

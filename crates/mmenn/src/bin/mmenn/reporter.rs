@@ -1,0 +1,121 @@
+//! Progress of long workflows on stderr ([`Reporter`], the binary's
+//! [`ProgressSink`](mmenn::progress::ProgressSink)).
+
+/// What the progress reporter is showing.
+enum Shown {
+    Nothing,
+    /// A bar (or spinner) on the terminal.
+    Bar(String, indicatif::ProgressBar),
+    /// Plain lines: the task, when it started, when the last line was due or printed,
+    /// and whether any line was printed (short tasks print nothing).
+    Lines(String, std::time::Instant, std::time::Instant, bool),
+}
+
+/// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
+/// every few seconds of a task's progress reports (a task shorter than that prints
+/// nothing, so a failing command's stderr stays its one error line); nothing with
+/// `--quiet`.
+pub(crate) struct Reporter {
+    quiet: bool,
+    terminal: bool,
+    shown: std::sync::Mutex<Shown>,
+}
+
+/// Seconds between plain progress lines when stderr is not a terminal.
+const LINE_EVERY_SECONDS: u64 = 5;
+
+/// A finished task gets a "done in …" line when it took at least this long.
+const WORTH_A_LINE_SECONDS: u64 = 2;
+
+impl Reporter {
+    pub(crate) fn new(quiet: bool) -> Self {
+        use std::io::IsTerminal;
+        Self {
+            quiet,
+            terminal: std::io::stderr().is_terminal(),
+            shown: std::sync::Mutex::new(Shown::Nothing),
+        }
+    }
+
+    fn bar(p: &mmenn::progress::Progress) -> indicatif::ProgressBar {
+        let (bar, template) = match p.total {
+            Some(n) => (
+                indicatif::ProgressBar::new(n as u64),
+                "{prefix} [{bar:30}] {pos}/{len}, {elapsed} elapsed, ETA {eta}  {wide_msg}",
+            ),
+            None => (
+                indicatif::ProgressBar::new_spinner(),
+                "{prefix} {spinner} {elapsed}  {wide_msg}",
+            ),
+        };
+        if let Ok(style) = indicatif::ProgressStyle::with_template(template) {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_prefix(p.task.clone());
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+        bar
+    }
+}
+
+#[allow(clippy::print_stderr)]
+impl mmenn::progress::ProgressSink for Reporter {
+    fn report(&self, p: &mmenn::progress::Progress) {
+        if self.quiet {
+            return;
+        }
+        let Ok(mut shown) = self.shown.lock() else {
+            return;
+        };
+        let same = match &*shown {
+            Shown::Bar(t, _) | Shown::Lines(t, _, _, _) => t == &p.task,
+            Shown::Nothing => false,
+        };
+        if !same {
+            if let Shown::Bar(_, b) = &*shown {
+                b.finish_and_clear();
+            }
+            *shown = if self.terminal {
+                Shown::Bar(p.task.clone(), Self::bar(p))
+            } else {
+                let now = std::time::Instant::now();
+                Shown::Lines(p.task.clone(), now, now, false)
+            };
+        }
+        match &mut *shown {
+            Shown::Bar(_, b) => {
+                b.set_position(p.done as u64);
+                b.set_message(p.note.clone());
+            }
+            Shown::Lines(_, _, last, printed) => {
+                if last.elapsed().as_secs() >= LINE_EVERY_SECONDS {
+                    *last = std::time::Instant::now();
+                    *printed = true;
+                    let of = p.total.map(|n| format!(" of {n}")).unwrap_or_default();
+                    eprintln!("{}: {}{of} done  {}", p.task, p.done, p.note);
+                }
+            }
+            Shown::Nothing => {}
+        }
+    }
+
+    fn finish(&self, task: &str) {
+        let Ok(mut shown) = self.shown.lock() else {
+            return;
+        };
+        match &*shown {
+            Shown::Bar(t, b) if t == task => {
+                b.finish_and_clear();
+                if b.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
+                    eprintln!("{task}: done in {:.1} s", b.elapsed().as_secs_f64());
+                }
+            }
+            Shown::Lines(t, start, _, printed) if t == task => {
+                if *printed || start.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
+                    eprintln!("{task}: done in {:.1} s", start.elapsed().as_secs_f64());
+                }
+            }
+            _ => return,
+        }
+        *shown = Shown::Nothing;
+    }
+}

@@ -1,0 +1,190 @@
+//! Unit tests of the CSV reader, the preparation of logger files and the writer.
+
+use super::*;
+
+fn parse(text: &str) -> Result<Table> {
+    parse_table(Path::new("d.csv"), text.as_bytes())
+}
+
+fn problem(r: Result<impl std::fmt::Debug>) -> (usize, Option<String>, CsvProblem) {
+    match r {
+        Err(MmennError::Csv {
+            line,
+            column,
+            problem,
+            ..
+        }) => (line, column, problem),
+        other => panic!("expected a CSV error, got {other:?}"),
+    }
+}
+
+fn names(v: &[&str]) -> Vec<String> {
+    v.iter().map(|s| s.to_string()).collect()
+}
+
+#[test]
+fn round_trip_is_bit_exact_with_missing_samples() {
+    let t = [0.0, 0.1, 0.2, 0.30000000000000004];
+    let u = [1.0 / 3.0, -2.5e-17, 7.0, 1e300];
+    let y = [f64::NAN, 0.1 + 0.2, -0.0, 5.0];
+    let text = format_csv(&names(&["t", "u", "y"]), &[&t, &u, &y]);
+    let table = parse(&text).unwrap();
+    let exp = table_to_experiment(&table, &names(&["u"]), &names(&["y"])).unwrap();
+    for k in 0..4 {
+        assert_eq!(exp.input(k)[0].to_bits(), u[k].to_bits());
+        if y[k].is_nan() {
+            assert!(exp.output(k)[0].is_nan());
+        } else {
+            assert_eq!(exp.output(k)[0].to_bits(), y[k].to_bits());
+        }
+    }
+    assert_eq!(table.lines, vec![2, 3, 4, 5]);
+}
+
+#[test]
+fn bad_input_classes_name_line_and_column() {
+    let io = (names(&["u"]), names(&["y"]));
+    let exp = |text: &str| parse(text).and_then(|t| table_to_experiment(&t, &io.0, &io.1));
+    assert!(matches!(
+        problem(exp("t,u,y\n0,1,2\n0.1,1\n")),
+        (
+            3,
+            None,
+            CsvProblem::Ragged {
+                expected: 3,
+                found: 2
+            }
+        )
+    ));
+    assert!(
+        matches!(problem(exp("t,u,y\n0,1,2\n0.1,x,2\n")), (3, Some(c), CsvProblem::NotANumber { .. }) if c == "u")
+    );
+    assert!(
+        matches!(problem(exp("t,u,y\n0,1,2\n0.1,,2\n0.2,1,1\n")), (3, Some(c), CsvProblem::Missing { .. }) if c == "u")
+    );
+    assert!(matches!(
+        problem(exp("t,u,y\n0,1,2\n0.1,NaN,2\n0.2,1,1\n")),
+        (3, _, CsvProblem::Missing { .. })
+    ));
+    assert!(matches!(
+        problem(exp("t,u,y\n0,1,2\n0.1,1,2\n0.1,1,1\n")),
+        (4, _, CsvProblem::NonIncreasingTime { .. })
+    ));
+    assert!(matches!(
+        problem(exp("t,u,y\n0,1,2\n0.1,1,2\n0.25,1,1\n0.3,1,1\n")),
+        (4, _, CsvProblem::NonUniformTime { .. })
+    ));
+    assert!(matches!(
+        problem(exp("u,y\n1,2\n1,2\n")),
+        (1, _, CsvProblem::NoTimeColumn)
+    ));
+    assert!(matches!(
+        problem(exp("t,u,u\n0,1,2\n0.1,1,2\n")),
+        (1, _, CsvProblem::DuplicateColumn(_))
+    ));
+    assert!(
+        matches!(problem(exp("t,u\n0,1\n0.1,1\n")), (1, _, CsvProblem::MissingChannel(c)) if c == "y")
+    );
+    assert!(matches!(problem(exp("")), (1, _, CsvProblem::Empty)));
+    assert!(matches!(
+        problem(exp("t,u,y\n0,1,2\n")),
+        (_, _, CsvProblem::TooFewRows(1))
+    ));
+    assert!(matches!(
+        problem(exp("t,u,y\n0,1,inf\n0.1,1,2\n")),
+        (2, _, CsvProblem::Infinite)
+    ));
+}
+
+/// A jittered time column (±30 % of a 2 ms step, seeded) is an error naming its
+/// first off-grid row without `--resample`; resampled, a linear signal comes back
+/// exactly (linear interpolation is exact on it), a sine within the interpolation
+/// bound `h²/8·max|y''|`, and the report states the spacing and the method.
+#[test]
+fn jittered_time_is_rejected_or_resampled_explicitly() {
+    let mut state = 7_u64;
+    let mut jitter = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.6
+    };
+    let n = 500;
+    let t: Vec<f64> = (0..n).map(|k| 0.002 * (k as f64 + jitter())).collect();
+    let u: Vec<f64> = t.iter().map(|t| 1.0 + 3.0 * t).collect();
+    let y: Vec<f64> = t.iter().map(|t| (5.0 * t).sin()).collect();
+    let text = format_csv(&names(&["time", "torque", "pos"]), &[&t, &u, &y]);
+    let table = parse(&text).unwrap();
+    let map = PrepareOptions::parse_map(&["t=time,u=torque".into(), "theta=pos".into()]).unwrap();
+    let mapped = PrepareOptions {
+        map: map.clone(),
+        resample: None,
+    };
+    // Renaming alone keeps the rows; a jittered time column then fails naming its row.
+    let uniform = parse("time,torque,pos\n0,1,2\n0.5,1,2\n1,1,2\n").unwrap();
+    let (plain, report) = prepare_table(uniform, &mapped).unwrap();
+    assert_eq!(plain.header, names(&["t", "u", "theta"]));
+    assert_eq!((report.rows_in, report.rows_out), (3, 3));
+    let (line, column, p) = problem(prepare_table(table.clone(), &mapped));
+    assert!(matches!(p, CsvProblem::NonUniformTime { .. }), "{p:?}");
+    assert!((3..=n + 1).contains(&line) && column.as_deref() == Some("t"));
+    assert!(p.to_string().contains("--resample"), "{p}");
+
+    let opts = PrepareOptions {
+        map,
+        resample: Some(0.002),
+    };
+    let (table, report) = prepare_table(table, &opts).unwrap();
+    let exp = table_to_experiment(&table, &names(&["u"]), &names(&["theta"])).unwrap();
+    assert!((exp.dt() - 0.002).abs() < 1e-15);
+    assert_eq!(report.rows_in, n);
+    assert_eq!(report.rows_out, table.lines.len());
+    let s = report.spacing_in.unwrap();
+    assert!(s.min < 0.002 && s.max > 0.002 && s.std > 1e-4, "{s:?}");
+    assert!(report.describe().contains("linear interpolation"));
+    assert!(report.describe().contains("torque → u"));
+    for k in 0..exp.len() {
+        let tk = exp.t0() + k as f64 * 0.002;
+        assert!(
+            (exp.input(k)[0] - (1.0 + 3.0 * tk)).abs() < 1e-12,
+            "u at {tk}"
+        );
+        // Steps up to 1.6·2 ms: h²/8·25 = 2.6e-5.
+        assert!(
+            (exp.output(k)[0] - (5.0 * tk).sin()).abs() < 2.6e-5,
+            "y at {tk}"
+        );
+    }
+    // A column the map names that the file lacks; an unmapped model name.
+    let bad = PrepareOptions {
+        map: vec![("u".into(), "tau".into())],
+        resample: None,
+    };
+    let r = prepare_table(parse("t,x\n0,1\n1,2\n").unwrap(), &bad);
+    assert!(matches!(problem(r), (1, _, CsvProblem::MissingChannel(c)) if c == "tau"));
+    assert!(PrepareOptions::parse_map(&["t".into()]).is_err());
+    // Decreasing time names the row even when resampling.
+    let r = prepare_table(
+        parse("t,x\n0,1\n0.2,2\n0.1,3\n").unwrap(),
+        &opts_resample(0.1),
+    );
+    assert!(matches!(
+        problem(r),
+        (4, _, CsvProblem::NonIncreasingTime { .. })
+    ));
+}
+
+fn opts_resample(dt: f64) -> PrepareOptions {
+    PrepareOptions {
+        map: Vec::new(),
+        resample: Some(dt),
+    }
+}
+
+#[test]
+fn empty_measured_cells_are_missing_samples() {
+    let t = parse("t,u,y\n0,1,\n0.1,1,2\n0.2,1,\n").unwrap();
+    let e = table_to_experiment(&t, &names(&["u"]), &names(&["y"])).unwrap();
+    assert!(e.output(0)[0].is_nan() && e.output(2)[0].is_nan());
+    assert!((e.output(1)[0] - 2.0).abs() < 1e-15);
+}

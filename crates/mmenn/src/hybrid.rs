@@ -1,0 +1,136 @@
+//! The hybrid model file `model.json` written by `mmenn fit` (format tag, checks on
+//! reading) and the plant model it builds, `ẋ = f(x, u) + E·NN(x, u)` as sysid-core's
+//! [`CorrectedModel`].
+
+use std::path::Path;
+
+use nn::{Mlp, NetCorrection};
+use serde::{Deserialize, Serialize};
+use sysid_core::{CorrectedModel, TermModel};
+
+use crate::error::{MmennError, Result};
+use crate::model_file::{ModelSpec, parse_model};
+
+/// Format tag of `model.json`.
+pub const HYBRID_FORMAT: &str = "mmenn-hybrid/1";
+
+/// The hybrid model as saved in `model.json`: the assumed model (model-file TOML text, with
+/// its `intersample`), the trained network, the training initial state and the integration
+/// settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HybridFile {
+    /// Always [`HYBRID_FORMAT`].
+    pub format: String,
+    /// The assumed model, in the model-file format.
+    pub model_toml: String,
+    /// The network `(x, u) → d` (inputs: states then inputs; outputs: corrections).
+    pub network: Mlp,
+    /// Initial state of the training record (MME's `x̂(t0)`).
+    pub x0: Vec<f64>,
+    /// Sample period of the training data, s.
+    pub dt: f64,
+    /// RK4 sub-steps per sample interval in free-run simulation.
+    pub substeps: usize,
+}
+
+/// The completed plant model: assumed dynamics (with named terms) plus the network.
+pub type HybridModel = CorrectedModel<TermModel, NetCorrection>;
+
+impl HybridFile {
+    /// Parse and check `model.json` text (`path` only names the file in errors): the
+    /// format tag, `dt` finite and > 0, `substeps` in `1..=MAX_SUBSTEPS`, the model-file
+    /// part, an initial state of finite numbers, one per state.
+    pub fn parse(path: &Path, text: &str) -> Result<Self> {
+        let problem = |line, column, message: String| MmennError::Model {
+            path: path.to_path_buf(),
+            line,
+            column,
+            problem: crate::error::ModelProblem::Syntax { message },
+        };
+        let file: HybridFile = serde_json::from_str(text)
+            .map_err(|e| problem(Some(e.line()), Some(e.column()), e.to_string()))?;
+        if file.format != HYBRID_FORMAT {
+            return Err(problem(
+                None,
+                None,
+                format!("format is '{}', expected '{HYBRID_FORMAT}'", file.format),
+            ));
+        }
+        if !(file.dt.is_finite() && file.dt > 0.0) {
+            return Err(problem(
+                None,
+                None,
+                format!("dt = {} must be finite and > 0", file.dt),
+            ));
+        }
+        if !(1..=mme_core::discretize::MAX_SUBSTEPS).contains(&file.substeps) {
+            return Err(problem(
+                None,
+                None,
+                format!(
+                    "substeps = {} must be in 1..={}",
+                    file.substeps,
+                    mme_core::discretize::MAX_SUBSTEPS
+                ),
+            ));
+        }
+        let n = file.spec()?.linear.n_states();
+        if file.x0.len() != n || file.x0.iter().any(|v| !v.is_finite()) {
+            return Err(problem(
+                None,
+                None,
+                format!("x0 must hold {n} finite numbers, got {:?}", file.x0),
+            ));
+        }
+        Ok(file)
+    }
+
+    /// The model-file part (its `intersample` is how `predict` treats the inputs between
+    /// samples).
+    pub fn spec(&self) -> Result<ModelSpec> {
+        parse_model(Path::new("model.json:model_toml"), &self.model_toml)
+    }
+
+    /// Build the simulatable hybrid model.
+    pub fn model(&self) -> Result<HybridModel> {
+        let spec = self.spec()?;
+        hybrid_model(&spec, self.network.clone(), &self.x0, self.substeps)
+    }
+}
+
+fn model_problem(problem: crate::error::ModelProblem) -> MmennError {
+    MmennError::Model {
+        path: "<model>".into(),
+        line: None,
+        column: None,
+        problem,
+    }
+}
+
+/// Build `ẋ = f(x, u) + E·NN(x, u)` from a model file and a network.
+pub fn hybrid_model(
+    spec: &ModelSpec,
+    network: Mlp,
+    x0: &[f64],
+    substeps: usize,
+) -> Result<HybridModel> {
+    let lin = &spec.linear;
+    let base = spec.term_model().map_err(model_problem)?;
+    let corr = NetCorrection::new(network, lin.n_states())?;
+    let mut model = CorrectedModel::new(
+        base,
+        corr,
+        lin.e().clone(),
+        lin.c().clone(),
+        lin.output_names().to_vec(),
+    )
+    .map_err(|source| MmennError::Core {
+        context: "building the hybrid model",
+        source,
+    })?;
+    model.x0 = x0.to_vec();
+    model.integrator = sysid_core::Integrator::Rk4 {
+        substeps: substeps.max(1),
+    };
+    Ok(model)
+}

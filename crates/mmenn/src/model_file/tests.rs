@@ -1,0 +1,255 @@
+//! Unit tests of the model-file reader and writer.
+
+use super::*;
+
+const SPEC_EXAMPLE: &str = r#"
+states = ["theta", "omega"]          # state names, in order
+inputs = ["u"]
+A = [[0.0, 1.0], [-9.81, 0.0]]       # n×n
+B = [[0.0], [-1.0]]                  # n×m
+measured = ["theta"]
+corrected = ["omega"]
+noise_variance = [1e-4]
+units = { theta = "rad", omega = "rad/s", u = "m/s^2" }
+
+[[terms]]
+state = "omega"
+effect = "coulomb_friction"
+term = "sign(omega)"
+coefficient = -0.3
+"#;
+
+fn problem(text: &str) -> ModelProblem {
+    match parse_model(Path::new("m.toml"), text) {
+        Err(MmennError::Model { problem, .. }) => problem,
+        other => panic!("expected a model error, got {other:?}"),
+    }
+}
+
+#[test]
+fn spec_example_parses_and_round_trips() {
+    let spec = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+    assert!((spec.linear.a()[(1, 0)] + 9.81).abs() < 1e-15);
+    assert_eq!(spec.linear.c(), &DMatrix::from_row_slice(1, 2, &[1.0, 0.0]));
+    assert_eq!(spec.linear.e(), &DMatrix::from_row_slice(2, 1, &[0.0, 1.0]));
+    assert_eq!(spec.linear.correction_names(), &["omega".to_string()]);
+    assert_eq!(spec.noise_variance, NoiseVariance::Given(vec![1e-4]));
+    assert_eq!(spec.terms[0].term, "sign(omega)");
+    let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+    assert_eq!(spec, again);
+    assert_eq!(spec.terms[0].into, None);
+    // A transfer term keeps its receiving equation through a round trip, and the
+    // model it builds subtracts the term there.
+    let text = SPEC_EXAMPLE.replace("state = \"omega\"", "state = \"omega\"\ninto = \"theta\"");
+    let spec = parse_model(Path::new("m.toml"), &text).unwrap();
+    assert_eq!(spec.terms[0].into.as_deref(), Some("theta"));
+    let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+    assert_eq!(spec, again);
+    let model = spec.term_model().unwrap();
+    let mut dx = [0.0; 2];
+    sysid_core::Dynamics::rhs(&model, 0.0, &[0.0, 1.0], &[0.0], &mut dx);
+    // theta' = omega + 0.3·sign(omega) (the transfer), omega' = −0.3 (the term).
+    assert!(
+        (dx[0] - 1.3).abs() < 1e-15 && (dx[1] + 0.3).abs() < 1e-15,
+        "{dx:?}"
+    );
+}
+
+/// `intersample` defaults to the hold, survives a round trip when set, is not written
+/// when it is the default, and an unknown value is a syntax error naming it.
+#[test]
+fn intersample_key() {
+    let spec = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+    assert_eq!(spec.intersample, InterSample::Zoh);
+    assert!(!format_model(&spec).unwrap().contains("intersample"));
+    let text = SPEC_EXAMPLE.replace("noise_variance", "intersample = \"foh\"\nnoise_variance");
+    let spec = parse_model(Path::new("m.toml"), &text).unwrap();
+    assert_eq!(spec.intersample, InterSample::Foh);
+    let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+    assert_eq!(spec, again);
+    let bad = SPEC_EXAMPLE.replace("noise_variance", "intersample = \"spline\"\nnoise_variance");
+    match problem(&bad) {
+        ModelProblem::Syntax { message } => assert!(message.contains("spline"), "{message}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn correction_units_follow_their_state() {
+    let mut spec = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+    spec.units = [("x", "m"), ("v", "m/s"), ("w", "rad/s^2"), ("d_x", "given")]
+        .into_iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    assert_eq!(spec.unit_of("v").as_deref(), Some("m/s"));
+    assert_eq!(spec.unit_of("d_v").as_deref(), Some("m/s^2"));
+    assert_eq!(spec.unit_of("d_w").as_deref(), Some("rad/s^3"));
+    assert_eq!(spec.unit_of("d_x").as_deref(), Some("given"));
+    assert_eq!(spec.unit_of("d_q"), None);
+    assert_eq!(spec.unit_of("u"), None);
+    assert_eq!(per_second("N"), "N/s");
+}
+
+#[test]
+fn general_c_and_auto_noise_round_trip() {
+    let text = r#"
+states = ["x1", "x2"]
+A = [[0.0, 1.0], [-1.0, -0.1]]
+C = [[1.0, 1.0]]
+outputs = ["s"]
+corrected = ["x2"]
+noise_variance = "auto"
+"#;
+    let spec = parse_model(Path::new("m.toml"), text).unwrap();
+    assert_eq!(spec.noise_variance, NoiseVariance::Auto);
+    assert_eq!(spec.linear.n_inputs(), 0);
+    // Leaving the key out means the same.
+    let omitted = text.replace("noise_variance = \"auto\"\n", "");
+    assert_eq!(parse_model(Path::new("m.toml"), &omitted).unwrap(), spec);
+    let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
+    assert_eq!(spec, again);
+}
+
+#[test]
+fn every_bad_input_class_is_typed() {
+    let base = |a: &str, b: &str| {
+        SPEC_EXAMPLE
+            .replace("A = [[0.0, 1.0], [-9.81, 0.0]]", a)
+            .replace("noise_variance = [1e-4]", b)
+    };
+    assert!(matches!(
+        problem(&base(
+            "A = [[0.0, 1.0, 2.0], [-9.81, 0.0, 1.0]]",
+            "noise_variance = [1e-4]"
+        )),
+        ModelProblem::RaggedRow {
+            matrix: "A",
+            row: 0,
+            ..
+        }
+    ));
+    assert!(matches!(
+        problem(&base("A = [[0.0, 1.0]]", "noise_variance = [1e-4]")),
+        ModelProblem::Rows { matrix: "A", .. }
+    ));
+    assert!(matches!(
+        problem(&base(
+            "A = [[0.0, 1.0], [-9.81, 0.0]]",
+            "noise_variance = [0.0]"
+        )),
+        ModelProblem::NonPositiveVariance { index: 0, .. }
+    ));
+    assert!(matches!(
+        problem(&base(
+            "A = [[0.0, 1.0], [-9.81, 0.0]]",
+            "noise_variance = [-1.0]"
+        )),
+        ModelProblem::NonPositiveVariance { .. }
+    ));
+    assert!(matches!(
+        problem(&base(
+            "A = [[0.0, 1.0], [-9.81, 0.0]]",
+            "noise_variance = [1.0, 2.0]"
+        )),
+        ModelProblem::NoiseLength {
+            found: 2,
+            expected: 1
+        }
+    ));
+    assert!(matches!(
+        problem(&base(
+            "A = [[0.0, 1.0], [-9.81, 0.0]]",
+            "noise_variance = \"guess\""
+        )),
+        ModelProblem::NoiseWord(_)
+    ));
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace("B = [[0.0], [-1.0]]", "B = [[0.0, 1.0], [-1.0, 1.0]]")),
+        ModelProblem::RaggedRow { matrix: "B", .. }
+    ));
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace("measured = [\"theta\"]", "measured = [\"phi\"]")),
+        ModelProblem::UnknownName {
+            key: "measured",
+            ..
+        }
+    ));
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace("corrected = [\"omega\"]", "corrected = [\"w\"]")),
+        ModelProblem::UnknownName {
+            key: "corrected",
+            ..
+        }
+    ));
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace("state = \"omega\"", "state = \"w\"")),
+        ModelProblem::UnknownName {
+            key: "terms.state",
+            ..
+        }
+    ));
+    for into in ["into = \"w\"", "into = \"omega\""] {
+        let text = SPEC_EXAMPLE.replace("state = \"omega\"", &format!("state = \"omega\"\n{into}"));
+        assert!(
+            matches!(
+                problem(&text),
+                ModelProblem::UnknownName {
+                    key: "terms.into",
+                    ..
+                }
+            ),
+            "{into}"
+        );
+    }
+    // A and B left out are zero.
+    let bare = SPEC_EXAMPLE
+        .replace("B = [[0.0], [-1.0]]", "")
+        .replace("A = [[0.0, 1.0], [-9.81, 0.0]]", "");
+    let spec = parse_model(Path::new("m.toml"), &bare).unwrap();
+    assert_eq!(spec.linear.a(), &DMatrix::zeros(2, 2));
+    assert_eq!(spec.linear.b(), &DMatrix::zeros(2, 1));
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace(
+            "measured = [\"theta\"]",
+            "measured = [\"theta\"]\nC = [[1.0, 0.0]]"
+        )),
+        ModelProblem::Conflict { .. }
+    ));
+    let dup = "states = [\"x\", \"x\"]\nA = [[0.0, 1.0], [0.0, 0.0]]\nmeasured = [\"x\"]\nnoise_variance = [1.0]\n";
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace("sign(omega)", "sign(omega")),
+        ModelProblem::Term(e) if matches!(*e, sysid_core::TermError::Expression { .. })
+    ));
+    assert!(matches!(
+        problem(&SPEC_EXAMPLE.replace("sign(omega)", "sign(phi)")),
+        ModelProblem::Term(_)
+    ));
+    assert!(matches!(
+        problem(dup),
+        ModelProblem::Model(sysid_core::CoreError::DuplicateName { .. })
+    ));
+}
+
+#[test]
+fn syntax_errors_carry_line_and_column() {
+    let text = SPEC_EXAMPLE.replace("inputs = [\"u\"]", "inputs = [\"u\"\nmesured = 3");
+    match parse_model(Path::new("m.toml"), &text) {
+        Err(MmennError::Model {
+            line: Some(l),
+            column: Some(_),
+            problem: ModelProblem::Syntax { .. },
+            ..
+        }) => assert!(l >= 3),
+        other => panic!("expected a located syntax error, got {other:?}"),
+    }
+    match parse_model(
+        Path::new("m.toml"),
+        &format!("{SPEC_EXAMPLE}\nmesured = 1\n"),
+    ) {
+        Err(MmennError::Model {
+            problem: ModelProblem::Syntax { message },
+            ..
+        }) => assert!(message.contains("mesured"), "{message}"),
+        other => panic!("expected unknown key error, got {other:?}"),
+    }
+}
