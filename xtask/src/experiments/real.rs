@@ -574,42 +574,40 @@ fn run_benchmark(
             3,
         )],
     );
+    // NARX is independent of the other rows: it runs on its own thread beside them (the
+    // two cores stay busy when this job is the last one running) and its rows, notes and
+    // figure line join the table after the others, as if run last.
+    let narx_table = table.clone();
     for n in &s.notes {
         table.note(n.clone());
     }
-    let mut sims: Vec<(String, Vec<f64>)> = Vec::new();
-
-    // Linear output-error model from the physics structure, and MME/NN on it: only where
-    // the estimation record follows the official protocol (Cascaded Tanks).
-    let oe = match &s.shortened {
-        None => Some(oe_rows(&s, &protocol, &mut table, &mut sims, benchmark)?),
-        Some(how) => {
-            table.note(format!(
-                "Not run here: the linear output-error model of the physics structure and \
-                 MME/NN on it. They ran only on a shortened protocol ({how}); the same model \
-                 class (a second-order linear model) is the linear SS baseline below, run under \
-                 the full protocol, and MME/NN runs on the grey box under the full protocol."
-            ));
-            None
-        }
-    };
-
-    // Linear state-space baseline on the official records (full rate, every training
-    // sample): MOESP, then free-run output error, order chosen on held-out data.
-    linear_ss_rows(&data, &mut table, &mut sims, ctx.mode, s.offset);
-
-    // Physics-first grey box on the official records.
-    grey_rows(&data, &mut table, &mut sims, ctx.mode, s.offset);
-
-    // MME/NN on top of the calibrated grey box, trained on trajectories.
-    hybrid::hybrid_rows(ctx, &data, &mut table, &mut sims, s.offset);
-
-    if let Some(oe) = &oe {
-        oe_hybrid_rows(ctx, &s, oe, &protocol, &mut table, &mut sims, benchmark)?;
-    }
-
-    // NARX on the official records, its orders chosen on held-out training data.
-    narx::narx_rows(&data, ctx.mode, &mut table, &mut sims, s.offset);
+    // The figure's sample grid (its first test record) leads the list of simulated series,
+    // so that every model run on that grid joins the figure; removed before plotting.
+    let grid: Vec<(String, Vec<f64>)> = s
+        .tests
+        .first()
+        .map(|(_, t)| (String::new(), vec![0.0; t.experiments()[0].len()]))
+        .into_iter()
+        .collect();
+    let mut sims = grid.clone();
+    let (mode, offset) = (ctx.mode, s.offset);
+    let (data_ref, grid_ref) = (&data, &grid);
+    std::thread::scope(|scope| -> Result<()> {
+        let narx = scope.spawn(move || {
+            let (mut t, mut v) = (narx_table, grid_ref.clone());
+            narx::narx_rows(data_ref, mode, &mut t, &mut v, offset);
+            (t, v)
+        });
+        let physics = physics_rows(ctx, &s, &data, &protocol, &mut table, &mut sims, benchmark);
+        let (narx_table, narx_sims) = narx
+            .join()
+            .map_err(|_| anyhow::anyhow!("the NARX rows panicked"))?;
+        physics?;
+        table.merge(narx_table);
+        sims.extend(narx_sims.into_iter().skip(grid.len()));
+        Ok(())
+    })?;
+    sims.drain(..grid.len());
     table.note(target_note(benchmark, &table));
 
     // Figure: first test record.
@@ -633,6 +631,52 @@ fn run_benchmark(
     }
     out.tables.push(table);
     Ok(out)
+}
+
+/// Every row but NARX's: linear OE and MME/NN on it (where the protocol allows), the linear
+/// SS baseline, the grey box and MME/NN on the grey box, in table order.
+fn physics_rows(
+    ctx: &Ctx,
+    s: &Setup,
+    data: &mmenn::benchmarks::BenchmarkData,
+    protocol: &str,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    benchmark: Benchmark,
+) -> Result<()> {
+    // Linear output-error model from the physics structure, and MME/NN on it: only where
+    // the estimation record follows the official protocol (Cascaded Tanks).
+    let oe = match &s.shortened {
+        None => Some(oe_rows(s, protocol, table, sims, benchmark)?),
+        Some(how) => {
+            table.note(format!(
+                "Not run here: the linear output-error model of the physics structure and \
+                 MME/NN on it. They ran only on a shortened protocol ({how}); the same model \
+                 class (a second-order linear model) is the linear SS baseline below, run under \
+                 the full protocol, and MME/NN runs on the grey box under the full protocol."
+            ));
+            None
+        }
+    };
+
+    // Linear state-space baseline on the official records (full rate, every training
+    // sample): MOESP, then free-run output error, order chosen on held-out data.
+    linear_ss_rows(data, table, sims, ctx.mode, s.offset);
+
+    // Physics-first grey box on the official records.
+    let chosen = grey_rows(data, table, sims, ctx.mode, s.offset);
+
+    // MME/NN on top of the calibrated grey box, trained on trajectories.
+    match &chosen {
+        Some(g) => hybrid::hybrid_rows(ctx, data, g, table, sims, s.offset),
+        None => table.note(format!("{}: not built: no grey box", hybrid::LABEL)),
+    }
+
+    if let Some(oe) = &oe {
+        oe_hybrid_rows(ctx, s, oe, protocol, table, sims, benchmark)?;
+    }
+
+    Ok(())
 }
 
 /// Rows of the linear output-error model of the physics structure on the test records;
@@ -1018,22 +1062,33 @@ fn grey_candidates(
     })
 }
 
+/// The grey box the table reports (lowest training free-run RMSE among the candidates):
+/// its structure, calibration, candidate name and the wall time of all candidates' calibration.
+/// MME/NN on the grey box starts from it (no second calibration).
+pub struct ChosenGrey {
+    pub spec: grey::GreySpec,
+    pub fit: grey::GreyFit,
+    pub name: String,
+    pub seconds: f64,
+}
+
 /// Rows of the physics-first grey box (see [`grey`]): calibrated by free-run output error
-/// on the whole training record at full rate, scored under the official protocol.
+/// on the whole training record at full rate, scored under the official protocol. Returns
+/// the chosen grey box (`None` when every calibration failed).
 fn grey_rows(
     data: &mmenn::benchmarks::BenchmarkData,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     mode: Mode,
     offset: f64,
-) {
+) -> Option<ChosenGrey> {
     let window = data.benchmark.init_window();
     let (scale, unit) = data.benchmark.reporting_unit();
     let (label, candidates) = match grey_candidates(data, mode) {
         Ok(c) => c,
         Err(e) => {
             table.note(format!("grey box: not built: {e:#}"));
-            return;
+            return None;
         }
     };
     let tests: Vec<(String, Experiment)> = data
@@ -1043,30 +1098,30 @@ fn grey_rows(
         .collect();
     let est = &data.estimation.experiments()[0];
     let clock = std::time::Instant::now();
-    let mut best: Option<(String, grey::GreyFit)> = None;
+    let mut best: Option<(String, grey::GreySpec, grey::GreyFit)> = None;
     let mut tried = Vec::new();
-    for (name, spec) in &candidates {
-        match grey::fit_grey(spec, est, &tests, window) {
+    for (name, spec) in candidates {
+        match grey::fit_grey(&spec, est, &tests, window) {
             Ok(fit) => {
                 tried.push(format!("{name}: {:.4} {unit}", scale * fit.train_rmse));
                 if fit.train_rmse.is_finite()
                     && best
                         .as_ref()
-                        .is_none_or(|(_, b)| fit.train_rmse < b.train_rmse)
+                        .is_none_or(|(_, _, b)| fit.train_rmse < b.train_rmse)
                 {
-                    best = Some((name.clone(), fit));
+                    best = Some((name, spec, fit));
                 }
             }
             Err(e) => tried.push(format!("{name}: failed ({e:#})")),
         }
     }
     let seconds = clock.elapsed().as_secs_f64();
-    let Some((chosen, fit)) = best else {
+    let Some((chosen, chosen_spec, fit)) = best else {
         table.note(format!(
             "grey box: every calibration failed: {}",
             tried.join("; ")
         ));
-        return;
+        return None;
     };
     push_grey(
         table,
@@ -1122,6 +1177,12 @@ fn grey_rows(
             Err(e) => table.note(format!("{label}: failed: {e:#}")),
         }
     }
+    Some(ChosenGrey {
+        spec: chosen_spec,
+        fit,
+        name: chosen,
+        seconds,
+    })
 }
 
 /// A grey box's calibrated terms for a note.

@@ -1,6 +1,6 @@
 //! MME/NN on top of the calibrated grey box (physics first, the network for what
 //! remains): the grey box of [`super::grey_candidates`] with the lowest training free-run
-//! error becomes the assumed model (its named terms included) of `mmenn fit`; MME on the
+//! error (the one the grey-box row reports, calibrated once) becomes the assumed model (its named terms included) of `mmenn fit`; MME on the
 //! whole official training record at full rate gives `x̂`, `d̂` on the corrected equation;
 //! a small network learns `d̂` from `(x̂, u)`, is picked by its free-run error on the
 //! training record, then refined on trajectories (multiple shooting on the free-run
@@ -19,7 +19,7 @@ use mmenn::fit::{FitOptions, InitialChoice, NetworkSelection, RefineChoice, run_
 use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry, write_model};
 use mmenn::sysid_core::{Experiment, Integrator};
 
-use super::{OFFICIAL, grey, grey_candidates, rmse_after};
+use super::{ChosenGrey, OFFICIAL, grey, rmse_after};
 use crate::experiments::{Ctx, FIT_SEED, Mode, row};
 use crate::table::Table;
 
@@ -83,32 +83,6 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             selection: NetworkSelection::FreeRun,
         },
     }
-}
-
-/// The grey box with the lowest training free-run RMSE (test records not run), its name
-/// and the calibration wall time.
-fn best_grey(
-    data: &BenchmarkData,
-    mode: Mode,
-) -> Result<(grey::GreySpec, grey::GreyFit, String, f64)> {
-    let (_, candidates) = grey_candidates(data, mode)?;
-    let window = data.benchmark.init_window();
-    let clock = Instant::now();
-    let mut best: Option<(grey::GreySpec, grey::GreyFit, String)> = None;
-    for (name, spec) in candidates {
-        let Ok(fit) = grey::fit_grey(&spec, &data.estimation.experiments()[0], &[], window) else {
-            continue;
-        };
-        if fit.train_rmse.is_finite()
-            && best
-                .as_ref()
-                .is_none_or(|(_, b, _)| fit.train_rmse < b.train_rmse)
-        {
-            best = Some((spec, fit, name));
-        }
-    }
-    let (spec, fit, name) = best.context("every grey-box calibration failed")?;
-    Ok((spec, fit, name, clock.elapsed().as_secs_f64()))
 }
 
 /// The calibrated grey box as a model file: its linear part, its terms with the
@@ -183,11 +157,12 @@ pub fn failure_text(text: &str) -> String {
 pub fn hybrid_rows(
     ctx: &Ctx,
     data: &BenchmarkData,
+    grey: &ChosenGrey,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
 ) {
-    if let Err(e) = hybrid_rows_inner(ctx, data, table, sims, offset) {
+    if let Err(e) = hybrid_rows_inner(ctx, data, grey, table, sims, offset) {
         table.note(format!("{LABEL}: not built: {e:#}"));
     }
 }
@@ -195,6 +170,7 @@ pub fn hybrid_rows(
 fn hybrid_rows_inner(
     ctx: &Ctx,
     data: &BenchmarkData,
+    grey: &ChosenGrey,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
@@ -203,8 +179,10 @@ fn hybrid_rows_inner(
     let window = b.init_window();
     let (scale, unit) = b.reporting_unit();
     let eff = effort(b, ctx.mode);
-    let (gspec, gfit, chosen, grey_seconds) = best_grey(data, ctx.mode)?;
-    let spec = model_spec(&gspec, &gfit, eff.noise);
+    // The grey box the table reports, calibrated once (its calibration wall time below is
+    // that of all its candidates).
+    let (gspec, gfit, chosen, grey_seconds) = (&grey.spec, &grey.fit, &grey.name, grey.seconds);
+    let spec = model_spec(gspec, gfit, eff.noise);
     let output = spec.linear.output_names()[0].clone();
     let work = ctx.work.join("real").join(b.folder()).join("hybrid");
     std::fs::create_dir_all(&work)?;
