@@ -323,7 +323,15 @@ fn hybrid_rows_inner(
         eff.noise,
         match eff.w {
             Some(w) => format!("= {w:.4e}, the covariance constraint's value on the training record, held"),
-            None => "by the covariance constraint".into(),
+            None => format!(
+                "by the covariance constraint: {}",
+                summary
+                    .w_by_correction
+                    .iter()
+                    .map(|(k, w)| format!("{k} {w:.9e}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
         },
         est.len(),
         spec.linear.correction_names().join(", "),
