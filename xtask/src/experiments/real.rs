@@ -406,7 +406,7 @@ fn gap_cause(b: Benchmark) -> &'static str {
              lower tank's overflow, which holds the level at the sensor top, is in the model); \
              a saturating first-order sensor instead of that overflow, a smooth overflow, a \
              linear term in the upper outflow or a sensor offset each fit the training record \
-             worse or the test record worse (explore_tanks on 7b7e0a7). The hybrid's gain is \
+             worse or the test record worse (explore_tanks on d52faee). The hybrid's gain is \
              judged on 204 held-out training samples, which do not rank its variants on the \
              test record: with 256-sample shooting windows the guard keeps the refined network \
              (held-out 0.155 V against 0.160 V) and the test RMSE rises to 0.199 V; 4–6 \
