@@ -84,7 +84,8 @@ struct ReproduceArgs {
     /// workspace's fixtures/).
     #[arg(long)]
     fixtures: Option<PathBuf>,
-    /// Only these experiment groups (ch2, ch4, ch6, real, discovery), comma-separated.
+    /// Only these experiment groups (ch2, ch4, ch6, real, discovery) or jobs (by the name
+    /// on their progress lines, e.g. "real Cascaded Tanks"), comma-separated.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
     /// Worker threads (default: all cores).
@@ -198,7 +199,7 @@ fn reproduce(args: ReproduceArgs) -> Result<()> {
     let mut not_run: BTreeMap<String, String> = BTreeMap::new();
     let mut selected = Vec::new();
     for job in all {
-        if args.only.is_empty() || args.only.iter().any(|g| g == job.group) {
+        if args.only.is_empty() || args.only.iter().any(|g| g == job.group || *g == job.name) {
             selected.push(job);
         } else {
             for t in &job.tables {

@@ -745,6 +745,21 @@ mod explore {
                 );
             }
             std::fs::write(format!("{path}-{}.csv", label.replace(' ', "_")), text).unwrap();
+            // Every test record (input, measured, simulated), one file each.
+            for (t, (name, e)) in fit.tests.iter().zip(&tests) {
+                let sim = t.sim.clone().unwrap_or_default();
+                let mut text = String::from("u,y,sim\n");
+                for k in 0..e.len() {
+                    text += &format!(
+                        "{},{},{}\n",
+                        e.inputs()[(0, k)],
+                        e.outputs()[(0, k)],
+                        sim.get(k).copied().unwrap_or(f64::NAN)
+                    );
+                }
+                let file = format!("{path}-{}-{name}.csv", label.replace(' ', "_"));
+                std::fs::write(file, text).unwrap();
+            }
         }
         let terms: Vec<String> = fit
             .model

@@ -126,7 +126,7 @@ pub fn jobs(mode: Mode) -> Vec<Job> {
     v.extend(ch6::jobs());
     v.extend(real::jobs());
     if mode == Mode::Full {
-        v.push(discovery::job());
+        v.extend(discovery::jobs());
     }
     v
 }
