@@ -15,3 +15,4 @@ mod physical;
 mod real_data;
 mod reliability;
 mod simulate;
+mod stand_in;

@@ -10,8 +10,7 @@ use mmenn::plants::{self, SimulationRequest};
 
 use args::{
     Cli, Command, CompareArgs, DiscoverArgs, EstimateArgs, FitArgs, GreyestArgs, MonitorCommand,
-    PredictArgs,
-    PrepArgs, ShowArgs, SimulateArgs,
+    PredictArgs, PrepArgs, ShowArgs, SimulateArgs,
 };
 use reporter::Reporter;
 
