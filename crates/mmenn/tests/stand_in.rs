@@ -24,6 +24,7 @@ fn case(name: &str) -> PathBuf {
 
 /// The stand-in's (statistic, threshold) on a case's estimation record with its
 /// assumed model.
+#[allow(clippy::print_stderr)]
 fn gain(name: &str) -> (f64, f64) {
     let dir = case(name);
     let spec = read_model(&dir.join("model.toml")).unwrap_or_else(|e| panic!("{name}: {e}"));
