@@ -17,6 +17,7 @@ mod screen;
 pub mod select;
 pub mod standin;
 pub mod stats;
+mod term_set;
 #[cfg(test)]
 mod test_support;
 pub mod transfer;

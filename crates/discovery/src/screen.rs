@@ -28,7 +28,7 @@ use sysid_core::{Dataset, Dynamics, Integrator, Term, TermModel};
 
 use crate::augment::{measured_values, simulate_outputs};
 use crate::error::{DiscoveryError, Result};
-use crate::refine::RefineCandidate;
+use crate::term_set::RefineCandidate;
 
 mod columns;
 use columns::{Columns, difference_columns, forward_columns};
@@ -102,7 +102,7 @@ fn with_candidate(model: &TermModel, cand: &RefineCandidate, value: f64) -> Resu
         coefficient: value,
         ..cand.clone()
     };
-    crate::refine::build(model, std::slice::from_ref(&one), &[0])
+    crate::term_set::build(model, std::slice::from_ref(&one), &[0])
 }
 
 /// RMS of each state's right-hand side and of a candidate's basis along a trajectory.

@@ -31,8 +31,14 @@ use holdout::{holdout_initial_states, recalibrate_on, split_records};
 
 mod holdout;
 mod report;
+mod steps;
 
 pub use report::{Ambiguity, AssumedEntry, NamedEffect, Round};
+pub use steps::d_rms;
+use steps::{
+    alternative_explanation, final_stand_in, free_run_states, noise_floor, round_candidates,
+    trim_ends, validation_cost, without, x0_of,
+};
 
 /// Largest free-run cost `J = (1/M) Σ r²/R` (1 for a right model and right noise
 /// variance) at which named effects are claimed when `R` is estimated and the bootstrap
@@ -239,236 +245,6 @@ impl JudgeContext {
         };
         crate::judge(&self.model, &self.new_terms, &protocol, &config)
     }
-}
-
-/// Drop `fraction` of the samples at each end of every record.
-fn trim_ends(samples: &[Samples], fraction: f64) -> crate::Result<Vec<Samples>> {
-    samples
-        .iter()
-        .map(|s| {
-            let n = s.len();
-            let cut = ((n as f64) * fraction).floor() as usize;
-            let keep = n.saturating_sub(2 * cut).max(1);
-            let start = cut.min(n - keep);
-            Samples::new(
-                s.states().columns(start, keep).into_owned(),
-                s.inputs().columns(start, keep).into_owned(),
-                s.corrections().columns(start, keep).into_owned(),
-            )
-        })
-        .collect()
-}
-
-/// Free-run states of `model` over one record from `x0` (default integrator, inputs
-/// between samples as the record says).
-fn free_run_states(
-    model: &TermModel,
-    x0: &[f64],
-    exp: &Experiment,
-) -> sysid_core::Result<DMatrix<f64>> {
-    sysid_core::simulate_with(
-        model,
-        x0,
-        exp.t0(),
-        exp.dt(),
-        exp.inputs(),
-        exp.intersample(),
-        &sysid_core::Integrator::default(),
-        sysid_core::integrate::DEFAULT_BLOW_UP,
-    )
-}
-
-/// Free-run cost `(1/M) Σ r²/R` of `model` over every record of `data`, with initial
-/// states fitted by free-run error on each record (from `guesses` and from the data, the
-/// lowest cost wins, see [`crate::augment::fit_initial_states`]); infinite when every
-/// fit fails or diverges.
-fn validation_cost(model: &TermModel, data: &Dataset, guesses: &[Vec<f64>], noise: &[f64]) -> f64 {
-    let config = CalibrationConfig {
-        weights: OutputWeights::NoiseVariance(noise.to_vec()),
-        ..RefineConfig::default().calibration
-    };
-    crate::augment::fit_initial_states(model, data, &[guesses], &config)
-        .ok()
-        .map(|fit| fit.cost_after)
-        .filter(|c| c.is_finite())
-        .unwrap_or(f64::INFINITY)
-}
-
-/// RMS of MME's `d̂` per corrected equation, by name.
-pub fn d_rms(est: &MmeEstimate) -> BTreeMap<String, f64> {
-    let mut out = BTreeMap::new();
-    for (i, name) in est.correction_names.iter().enumerate() {
-        let (mut s, mut n) = (0.0, 0usize);
-        for e in &est.experiments {
-            for v in e.corrections.row(i).iter() {
-                s += v * v;
-                n += 1;
-            }
-        }
-        out.insert(name.clone(), (s / n.max(1) as f64).sqrt());
-    }
-    out
-}
-
-/// Noise floor of `d̂`: simulate `model` itself (free-run from MME's `x̂(t0)`), add
-/// measurement noise of the estimated variance, and run MME at the same `W` and `R`
-/// (inputs between samples as the record says, for the simulation and for MME).
-fn noise_floor<M: Mme>(
-    mme: &M,
-    model: &TermModel,
-    data: &Dataset,
-    est: &MmeEstimate,
-    seed: u64,
-) -> Result<NoiseFloor, M::Error> {
-    let c = model.linear().c();
-    let mut experiments = Vec::new();
-    for (i, (exp, e)) in data.experiments().iter().zip(&est.experiments).enumerate() {
-        let x0: Vec<f64> = e.states.column(0).iter().copied().collect();
-        let xs = free_run_states(model, &x0, exp).map_err(DiscoveryError::from)?;
-        let noise = crate::judge::gaussian_noise(&est.noise_variance, exp.len(), seed, i as u64);
-        let y = c * xs + noise;
-        experiments.push(
-            Experiment::new(exp.t0(), exp.dt(), exp.inputs().clone(), y)
-                .map_err(DiscoveryError::from)?
-                .with_intersample(exp.intersample()),
-        );
-    }
-    let names = |v: Vec<String>| v.into_iter().map(Channel::new).collect::<Vec<_>>();
-    let sim = Dataset::new(
-        names(data.input_names()),
-        names(data.output_names()),
-        experiments,
-    )
-    .map_err(DiscoveryError::from)?;
-    let out = match mme.estimate_fixed(model, &sim, &est.w, &est.noise_variance, None) {
-        Ok(out) => out,
-        Err(_) => {
-            let x0s = x0_of(est);
-            mme.estimate_fixed(model, &sim, &est.w, &est.noise_variance, Some(&x0s))?
-        }
-    };
-    Ok(NoiseFloor::from_estimate(&out)?)
-}
-
-/// The search's set as `equation: term` lines (`a→b: term` for a transfer).
-fn term_labels(list: &[RefineCandidate], selected: &[usize]) -> Vec<String> {
-    selected
-        .iter()
-        .map(|&i| {
-            let c = &list[i];
-            match &c.into {
-                Some(r) => format!("{}→{r}: {}", c.state, c.term),
-                None => format!("{}: {}", c.state, c.term),
-            }
-        })
-        .collect()
-}
-
-/// When `refined` (indexing `chosen_from`) touches a state of free scale, the best set
-/// `search` finds over `candidates` without those terms (starting from the others), with
-/// both sets' judged costs; `None` when it touches none or the model has no such state.
-fn alternative_explanation(
-    model: &TermModel,
-    search: &Search<'_>,
-    candidates: &[RefineCandidate],
-    refined: &Refinement,
-    chosen_from: &[RefineCandidate],
-) -> crate::Result<Option<Ambiguity>> {
-    let linear = model.linear();
-    let free = crate::scale_free_states(linear);
-    if free.is_empty() {
-        return Ok(None);
-    }
-    let (touching, keep): (Vec<RefineCandidate>, Vec<RefineCandidate>) = refined
-        .selected
-        .iter()
-        .map(|&i| chosen_from[i].clone())
-        .partition(|c| crate::touches(c, linear, &free));
-    if touching.is_empty() {
-        return Ok(None);
-    }
-    let (list, start) = crate::ban_touching(candidates, &touching, &keep);
-    let (alt, alt_list) = crate::refine_with_transfers(search, &list, &start)?;
-    let names = linear.state_names();
-    Ok(Some(Ambiguity {
-        free_states: free.iter().map(|&j| names[j].clone()).collect(),
-        named: term_labels(chosen_from, &refined.selected),
-        named_cost: refined.cost[1],
-        alternative: term_labels(&alt_list, &alt.selected),
-        alternative_cost: alt.cost[1],
-    }))
-}
-
-/// The candidate list of a round: every library term of the corrected equations, with
-/// the regression's proposals (found or not in the library) as the starting set.
-fn round_candidates(
-    model: &TermModel,
-    units: &BTreeMap<String, String>,
-    samples: &[Samples],
-    proposed: &[FoundEffect],
-) -> crate::Result<(Vec<RefineCandidate>, Vec<usize>)> {
-    let linear = model.linear();
-    let roles = StateRoles::infer(linear, units, &[])?;
-    let libraries = build_library(linear, &roles, units, samples, &LibraryConfig::default())?;
-    let mut candidates: Vec<RefineCandidate> = Vec::new();
-    for lib in &libraries {
-        for c in &lib.candidates {
-            candidates.push(RefineCandidate {
-                effect: c.model_effect.name().to_string(),
-                state: c.state.clone(),
-                into: None,
-                term: c.model_term.clone(),
-                coefficient: 0.0,
-                variables: c.variables.clone(),
-                parameters: c.model_parameters.clone(),
-            });
-        }
-    }
-    let mut initial = Vec::new();
-    for e in proposed {
-        match candidates
-            .iter()
-            .position(|c| c.into.is_none() && c.state == e.state && c.term == e.model_term)
-        {
-            Some(i) => {
-                candidates[i].coefficient = e.coefficient;
-                initial.push(i);
-            }
-            None => {
-                candidates.push(RefineCandidate {
-                    effect: e.model_effect.clone(),
-                    state: e.state.clone(),
-                    into: None,
-                    term: e.model_term.clone(),
-                    coefficient: e.coefficient,
-                    variables: vec![],
-                    parameters: vec![],
-                });
-                initial.push(candidates.len() - 1);
-            }
-        }
-    }
-    Ok((candidates, initial))
-}
-
-/// `model` without the terms at `drop` (indices into its term list).
-fn without(model: &TermModel, drop: &[usize]) -> crate::Result<TermModel> {
-    let (linear, terms) = model.clone().into_parts();
-    let kept: Vec<_> = terms
-        .into_iter()
-        .enumerate()
-        .filter(|(k, _)| !drop.contains(k))
-        .map(|(_, t)| t)
-        .collect();
-    Ok(TermModel::new(linear, kept)?)
-}
-
-/// Initial states of every record from MME's `x̂(t0)`.
-fn x0_of(est: &MmeEstimate) -> Vec<Vec<f64>> {
-    est.experiments
-        .iter()
-        .map(|e| e.states.column(0).iter().copied().collect())
-        .collect()
 }
 
 /// Run the discovery workflow on `data` (estimation records) with the assumed `model`
@@ -1018,45 +794,20 @@ pub fn run<M: Mme + Sync>(
     let decides = matches!(verdict, Verdict::Found | Verdict::None);
     if config.stand_in_draws > 0 && (decides || d_after_known) {
         observer.stage(rounds.len(), "flexible stand-in on d̂ (reference draws)");
-        let final_est = if d_after_known {
-            Ok(result.clone())
-        } else {
-            mme.estimate(&current, data, None)
-                .or_else(|_| mme.estimate(&current, data, Some(&x0_of(&result))))
-        };
-        match final_est {
-            Ok(est) => {
-                let standin_config = StandInConfig {
-                    draws: config.stand_in_draws,
-                    trim_fraction: config.trim_fraction,
-                    seed: config.seed.wrapping_add(29),
-                    ..StandInConfig::default()
-                };
-                let rerun = |sim: &Dataset, x0: &[Vec<f64>]| {
-                    mme.estimate_fixed(&current, sim, &est.w, &est.noise_variance, None)
-                        .or_else(|_| {
-                            mme.estimate_fixed(&current, sim, &est.w, &est.noise_variance, Some(x0))
-                        })
-                        .ok()
-                };
-                match crate::standin::stand_in(&current, data, &est, &standin_config, rerun) {
-                    Ok(s) => {
-                        if decides && !s.accepts() {
-                            verdict = Verdict::Unexplained;
-                            unconfirmed.append(&mut effects);
-                        }
-                        stand_in = Some(s);
-                    }
-                    Err(e) => stand_in_note = Some(format!("the stand-in could not run: {e}")),
-                }
-                if !d_after_known {
-                    result = est;
-                    d_after_known = true;
-                }
-            }
-            Err(e) => {
-                stand_in_note = Some(format!("MME with the final model failed: {e}"));
-            }
+        let at_hand = d_after_known.then_some(&result);
+        let (s, note, fresh) = final_stand_in(mme, &current, data, at_hand, &result, config);
+        if let Some(s) = &s
+            && decides
+            && !s.accepts()
+        {
+            verdict = Verdict::Unexplained;
+            unconfirmed.append(&mut effects);
+        }
+        stand_in = s;
+        stand_in_note = note;
+        if let Some(est) = fresh {
+            result = est;
+            d_after_known = true;
         }
     }
     Ok(Outcome {

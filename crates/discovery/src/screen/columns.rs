@@ -11,7 +11,7 @@ use super::{
 use crate::augment::sensitivity::{Forcing, Partials, Propagator};
 use crate::augment::{measured_values, simulate_outputs};
 use crate::error::Result;
-use crate::refine::RefineCandidate;
+use crate::term_set::RefineCandidate;
 
 /// Output sensitivities `∂(√(1/(R_c M))·ŷ)/∂θ` of the current parameters and of the
 /// candidates at coefficient 0, one entry per measured value.
