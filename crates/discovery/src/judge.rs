@@ -101,9 +101,10 @@ impl Default for JudgeConfig {
     }
 }
 
-/// The statistic and its reference distribution.
+/// The judged free-run cost and its bootstrap reference distribution (named apart from
+/// `sysid_core::Judgement`, the one free-run judge's scores of a model on a record).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Judgement {
+pub struct BootstrapJudgement {
     /// Free-run cost of the model on the judging records, by the protocol.
     pub statistic: f64,
     /// The protocol's cost on every bootstrap draw that completed.
@@ -146,7 +147,7 @@ pub struct Structure {
     pub p_value: f64,
 }
 
-impl Judgement {
+impl BootstrapJudgement {
     /// Whether the statistic — and the residual's structure, when measured — lies
     /// within its reference distribution.
     pub fn accepts(&self) -> bool {
@@ -350,7 +351,7 @@ pub fn judge(
     new_terms: &[usize],
     protocol: &Protocol<'_>,
     config: &JudgeConfig,
-) -> Result<Judgement> {
+) -> Result<BootstrapJudgement> {
     if config.draws < 8 {
         return Err(DiscoveryError::InvalidConfig {
             field: "draws",
@@ -476,7 +477,7 @@ pub fn judge(
         }
         _ => None,
     };
-    Ok(Judgement {
+    Ok(BootstrapJudgement {
         statistic,
         reference,
         draws: config.draws,

@@ -32,7 +32,7 @@ pub use catalogue::{Effect, Slot, coefficient_unit};
 pub use error::{DiscoveryError, Result};
 pub use floor::NoiseFloor;
 pub use gauge::{ban_touching, scale_free_states, touches};
-pub use judge::{JudgeConfig, Judgement, Protocol, judge};
+pub use judge::{BootstrapJudgement, JudgeConfig, Protocol, judge};
 pub use localise::{
     Bin, DisagreementWindow, FreeRun, Localisation, LocaliseConfig, MovingRms, Profile, Region,
     WindowLength, WindowSource, localise,

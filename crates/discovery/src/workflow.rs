@@ -17,7 +17,7 @@ use sysid_core::{Channel, Dataset, Experiment, MmeEstimate, TermModel};
 
 use crate::error::DiscoveryError;
 use crate::floor::NoiseFloor;
-use crate::judge::{JudgeConfig, Judgement, Protocol};
+use crate::judge::{BootstrapJudgement, JudgeConfig, Protocol};
 use crate::localise::{FreeRun, LocaliseConfig, localise};
 use crate::propose::{DiscoveryConfig, FoundEffect, Verdict, propose};
 use crate::refine::{Holdout, RefineCandidate, RefineConfig, Refinement, Search};
@@ -182,7 +182,7 @@ pub struct Outcome {
     /// when the judge ran, else [`claim_bound`].
     pub claim_bound: f64,
     /// The judged statistic and its bootstrap reference.
-    pub judgement: Option<Judgement>,
+    pub judgement: Option<BootstrapJudgement>,
     /// Why the bootstrap judge did not decide, when it did not.
     pub judge_note: Option<String>,
     /// Terms dropped as passengers (with the judged cost without them).
@@ -236,7 +236,7 @@ impl JudgeContext {
     }
 
     /// Judge its model by the protocol against the protocol's bootstrap reference.
-    fn judge(&self, seed: u64) -> crate::Result<Judgement> {
+    fn judge(&self, seed: u64) -> crate::Result<BootstrapJudgement> {
         let calibration = RefineConfig::default().calibration;
         let protocol = self.protocol(&calibration);
         let config = JudgeConfig {

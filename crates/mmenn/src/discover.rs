@@ -79,7 +79,7 @@ pub struct DiscoverSummary {
     /// The judged statistic and its reference distribution under the pipeline that
     /// produced it (parametric bootstrap, see `discovery::judge`); `None` when no free-run
     /// search ran or the bootstrap could not complete (`judge_note` says why).
-    pub judgement: Option<discovery::Judgement>,
+    pub judgement: Option<discovery::BootstrapJudgement>,
     /// Terms the free-run search kept that the judge's test showed unneeded (dropped
     /// from the model before the claim).
     #[serde(skip_serializing_if = "Vec::is_empty")]

@@ -246,11 +246,23 @@ pub const NOISE_MISFIT_RATIO: f64 = 10.0;
 /// differences, which see the sample-to-sample scatter and over-, not under-, estimate
 /// the noise when the signal itself curves between samples). There the likelihood has
 /// explained a deterministic misfit of the model as measurement noise, `W` is small and
-/// `d̂` says little; giving the sensor's noise variance is the remedy. Nothing for a
-/// given noise variance.
+/// `d̂` says little; giving the sensor's noise variance is the remedy. When the likelihood
+/// was degenerate and the difference-based value was used, one warning says that it is
+/// too large on signals that curve between samples. Nothing for a given noise variance.
 pub fn noise_warnings(names: &[String], noise: &mme_core::NoiseReport) -> Vec<String> {
     if noise.difference_based.len() != noise.variance.len() {
         return Vec::new();
+    }
+    if noise.method == mme_core::NoiseMethod::DifferenceBased {
+        // The likelihood ran to R → 0 and the fallback was used.
+        return vec![format!(
+            "{}: the noise variance comes from second differences of the measurements \
+             (the likelihood was degenerate). That estimate is too large when the signal \
+             itself curves between samples (oscillations with few samples per period), \
+             and W and d̂ inherit the error. Give the sensor's noise variance \
+             (noise_variance = [...]) when you know it.",
+            names.join(", ")
+        )];
     }
     names
         .iter()
@@ -782,5 +794,9 @@ mod tests {
         assert!(w[0].starts_with("y:") && w[0].contains("120×"), "{}", w[0]);
         assert!(noise_warnings(&names, &report(vec![9e-6, 1e-6], vec![1e-6, 1e-6])).is_empty());
         assert!(noise_warnings(&names, &report(vec![1.0, 1.0], vec![])).is_empty());
+        let mut fallback = report(vec![1e-6, 1e-6], vec![1e-6, 1e-6]);
+        fallback.method = mme_core::NoiseMethod::DifferenceBased;
+        let w = noise_warnings(&names, &fallback);
+        assert!(w.len() == 1 && w[0].starts_with("y, z:"), "{w:?}");
     }
 }
