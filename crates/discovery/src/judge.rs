@@ -631,33 +631,9 @@ fn statrs_upper_tail(x: f64, k: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sysid_core::{Channel, InterSample, LinearModel, ModelNames, TermSpec};
+    use sysid_core::{Channel, InterSample};
 
-    /// Oscillator `ẋ = v`, `v̇ = −4x − 0.2v + u` (x measured, v corrected) with `terms`.
-    fn oscillator(terms: &[(&str, &str, f64)]) -> TermModel {
-        let names = ModelNames {
-            states: vec!["x".into(), "v".into()],
-            inputs: vec!["u".into()],
-            outputs: vec!["x".into()],
-            corrections: vec!["v".into()],
-        };
-        let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.2]);
-        let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
-        let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
-        let e = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
-        let linear = LinearModel::with_names(a, b, c, e, names).unwrap_or_else(|e| panic!("{e}"));
-        TermModel::from_specs(
-            linear,
-            terms.iter().map(|&(effect, term, coefficient)| TermSpec {
-                state: "v",
-                into: None,
-                effect,
-                term,
-                coefficient,
-            }),
-        )
-        .unwrap_or_else(|e| panic!("{e}"))
-    }
+    use crate::test_support::oscillator;
 
     /// A record of `truth` (Dormand–Prince, tight) driven by a sum of incommensurate
     /// sines held between samples, with noise of variance `r` (its own seed).

@@ -553,33 +553,8 @@ mod tests {
     use rand::SeedableRng;
     use rand::rngs::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
-    use sysid_core::{LinearModel, ModelNames, TermSpec};
 
-    /// Oscillator `ẋ = v`, `v̇ = −4x − 0.2v + u` (x measured, v corrected) with `terms`.
-    fn oscillator(terms: &[(&str, &str)]) -> TermModel {
-        let names = ModelNames {
-            states: vec!["x".into(), "v".into()],
-            inputs: vec!["u".into()],
-            outputs: vec!["x".into()],
-            corrections: vec!["v".into()],
-        };
-        let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -4.0, -0.2]);
-        let b = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
-        let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
-        let e = DMatrix::from_row_slice(2, 1, &[0.0, 1.0]);
-        let linear = LinearModel::with_names(a, b, c, e, names).unwrap_or_else(|e| panic!("{e}"));
-        TermModel::from_specs(
-            linear,
-            terms.iter().map(|&(effect, term)| TermSpec {
-                state: "v",
-                into: None,
-                effect,
-                term,
-                coefficient: 1.0,
-            }),
-        )
-        .unwrap_or_else(|e| panic!("{e}"))
-    }
+    use crate::test_support::oscillator;
 
     /// States of a quasi-periodic trajectory, an input, and `d̂ = f(x, v) + smoothed
     /// noise` (a 5-sample moving average of white noise of sd `sd`, as MME's `d̂` is
@@ -637,7 +612,7 @@ mod tests {
     /// refits it, so nothing is left to the stand-in. Linear-in-state errors likewise.
     #[test]
     fn a_model_term_with_the_wrong_coefficient_is_not_structure() {
-        let model = oscillator(&[("coulomb_friction_smooth", "tanh(5*v)")]);
+        let model = oscillator(&[("coulomb_friction_smooth", "tanh(5*v)", 1.0)]);
         let g = gain(&model, &samples(|_, v| 0.3 * (5.0 * v).tanh(), 0.1, 7));
         assert!(g < 0.03, "term in model: gain {g}");
         let g = gain(&model, &samples(|x, v| 0.4 * x - 0.2 * v, 0.1, 8));
