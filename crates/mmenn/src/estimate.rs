@@ -226,7 +226,7 @@ pub struct EstimateSummary {
     /// Samples per second of the final sweep (samples / time of the sweep phase).
     pub sweep_samples_per_second: Option<f64>,
     /// Samples reported as outliers (largest first): against the robust estimate when it
-    /// ran, else by the running-median screen.
+    /// ran, else by the neighbour screen (`mme_core::screen_outliers`).
     pub outliers: Vec<mme_core::Outlier>,
     /// Passes of the robust estimate (`None`: not robust).
     pub robust_passes: Option<usize>,
@@ -504,8 +504,9 @@ pub fn estimate_spec_robust(
         .map_err(|e| name_terms(spec, e))
 }
 
-/// Samples farther than this many noise standard deviations from a running median are
-/// reported by a plain (not robust) estimate.
+/// Samples standing out from the cubic through their neighbours by more than this many
+/// noise standard deviations (of that difference) are reported by a plain (not robust)
+/// estimate (`mme_core::screen_outliers`).
 pub const OUTLIER_SCREEN_SIGMA: f64 = 8.0;
 
 /// Read data and model files, run MME, write every output into `out`.
@@ -519,7 +520,7 @@ pub fn run_estimate(
 }
 
 /// [`run_estimate`], robust when `robust` is given: outliers are then reported against
-/// the Huber estimate; otherwise by a running-median screen
+/// the Huber estimate; otherwise by a screen against the neighbours
 /// ([`OUTLIER_SCREEN_SIGMA`]). Reads the files, [`compute_estimate`], [`write_estimate`].
 /// The model may be any model file or a hybrid `model.json` (its model-file part).
 pub fn run_estimate_with(
@@ -749,7 +750,10 @@ fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
                 mme_core::RobustConfig::default().report_sigma
             )
         } else {
-            format!("{OUTLIER_SCREEN_SIGMA} noise standard deviations (σ) from a running median")
+            format!(
+                "{OUTLIER_SCREEN_SIGMA} noise standard deviations (σ) from the cubic through \
+                 their neighbours"
+            )
         };
         r.push_str(&format!("\nOutliers: samples more than {screen}.\n\n"));
         r.push_str("| experiment | channel | sample | t (s) | value | σ out |\n|---|---|---|---|---|---|\n");

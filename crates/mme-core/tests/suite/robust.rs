@@ -114,7 +114,7 @@ fn one_wild_sample_cannot_move_w_under_the_robust_option() {
 }
 
 #[test]
-fn the_median_screen_finds_the_wild_sample_without_an_estimate() {
+fn the_screen_finds_the_wild_sample_without_an_estimate() {
     let found = screen_outliers(
         &data(true, false),
         &["x".to_string()],
