@@ -158,7 +158,8 @@ fn standout(y: &[f64]) -> Vec<(f64, f64)> {
 /// two of it: a wild sample moves its neighbours' predictions by at most 4/6 of itself.
 fn is_local_max(rs: &[(f64, f64)], k: usize) -> bool {
     let d = rs[k].0.abs();
-    (k.saturating_sub(2)..(k + 3).min(rs.len())).all(|j| !(rs[j].0.abs() > d))
+    (k.saturating_sub(2)..(k + 3).min(rs.len()))
+        .all(|j| rs[j].0.abs().partial_cmp(&d) != Some(std::cmp::Ordering::Greater))
 }
 
 /// Median of the values (NaN when empty); sorts `v`.
