@@ -92,13 +92,20 @@ impl Default for JudgeConfig {
             level: 0.99,
             structure_level: 0.999,
             seed: 17,
-            truth_integrator: Integrator::DormandPrince(DpOptions {
-                rtol: 1e-10,
-                atol: 1e-12,
-                ..DpOptions::default()
-            }),
+            truth_integrator: truth_integrator(),
         }
     }
+}
+
+/// The integrator that simulates bootstrap records (the judge's and the stand-in's):
+/// Dormand–Prince at rtol 1e-10, atol 1e-12, not the pipeline's RK4, so that the
+/// integrator's error is part of every reference.
+pub(crate) fn truth_integrator() -> Integrator {
+    Integrator::DormandPrince(DpOptions {
+        rtol: 1e-10,
+        atol: 1e-12,
+        ..DpOptions::default()
+    })
 }
 
 /// The judged free-run cost and its bootstrap reference distribution (named apart from

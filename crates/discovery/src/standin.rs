@@ -46,7 +46,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
-use sysid_core::{Dataset, DpOptions, Integrator, MmeEstimate, TermModel};
+use sysid_core::{Dataset, Integrator, MmeEstimate, TermModel};
 
 use crate::error::{DiscoveryError, Result};
 use crate::samples::{Samples, samples_from_estimate};
@@ -95,11 +95,7 @@ impl Default for StandInConfig {
             trim_fraction: 0.05,
             ridge: 0.1,
             seed: 29,
-            truth_integrator: Integrator::DormandPrince(DpOptions {
-                rtol: 1e-10,
-                atol: 1e-12,
-                ..DpOptions::default()
-            }),
+            truth_integrator: crate::judge::truth_integrator(),
         }
     }
 }
