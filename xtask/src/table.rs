@@ -113,15 +113,31 @@ impl Table {
         }
     }
 
-    /// Append a row (values `NaN` and infinities are stored as N/A).
+    /// Append a row (values `NaN` and infinities are stored as N/A). `values` gives the
+    /// leading columns; columns past its end are N/A (see [`Table::set_for_model`]).
     pub fn push(&mut self, key: &[&str], values: &[Option<f64>]) {
         debug_assert_eq!(key.len(), self.keys.len());
-        debug_assert_eq!(values.len(), self.columns.len());
+        debug_assert!(values.len() <= self.columns.len());
+        let mut values: Vec<Option<f64>> =
+            values.iter().map(|v| v.filter(|x| x.is_finite())).collect();
+        values.resize(self.columns.len(), None);
         self.rows.push(Row {
             key: key.iter().map(|k| k.to_string()).collect(),
-            values: values.iter().map(|v| v.filter(|x| x.is_finite())).collect(),
+            values,
             remark: None,
         });
+    }
+
+    /// Set `column` to `value` on every row whose first key cell is `model` (a value
+    /// that belongs to the model rather than to one of its test records, such as its
+    /// training time). No-op when the column does not exist.
+    pub fn set_for_model(&mut self, model: &str, column: &str, value: f64) {
+        let Some(j) = self.column(column) else {
+            return;
+        };
+        for r in self.rows.iter_mut().filter(|r| r.key[0] == model) {
+            r.values[j] = Some(value).filter(|v| v.is_finite());
+        }
     }
 
     /// Append a row whose missing values read `remark` (why there is no number).

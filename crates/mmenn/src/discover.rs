@@ -59,6 +59,93 @@ pub struct GapPair {
     pub after: Gap,
 }
 
+/// Fit points (mean over the measured outputs) the discovered model may lose against the
+/// assumed one on the estimation records before its terms are rejected: they were
+/// calibrated on those records, so a drop there means the calibration or its free run
+/// went wrong, whatever another record shows.
+pub const ESTIMATION_DROP: f64 = 1.0;
+
+/// Free-run fit points gained on the validation records, on every measured output,
+/// that keep a discovered model whose estimation fit dropped (reported, not hidden).
+pub const VALIDATION_GAIN: f64 = 10.0;
+
+/// The guard against a discovered model that is worse on its own estimation records
+/// (issue 20, item 6).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DegradationGuard {
+    /// Mean free-run fit % over the outputs on the estimation records: assumed model
+    /// minus discovered model (positive: the discovered model is worse).
+    pub estimation_drop: f64,
+    /// Smallest validation fit gain over the outputs (discovered minus assumed), when
+    /// validation records were given.
+    pub validation_gain: Option<f64>,
+    /// Whether the discovered terms were rejected (the written model is the assumed one).
+    pub rejected: bool,
+    /// The decision in words.
+    pub reason: String,
+}
+
+/// The guard's decision on the gaps of a run: `None` when the discovered model does not
+/// lose more than [`ESTIMATION_DROP`] fit points on the estimation records.
+pub fn degradation_guard(
+    estimation: &GapPair,
+    validation: Option<&GapPair>,
+) -> Option<DegradationGuard> {
+    let mean = |g: &Gap| {
+        let v: Vec<f64> = g.fit_percent.values().copied().collect();
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let drop = mean(&estimation.before) - mean(&estimation.after);
+    // NaN (an output without a fit) counts as a drop: the guard then decides.
+    if drop <= ESTIMATION_DROP {
+        return None;
+    }
+    let gain = validation.and_then(|v| {
+        v.before
+            .fit_percent
+            .iter()
+            .map(|(name, b)| v.after.fit_percent.get(name).map_or(f64::NAN, |a| a - b))
+            .reduce(f64::min)
+    });
+    let kept = gain.is_some_and(|g| g >= VALIDATION_GAIN);
+    let drop_text = if drop.is_finite() {
+        format!("{drop:.1} fit points")
+    } else {
+        "an undefined amount (an output has no fit)".to_string()
+    };
+    let reason = match (gain, kept) {
+        (Some(g), true) => format!(
+            "the discovered model's free-run fit on the estimation records is {drop_text} \
+             below the assumed model's (the records its terms were calibrated on), but it \
+             gains {g:.1} points on every validation output (at least {VALIDATION_GAIN}), so \
+             it is kept; check the estimation-record figures"
+        ),
+        (Some(g), false) => format!(
+            "the discovered model's free-run fit on the estimation records is {drop_text} \
+             below the assumed model's (the records its terms were calibrated on) and its \
+             validation gain ({g:.1} points on the worst output) is below {VALIDATION_GAIN}: \
+             its terms are rejected (model.discovered.toml is the assumed model; the \
+             rejected one is model.rejected.toml)"
+        ),
+        (None, _) => format!(
+            "the discovered model's free-run fit on the estimation records is {drop_text} \
+             below the assumed model's (the records its terms were calibrated on) and no \
+             validation records show a gain: its terms are rejected (model.discovered.toml \
+             is the assumed model; the rejected one is model.rejected.toml)"
+        ),
+    };
+    Some(DegradationGuard {
+        estimation_drop: drop,
+        validation_gain: gain,
+        rejected: !kept,
+        reason,
+    })
+}
+
 /// `discovery.json`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct DiscoverSummary {
@@ -103,9 +190,14 @@ pub struct DiscoverSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub stand_in_note: Option<String>,
     /// What the user should know about the estimated noise variance of the assumed
-    /// model's MME run (`crate::estimate::noise_warnings`).
+    /// model's MME run (`crate::estimate::noise_warnings`), and the degradation guard's
+    /// reason when it fired.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// The guard against a discovered model worse on its own estimation records, when it
+    /// fired ([`degradation_guard`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub degradation: Option<DegradationGuard>,
     /// The augmented model file.
     pub model: String,
     /// Every round.
@@ -272,15 +364,56 @@ pub fn run_discover(
         None => None,
     };
     let validation_gap = validation_runs.as_ref().map(|(g, _, _)| g.clone());
-    let mut written = spec.clone();
+    let estimation_gap = GapPair { before, after };
+    let degradation = if outcome.added.is_empty() {
+        None
+    } else {
+        degradation_guard(&estimation_gap, validation_gap.as_ref())
+    };
+    let rejected = degradation.as_ref().is_some_and(|g| g.rejected);
+    let mut written = if rejected {
+        original.clone()
+    } else {
+        spec.clone()
+    };
     if let NoiseVariance::Auto = original.noise_variance {
         written.noise_variance = NoiseVariance::Auto;
     }
+    let rejected_path = out.join("model.rejected.toml");
+    if rejected {
+        let mut augmented = spec.clone();
+        if let NoiseVariance::Auto = original.noise_variance {
+            augmented.noise_variance = NoiseVariance::Auto;
+        }
+        write_model(&rejected_path, &augmented)?;
+    } else if rejected_path.exists() {
+        // A rerun into the same folder must not leave an earlier run's rejected model.
+        std::fs::remove_file(&rejected_path).map_err(|source| MmennError::Io {
+            path: rejected_path.clone(),
+            source,
+        })?;
+    }
     write_model(&out.join("model.discovered.toml"), &written)?;
+    let (mut verdict, mut effects, mut unconfirmed) =
+        (outcome.verdict, outcome.effects, outcome.unconfirmed);
+    if rejected {
+        unconfirmed.append(&mut effects);
+        verdict = Verdict::Unexplained;
+    }
+    let mut warnings = mme
+        .first_noise
+        .lock()
+        .ok()
+        .and_then(|n| n.clone())
+        .map(|n| crate::estimate::noise_warnings(&outcome.first_estimate.output_names, &n))
+        .unwrap_or_default();
+    if let Some(g) = &degradation {
+        warnings.push(g.reason.clone());
+    }
     let summary = DiscoverSummary {
-        verdict: outcome.verdict,
-        effects: outcome.effects,
-        unconfirmed: outcome.unconfirmed,
+        verdict,
+        effects,
+        unconfirmed,
         claim_bound: outcome.claim_bound,
         judgement: outcome.judgement,
         judge_note: outcome.judge_note,
@@ -288,14 +421,9 @@ pub fn run_discover(
         ambiguity: outcome.ambiguity,
         stand_in: outcome.stand_in,
         stand_in_note: outcome.stand_in_note,
-        warnings: mme
-            .first_noise
-            .lock()
-            .ok()
-            .and_then(|n| n.clone())
-            .map(|n| crate::estimate::noise_warnings(&outcome.first_estimate.output_names, &n))
-            .unwrap_or_default(),
-        gap: GapPair { before, after },
+        warnings,
+        degradation,
+        gap: estimation_gap,
         validation_gap,
         model: "model.discovered.toml".into(),
         rounds: outcome.rounds,
@@ -329,4 +457,66 @@ pub fn run_discover(
     let markdown = report(&summary) + &crate::html::figures_section(&files);
     crate::html::write_report(out, &markdown)?;
     Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gap(fits: &[(&str, f64)]) -> Gap {
+        Gap {
+            fit_percent: fits.iter().map(|(n, f)| (n.to_string(), *f)).collect(),
+            ..Gap::default()
+        }
+    }
+
+    fn pair(before: &[(&str, f64)], after: &[(&str, f64)]) -> GapPair {
+        GapPair {
+            before: gap(before),
+            after: gap(after),
+        }
+    }
+
+    #[test]
+    fn a_model_no_worse_on_its_estimation_records_passes_the_guard() {
+        // Better, equal, and within the allowed drop (mean over outputs).
+        assert!(degradation_guard(&pair(&[("x", 40.0)], &[("x", 90.0)]), None).is_none());
+        assert!(degradation_guard(&pair(&[("x", 40.0)], &[("x", 40.0)]), None).is_none());
+        let within = pair(&[("x", 40.0), ("y", 60.0)], &[("x", 38.5), ("y", 60.0)]);
+        assert!(degradation_guard(&within, None).is_none());
+    }
+
+    #[test]
+    fn a_drop_without_validation_records_is_rejected() {
+        // The reported case: estimation fit from 40.7 % to −216 %.
+        let g = degradation_guard(&pair(&[("theta2", 40.7)], &[("theta2", -216.0)]), None)
+            .expect("guard fires");
+        assert!(g.rejected);
+        assert!((g.estimation_drop - 256.7).abs() < 1e-9);
+        assert_eq!(g.validation_gain, None);
+        assert!(g.reason.contains("rejected"), "{}", g.reason);
+    }
+
+    #[test]
+    fn a_drop_is_kept_only_when_every_validation_output_gains_enough() {
+        let est = pair(&[("a", 40.0), ("b", 50.0)], &[("a", 30.0), ("b", 50.0)]);
+        let all = pair(&[("a", 20.0), ("b", 30.0)], &[("a", 35.0), ("b", 41.0)]);
+        let g = degradation_guard(&est, Some(&all)).expect("guard fires");
+        assert!(!g.rejected, "{}", g.reason);
+        assert_eq!(g.validation_gain, Some(11.0));
+        assert!(g.reason.contains("kept"));
+        // One output gains less than the bound: rejected.
+        let one = pair(&[("a", 20.0), ("b", 30.0)], &[("a", 35.0), ("b", 39.0)]);
+        let g = degradation_guard(&est, Some(&one)).expect("guard fires");
+        assert!(g.rejected);
+        assert_eq!(g.validation_gain, Some(9.0));
+    }
+
+    #[test]
+    fn an_output_without_a_fit_counts_as_a_drop() {
+        let g = degradation_guard(&pair(&[("x", 40.0)], &[("x", f64::NAN)]), None)
+            .expect("guard fires");
+        assert!(g.rejected);
+        assert!(g.reason.contains("undefined"));
+    }
 }

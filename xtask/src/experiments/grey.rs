@@ -52,6 +52,10 @@ pub struct GreyFit {
     pub x0: Vec<f64>,
     /// Training free-run RMSE (recorded units, after the window).
     pub train_rmse: f64,
+    /// Training free-run RMSE over every sample from the calibrated state (recorded
+    /// units): the protocol of dynoNet's published EMPS script, which scores the
+    /// estimation record.
+    pub train_rmse_all: f64,
     /// Test runs, in the order given.
     pub tests: Vec<GreyTest>,
 }
@@ -155,9 +159,13 @@ pub fn fit_grey(
         .context("grey-box calibration")?;
     let (model, x0) = (cal.model, cal.x0[0].clone());
     let y: Vec<f64> = est.outputs().row(0).iter().copied().collect();
-    let train_rmse = free_run(spec, &model, est, &x0)
-        .map(|s| rmse_after(&y, &s, window))
-        .unwrap_or(f64::NAN);
+    let train_sim = free_run(spec, &model, est, &x0).ok();
+    let train_rmse = train_sim
+        .as_ref()
+        .map_or(f64::NAN, |s| rmse_after(&y, s, window));
+    let train_rmse_all = train_sim
+        .as_ref()
+        .map_or(f64::NAN, |s| rmse_after(&y, s, 0));
     let tests = tests
         .iter()
         .map(|(name, exp)| {
@@ -179,6 +187,7 @@ pub fn fit_grey(
         model,
         x0,
         train_rmse,
+        train_rmse_all,
         tests,
     })
 }
@@ -574,6 +583,10 @@ pub enum SilverboxExtra {
     QuadraticSpring,
     /// `−c2·y²·y'`: damping growing with the displacement (van der Pol-like).
     DisplacementDamping,
+    /// `−k5·y⁵`: a quintic spring (the nonlinear feedback beyond cubic at large amplitude;
+    /// explored, not a candidate: the same training RMSE as without it, 0.2565 mV).
+    #[cfg_attr(not(test), allow(dead_code))]
+    QuinticSpring,
     /// A first-order input stage of this held time constant (s), `w' = (u − w)/τ`, with
     /// calibrated paths from `u` and from `w` into both the oscillator's acceleration and the
     /// measured voltage: the input reaches the output through a zero (a relative degree
@@ -623,6 +636,7 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
         specs.push(match e {
             SilverboxExtra::QuadraticSpring => ("v", "quadratic_spring", "y^2", 0.0),
             SilverboxExtra::DisplacementDamping => ("v", "displacement_damping", "y^2*v", 0.0),
+            SilverboxExtra::QuinticSpring => ("v", "quintic_spring", "y^5", 0.0),
             SilverboxExtra::Feedthrough(_) => continue,
         });
     }
@@ -824,6 +838,7 @@ mod explore {
                 match key.as_str() {
                     "q" => extra.push(SilverboxExtra::QuadraticSpring),
                     "dd" => extra.push(SilverboxExtra::DisplacementDamping),
+                    "q5" => extra.push(SilverboxExtra::QuinticSpring),
                     "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
                     "sub" => substeps = v as usize,
                     _ => panic!("unknown key {key}"),

@@ -222,5 +222,7 @@ fn narx_inner(
         net(&last),
         rayon::current_num_threads(),
     ));
+    table.set_for_model(&label, "train_s", select_seconds + fit_seconds);
+    table.set_for_model(&label, "threads", rayon::current_num_threads() as f64);
     Ok(())
 }
