@@ -666,7 +666,7 @@ fn compare_figure(
                     .iter()
                     .zip(row(y, i))
                     .map(|(m, s)| m - s)
-                    .collect(),
+                    .collect::<Vec<f64>>(),
             )
             .coloured(2 * i + 1),
         );
@@ -690,16 +690,27 @@ fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {
             Series::points(
                 "training",
                 h.clone(),
-                rows.iter().map(|r| r.train_mse.log10()).collect(),
+                rows.iter()
+                    .map(|r| r.train_mse.log10())
+                    .collect::<Vec<f64>>(),
             ),
-            Series::points("test", h, rows.iter().map(|r| r.test_mse.log10()).collect()),
+            Series::points(
+                "test",
+                h,
+                rows.iter()
+                    .map(|r| r.test_mse.log10())
+                    .collect::<Vec<f64>>(),
+            ),
             Series::highlight(
                 marked
                     .first()
                     .map(|r| format!("chosen: {} hidden, init {} (test)", r.hidden, r.init))
                     .unwrap_or_default(),
-                marked.iter().map(|r| r.hidden as f64).collect(),
-                marked.iter().map(|r| r.test_mse.log10()).collect(),
+                marked.iter().map(|r| r.hidden as f64).collect::<Vec<f64>>(),
+                marked
+                    .iter()
+                    .map(|r| r.test_mse.log10())
+                    .collect::<Vec<f64>>(),
             ),
         ],
         bands: vec![],
