@@ -130,8 +130,9 @@ mod fast {
             None => (text, ""),
         };
         let first = strip_cr(first);
-        if trim(first).is_empty() || first.contains('\r') {
-            // Empty file or leading blank line: the general reader decides.
+        if trim(first).is_empty() || first.contains(['\r', '\x0B']) {
+            // Empty file, leading blank line, a bare CR or a vertical tab (which a
+            // Unicode trim would remove from a name): the general reader decides.
             return None;
         }
         let header: Vec<String> = first.split(',').map(|h| trim(h).to_string()).collect();

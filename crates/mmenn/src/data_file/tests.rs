@@ -229,6 +229,7 @@ fn fast_parse_agrees_with_the_general_reader() {
         "t,u,y\n0,,2\n , , \n",
         "t,u,t\n0,1,2\n",
         "t,,y\n0,1,2\n",
+        "t,\x0Bu,y\n0,\x0B1,2\n",
         "t\n0\n\n1\n",
         "t\n0\n \n1\n",
         "",
