@@ -98,6 +98,66 @@ pub trait Mme {
 pub trait Observer: Sync {
     /// A step begins.
     fn stage(&self, round: usize, stage: &str);
+
+    /// `done` of `total` steps are finished; called right after each [`Observer::stage`]
+    /// and once at the end with `done == total`. `total` is the plan of [`run`]: the
+    /// first MME run, [`STEPS_PER_ROUND`] per round up to `max_rounds`, and
+    /// [`FINAL_STEPS`] after the rounds. It shrinks to what remains when the rounds stop
+    /// early or a step is not needed, and grows by one for an ambiguity test; `done`
+    /// never decreases and never exceeds `total`.
+    fn steps(&self, _done: usize, _total: usize) {}
+}
+
+/// Steps of one full round in the plan [`Observer::steps`] counts: the noise floor, the
+/// proposal, the free-run search and the proof.
+pub const STEPS_PER_ROUND: usize = 4;
+/// Steps after the rounds in that plan: the verdict's bootstrap judge, pruning passengers
+/// and the flexible stand-in.
+pub const FINAL_STEPS: usize = 3;
+
+/// Counts the workflow's steps against its plan for [`Observer::steps`].
+struct Plan<'a> {
+    observer: &'a dyn Observer,
+    /// Steps begun.
+    begun: std::cell::Cell<usize>,
+    /// Steps planned.
+    total: std::cell::Cell<usize>,
+}
+
+impl<'a> Plan<'a> {
+    fn new(observer: &'a dyn Observer, max_rounds: usize) -> Self {
+        Self {
+            observer,
+            begun: std::cell::Cell::new(0),
+            total: std::cell::Cell::new(1 + STEPS_PER_ROUND * max_rounds + FINAL_STEPS),
+        }
+    }
+
+    /// A planned step begins: the steps before it are finished.
+    fn stage(&self, round: usize, stage: &str) {
+        let done = self.begun.get();
+        self.begun.set(done + 1);
+        self.total.set(self.total.get().max(done + 1));
+        self.observer.stage(round, stage);
+        self.observer.steps(done, self.total.get());
+    }
+
+    /// A step outside the plan will run.
+    fn add(&self) {
+        self.total.set(self.total.get() + 1);
+    }
+
+    /// After the rounds: what remains is the final steps.
+    fn rounds_over(&self) {
+        self.total.set(self.begun.get() + FINAL_STEPS);
+    }
+
+    /// The run is over: every step begun is finished.
+    fn finish(&self) {
+        let done = self.begun.get();
+        self.total.set(done);
+        self.observer.steps(done, done);
+    }
 }
 
 /// An observer that ignores everything.
@@ -261,6 +321,22 @@ pub fn run<M: Mme + Sync>(
     validation: Option<&Dataset>,
     config: &WorkflowConfig,
     observer: &dyn Observer,
+) -> Result<Outcome, M::Error> {
+    let observer = &Plan::new(observer, config.max_rounds.max(1));
+    let outcome = run_planned(mme, model, units, data, validation, config, observer);
+    observer.finish();
+    outcome
+}
+
+/// [`run`] with its steps counted.
+fn run_planned<M: Mme + Sync>(
+    mme: &M,
+    model: &TermModel,
+    units: &BTreeMap<String, String>,
+    data: &Dataset,
+    validation: Option<&Dataset>,
+    config: &WorkflowConfig,
+    observer: &Plan<'_>,
 ) -> Result<Outcome, M::Error> {
     observer.stage(0, "MME with the assumed model");
     let first = mme.estimate(model, data, None)?;
@@ -453,6 +529,7 @@ pub fn run<M: Mme + Sync>(
         // alternative is sought).
         let mut claim_now = claim_bound(config.noise_given, judged_measured);
         if !crate::scale_free_states(current.linear()).is_empty() {
+            observer.add();
             observer.stage(round_no, "bootstrap judge (ambiguity test)");
             if let Ok(j) = ctx.judge(config.seed) {
                 claim_now = j.threshold;
@@ -656,6 +733,7 @@ pub fn run<M: Mme + Sync>(
         result = new_result;
     }
 
+    observer.rounds_over();
     // Found: a round was accepted. Unexplained: the library fitted something but the proof
     // failed (never name an effect that does not make the model better).
     // With nothing named, the free-run search's last cost decides between `none` (the

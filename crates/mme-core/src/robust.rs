@@ -117,14 +117,18 @@ fn erfc(x: f64) -> f64 {
 fn running_median(y: &[f64], half: usize) -> Vec<f64> {
     let mut buf = Vec::with_capacity(2 * half + 1);
     (0..y.len())
-        .map(|k| {
-            buf.clear();
-            let lo = k.saturating_sub(half);
-            let hi = (k + half + 1).min(y.len());
-            buf.extend(y[lo..hi].iter().copied().filter(|v| !v.is_nan()));
-            median(&mut buf)
-        })
+        .map(|k| median_around(y, k, half, &mut buf))
         .collect()
+}
+
+/// Median of the observed (non-NaN) values within `half` samples either side of `k`
+/// (one value of [`running_median`]); `buf` is scratch space.
+fn median_around(y: &[f64], k: usize, half: usize, buf: &mut Vec<f64>) -> f64 {
+    buf.clear();
+    let lo = k.saturating_sub(half);
+    let hi = (k + half + 1).min(y.len());
+    buf.extend(y[lo..hi].iter().copied().filter(|v| !v.is_nan()));
+    median(buf)
 }
 
 /// How far each sample stands out from its neighbours (see [`screen_outliers`]): its
@@ -132,7 +136,8 @@ fn running_median(y: &[f64], half: usize) -> Vec<f64> {
 /// missing sample.
 fn standout(y: &[f64]) -> Vec<(f64, f64)> {
     let n = y.len();
-    let med = running_median(y, 3);
+    // The running median of seven, only where a neighbour of the cubic is missing.
+    let mut buf = Vec::with_capacity(7);
     let ok = |ks: [usize; 4]| ks.iter().all(|&j| !y[j].is_nan());
     (0..n)
         .map(|k| {
@@ -148,7 +153,7 @@ fn standout(y: &[f64]) -> Vec<(f64, f64)> {
                 let pred = 4.0 * y[k - 1] - 6.0 * y[k - 2] + 4.0 * y[k - 3] - y[k - 4];
                 (y[k] - pred, 70.0f64.sqrt())
             } else {
-                (y[k] - med[k], 1.0)
+                (y[k] - median_around(y, k, 3, &mut buf), 1.0)
             }
         })
         .collect()

@@ -248,7 +248,7 @@ fn compare_figures(
                         .iter()
                         .zip(y.row(i).iter())
                         .map(|(m, s)| m - s)
-                        .collect(),
+                        .collect::<Vec<f64>>(),
                 )
                 .coloured(k + 1)
             })
@@ -263,7 +263,7 @@ fn compare_figures(
             series.push(Series::line(
                 format!("{label} (fit {fit:.1} %)"),
                 t.clone(),
-                y.row(i).iter().copied().collect(),
+                y.row(i).iter().copied().collect::<Vec<f64>>(),
             ));
         }
         let y_label = match units.get(name) {
@@ -310,7 +310,7 @@ fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<
             y_label: "ACF".into(),
             series: vec![Series::points(
                 "ACF",
-                c.lags.iter().map(|&l| l as f64).collect(),
+                c.lags.iter().map(|&l| l as f64).collect::<Vec<f64>>(),
                 c.values.clone(),
             )],
             bands: vec![("99 % band".into(), c.bound99)],
@@ -333,7 +333,7 @@ fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<
                 y_label: "XCF".into(),
                 series: vec![Series::points(
                     "XCF",
-                    c.lags.iter().map(|&l| l as f64).collect(),
+                    c.lags.iter().map(|&l| l as f64).collect::<Vec<f64>>(),
                     c.values.clone(),
                 )],
                 bands: vec![("99 % band".into(), c.bound99)],

@@ -58,7 +58,206 @@ pub fn read_table(path: &Path) -> Result<Table> {
 }
 
 /// Parse CSV bytes (see [`read_table`]); `path` is only used in errors.
+///
+/// Plain numeric files (ASCII, no quotes, `,` between cells, `\n` or `\r\n` at line
+/// ends) take a fast path that splits lines itself and parses the rows on two threads
+/// when the file is large. Whenever that path meets anything else — a quote, a cell
+/// that is not a finite number, a ragged row, an empty file — the whole file is parsed
+/// again by the general reader below, which produces the same values and the typed
+/// errors naming file, line and column.
 pub fn parse_table(path: &Path, bytes: &[u8]) -> Result<Table> {
+    if let Some((header, columns, lines)) = fast::parse(bytes) {
+        check_header(path, &header)?;
+        return Ok(Table {
+            path: path.to_path_buf(),
+            header,
+            columns,
+            lines,
+        });
+    }
+    parse_table_general(path, bytes)
+}
+
+/// Header checks shared by both parse paths: no empty and no repeated column name.
+fn check_header(path: &Path, header: &[String]) -> Result<()> {
+    let err = |column: Option<String>, problem| MmennError::Csv {
+        path: path.to_path_buf(),
+        line: 1,
+        column,
+        problem,
+    };
+    let mut seen = std::collections::HashSet::new();
+    for h in header {
+        if h.is_empty() {
+            return Err(err(None, CsvProblem::EmptyColumnName));
+        }
+        if !seen.insert(h.as_str()) {
+            return Err(err(Some(h.clone()), CsvProblem::DuplicateColumn(h.clone())));
+        }
+    }
+    Ok(())
+}
+
+/// The fast path of [`parse_table`] for plain numeric CSV. Returns `None` (and the
+/// caller falls back to the general reader) for anything it does not handle exactly
+/// as the `csv` crate with `Trim::All` and `f64::from_str` would.
+mod fast {
+    /// Header, columns, file line of each row.
+    pub(super) type Parsed = (Vec<String>, Vec<Vec<f64>>, Vec<usize>);
+
+    /// Files at least this large are parsed on two threads.
+    const PARALLEL_BYTES: usize = 1 << 20;
+
+    /// `csv`'s `Trim::All` trims ASCII whitespace; `\r` and `\n` are left in a cell so
+    /// that a bare carriage return (a record end for `csv`) fails the parse and sends the
+    /// file to the general reader.
+    fn trim(cell: &str) -> &str {
+        cell.trim_matches(|c| c == ' ' || c == '\t' || c == '\x0C')
+    }
+
+    /// One line without its `\n` and one trailing `\r`.
+    fn strip_cr(line: &str) -> &str {
+        line.strip_suffix('\r').unwrap_or(line)
+    }
+
+    pub(super) fn parse(bytes: &[u8]) -> Option<Parsed> {
+        if !bytes.is_ascii() || bytes.contains(&b'"') {
+            return None;
+        }
+        let text = std::str::from_utf8(bytes).ok()?;
+        let (first, body) = match text.find('\n') {
+            Some(i) => (&text[..i], &text[i + 1..]),
+            None => (text, ""),
+        };
+        let first = strip_cr(first);
+        if trim(first).is_empty() || first.contains(['\r', '\x0B']) {
+            // Empty file, leading blank line, a bare CR or a vertical tab (which a
+            // Unicode trim would remove from a name): the general reader decides.
+            return None;
+        }
+        let header: Vec<String> = first.split(',').map(|h| trim(h).to_string()).collect();
+        let width = header.len();
+        let (columns, lines) = if body.len() >= PARALLEL_BYTES {
+            // Split at a line end near the middle; each half counts its own lines.
+            let mid = body.len() / 2;
+            let cut = body[mid..].find('\n').map_or(body.len(), |i| mid + i + 1);
+            let (a, b) = body.split_at(cut);
+            let (ra, rb) = std::thread::scope(|s| {
+                let hb = s.spawn(|| rows(b, width));
+                let ra = rows(a, width);
+                (ra, hb.join().ok().flatten())
+            });
+            let (mut ca, mut la, na) = ra?;
+            let (cb, lb, _) = rb?;
+            for (c, more) in ca.iter_mut().zip(cb) {
+                c.extend_from_slice(&more);
+            }
+            la.extend(lb.into_iter().map(|l| l + na));
+            (ca, la)
+        } else {
+            let (c, l, _) = rows(body, width)?;
+            (c, l)
+        };
+        // File lines are 1-based and the header is line 1.
+        let lines = lines.into_iter().map(|l| l + 2).collect();
+        Some((header, columns, lines))
+    }
+
+    /// Rows of `text` (whole lines): columns, 0-based line index of each row within
+    /// `text`, and the number of lines `text` holds.
+    fn rows(text: &str, width: usize) -> Option<(Vec<Vec<f64>>, Vec<usize>, usize)> {
+        let guess = text
+            .find('\n')
+            .map_or(1, |i| text.len() / (i + 1).max(1) + 16);
+        let mut columns: Vec<Vec<f64>> = (0..width).map(|_| Vec::with_capacity(guess)).collect();
+        let mut lines = Vec::with_capacity(guess);
+        let bytes = text.as_bytes();
+        let mut count = 0;
+        let mut pos = 0;
+        while pos < bytes.len() {
+            let i = count;
+            count += 1;
+            let end = bytes[pos..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(bytes.len(), |e| pos + e);
+            let line = strip_cr(&text[pos..end]);
+            pos = end + 1;
+            // Cells by one pass over the line's bytes.
+            let lb = line.as_bytes();
+            let mut j = 0;
+            let mut start = 0;
+            let mut blank = true;
+            for at in 0..=lb.len() {
+                if at < lb.len() && lb[at] != b',' {
+                    continue;
+                }
+                if j == width {
+                    return None; // more cells than the header
+                }
+                let cell = trim(&line[start..at]);
+                start = at + 1;
+                let v = if cell.is_empty() {
+                    f64::NAN
+                } else {
+                    blank = false;
+                    let v: f64 = cell.parse().ok()?;
+                    if v.is_infinite() {
+                        return None;
+                    }
+                    v
+                };
+                columns[j].push(v);
+                j += 1;
+            }
+            if j != width || (width == 1 && blank) {
+                if j == 1 && blank && width > 1 {
+                    // Blank line: skipped, as the general reader does.
+                    columns[0].pop();
+                    continue;
+                }
+                // Too few cells, or an empty cell in a one-column file (blank line or
+                // missing value): the general reader decides.
+                return None;
+            }
+            lines.push(i);
+        }
+        Some((columns, lines, count))
+    }
+}
+
+/// File lines of records by counting `\n` up to each record's first byte. (The `csv`
+/// crate's own line count is one low after a CRLF line end and after an empty line that
+/// follows a record.) Records come in file order, so the count carries on.
+#[derive(Default)]
+struct FileLines {
+    /// Bytes counted so far.
+    at: usize,
+    /// `\n` seen before `at`.
+    newlines: usize,
+}
+
+impl FileLines {
+    /// The 1-based file line of the record at `pos`.
+    fn line(&mut self, bytes: &[u8], pos: &csv::Position) -> usize {
+        let mut b = usize::try_from(pos.byte())
+            .unwrap_or(usize::MAX)
+            .min(bytes.len());
+        // A record never starts with a line end: skip the rest of the previous one.
+        while b < bytes.len() && (bytes[b] == b'\n' || bytes[b] == b'\r') {
+            b += 1;
+        }
+        if b < self.at {
+            *self = Self::default();
+        }
+        self.newlines += bytes[self.at..b].iter().filter(|&&c| c == b'\n').count();
+        self.at = b;
+        self.newlines + 1
+    }
+}
+
+/// The general reader of [`parse_table`] (the `csv` crate).
+fn parse_table_general(path: &Path, bytes: &[u8]) -> Result<Table> {
     let err = |line, column: Option<String>, problem| MmennError::Csv {
         path: path.to_path_buf(),
         line,
@@ -76,27 +275,18 @@ pub fn parse_table(path: &Path, bytes: &[u8]) -> Result<Table> {
         Some(Err(e)) => return Err(err(1, None, CsvProblem::Syntax(e.to_string()))),
         Some(Ok(r)) => r.iter().map(str::to_string).collect(),
     };
-    let mut seen = std::collections::HashSet::new();
-    for h in &header {
-        if h.is_empty() {
-            return Err(err(1, None, CsvProblem::EmptyColumnName));
-        }
-        if !seen.insert(h.as_str()) {
-            return Err(err(
-                1,
-                Some(h.clone()),
-                CsvProblem::DuplicateColumn(h.clone()),
-            ));
-        }
-    }
+    check_header(path, &header)?;
     let mut columns = vec![Vec::new(); header.len()];
     let mut lines = Vec::new();
+    let mut file_lines = FileLines::default();
     for rec in records {
         let rec = rec.map_err(|e| {
-            let line = e.position().map(|p| p.line() as usize).unwrap_or(0);
+            let line = e
+                .position()
+                .map_or(0, |p| FileLines::default().line(bytes, p));
             err(line, None, CsvProblem::Syntax(e.to_string()))
         })?;
-        let line = rec.position().map(|p| p.line() as usize).unwrap_or(0);
+        let line = rec.position().map_or(0, |p| file_lines.line(bytes, p));
         if rec.len() == 1 && rec.get(0).is_some_and(str::is_empty) {
             continue; // blank line
         }
@@ -559,32 +749,54 @@ pub fn read_with_validation(
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
 /// Numbers are the shortest text that reads back to the same bits (ryu).
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
+    let mut out = Vec::new();
+    // Writing into a Vec cannot fail.
+    let _ = write_csv_to(&mut out, header, columns);
+    // ASCII digits, signs, `e`, `.`, `,`, `\n` and the header's (UTF-8) names only.
+    String::from_utf8(out).unwrap_or_default()
+}
+
+/// Rows formatted per chunk of [`write_csv_to`] (about 1 MB of text at a time).
+const CSV_CHUNK_ROWS: usize = 8192;
+
+/// Write CSV text (see [`format_csv`]) to `out` through one reused buffer of a few
+/// thousand rows, so a large file is never held in memory whole.
+pub fn write_csv_to(
+    out: &mut impl std::io::Write,
+    header: &[String],
+    columns: &[&[f64]],
+) -> std::io::Result<()> {
     let rows = columns.first().map_or(0, |c| c.len());
     // A shortest round-trip number is at most 24 characters; most are about 20.
-    let mut s = String::with_capacity(rows * columns.len() * 21 + 64);
+    let chunk = rows.min(CSV_CHUNK_ROWS);
+    let mut s: Vec<u8> = Vec::with_capacity(chunk * (columns.len() * 25 + 1) + 64);
     let mut buf = ryu::Buffer::new();
-    s.push_str(&header.join(","));
-    s.push('\n');
+    s.extend_from_slice(header.join(",").as_bytes());
+    s.push(b'\n');
     for k in 0..rows {
         for (j, c) in columns.iter().enumerate() {
             if j > 0 {
-                s.push(',');
+                s.push(b',');
             }
             let v = c[k];
             if !v.is_nan() {
                 // The shortest text that reads back to the same bits (ryu; `inf`, `-inf`
                 // for infinities), formatted without a string per value.
-                s.push_str(buf.format(v));
+                s.extend_from_slice(buf.format(v).as_bytes());
             }
         }
-        s.push('\n');
+        s.push(b'\n');
+        if (k + 1) % CSV_CHUNK_ROWS == 0 {
+            out.write_all(&s)?;
+            s.clear();
+        }
     }
-    s
+    out.write_all(&s)
 }
 
 /// Write columns to a CSV file atomically (see [`format_csv`]).
 pub fn write_csv(path: &Path, header: &[String], columns: &[&[f64]]) -> Result<()> {
-    write_atomic(path, format_csv(header, columns).as_bytes())
+    crate::atomic::write_atomic_with(path, |f| write_csv_to(f, header, columns))
 }
 
 /// Write one experiment of a dataset as a data file (`t`, inputs, outputs).

@@ -17,6 +17,7 @@ use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_term_model, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
+use crate::progress::{NoProgress, Progress, ProgressSink};
 use report::{figures, report};
 
 pub use discovery::workflow::{
@@ -34,8 +35,8 @@ pub struct DiscoverOptions {
     /// acceptance threshold, the hold-out fraction); `noise_given` is set from the model
     /// file.
     pub workflow: WorkflowConfig,
-    /// Print the workflow's stages as lines on standard error (the CLI does unless
-    /// `--quiet`; off for library callers by default).
+    /// [`run_discover`] prints the workflow's steps as lines on standard error (off by
+    /// default; [`run_discover_with_progress`] reports to a sink instead and ignores it).
     pub progress: bool,
 }
 
@@ -202,6 +203,11 @@ pub struct DiscoverSummary {
     pub model: String,
     /// Every round.
     pub rounds: Vec<Round>,
+    /// How MME's first solve (the assumed model on the estimation records) ended:
+    /// `exact` for a given `W`, otherwise the `W` search's ending. Anything but `exact`
+    /// or `converged` makes `mmenn discover` exit with status 3: `d̂`, and everything
+    /// proposed from it, rest on a `W` the covariance constraint did not fix.
+    pub mme_termination: Option<sysid_core::Termination>,
 }
 
 /// MME for the workflow: mme-core with the model file's settings (`W`, noise variance,
@@ -254,19 +260,45 @@ impl workflow::Mme for MmeCore<'_> {
     }
 }
 
-/// Progress of the workflow as plain lines on standard error (when asked for).
-struct Stages {
-    on: bool,
+/// The task name of `discover`'s progress reports.
+pub const DISCOVER_TASK: &str = "discover";
+
+/// The workflow's steps as progress reports of one task, [`DISCOVER_TASK`]: `done` of
+/// `total` steps of the workflow's plan (`discovery::workflow::Observer::steps`), the
+/// note naming the round and the step that begins.
+struct Reported<'a> {
+    sink: &'a dyn ProgressSink,
+    stage: std::sync::Mutex<String>,
 }
 
-impl Observer for Stages {
+impl Observer for Reported<'_> {
     fn stage(&self, round: usize, stage: &str) {
-        #[allow(clippy::print_stderr)]
-        if self.on {
-            if round == 0 {
-                eprintln!("discover: {stage}");
+        if let Ok(mut s) = self.stage.lock() {
+            *s = if round == 0 {
+                stage.to_string()
             } else {
-                eprintln!("discover: round {round}: {stage}");
+                format!("round {round}: {stage}")
+            };
+        }
+    }
+
+    fn steps(&self, done: usize, total: usize) {
+        let note = self.stage.lock().map(|s| s.clone()).unwrap_or_default();
+        self.sink
+            .report(&Progress::new(DISCOVER_TASK, done, Some(total)).with_note(note));
+    }
+}
+
+/// [`DiscoverOptions::progress`] for library callers of [`run_discover`]: one line on
+/// standard error per step of the workflow.
+struct StageLines;
+
+impl ProgressSink for StageLines {
+    fn report(&self, p: &Progress) {
+        if p.total != Some(p.done) {
+            #[allow(clippy::print_stderr)]
+            {
+                eprintln!("{}: {}", p.task, p.note);
             }
         }
     }
@@ -301,13 +333,35 @@ fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap
 }
 
 /// Run the discovery workflow and write `discovery.json`, `model.discovered.toml`,
-/// `report.md` and figures into `out`.
+/// `report.md` and figures into `out` (a line on standard error per step when
+/// [`DiscoverOptions::progress`] is set).
 pub fn run_discover(
     data_paths: &[PathBuf],
     model_path: &Path,
     val_paths: &[PathBuf],
     opts: &DiscoverOptions,
     out: &Path,
+) -> Result<DiscoverSummary> {
+    let progress: &dyn ProgressSink = if opts.progress {
+        &StageLines
+    } else {
+        &NoProgress
+    };
+    run_discover_with_progress(data_paths, model_path, val_paths, opts, out, progress)
+}
+
+/// [`run_discover`] reporting its progress to `progress` as one task,
+/// [`DISCOVER_TASK`], with a known total: the workflow's steps
+/// (`discovery::workflow::Observer::steps`), so that a display can show an ETA. The task
+/// is finished (`ProgressSink::finish`) when the workflow ends, whether it succeeded or
+/// not; [`DiscoverOptions::progress`] is not used.
+pub fn run_discover_with_progress(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &DiscoverOptions,
+    out: &Path,
+    progress: &dyn ProgressSink,
 ) -> Result<DiscoverSummary> {
     let original = read_model(model_path)?;
     // Free-run simulations treat the inputs between samples as the model file says (the
@@ -329,7 +383,10 @@ pub fn run_discover(
         options: &opts.estimate,
         first_noise: std::sync::Mutex::new(None),
     };
-    let observer = Stages { on: opts.progress };
+    let observer = Reported {
+        sink: progress,
+        stage: std::sync::Mutex::new(String::new()),
+    };
     let outcome = workflow::run(
         &mme,
         &base_model,
@@ -338,7 +395,9 @@ pub fn run_discover(
         val.as_ref(),
         &config,
         &observer,
-    )?;
+    );
+    progress.finish(DISCOVER_TASK);
+    let outcome = outcome?;
 
     let (mut before, y_before) = free_run_gap(&base_model, &data, opts.workflow.x0_window)?;
     before.d_rms = workflow::d_rms(&outcome.first_estimate);
@@ -426,6 +485,7 @@ pub fn run_discover(
         gap: estimation_gap,
         validation_gap,
         model: "model.discovered.toml".into(),
+        mme_termination: outcome.first_estimate.report.termination,
         rounds: outcome.rounds,
     };
     let estimation_run = report::GapRun {

@@ -3,6 +3,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 use mme_core::{MmeConfig, MmeOutput, NoiseSpec, NonlinearModel, WeightSpec};
@@ -331,26 +332,30 @@ pub fn estimate_figures_with_target(
 ) -> Result<Vec<PathBuf>> {
     let est = &out.estimate;
     let (e, exp) = (&est.experiments[0], &data.experiments()[0]);
-    let t: Vec<f64> = exp.times();
+    // Every column is copied out of its matrix once and shared by the figures.
+    let t: Arc<[f64]> = exp.times().into();
+    let shared =
+        |m: &nalgebra::DMatrix<f64>, i: usize| -> Arc<[f64]> { m.row(i).iter().copied().collect() };
     let unit = |n: &str| {
         spec.unit_of(n)
             .map(|u| format!("{n} ({u})"))
             .unwrap_or_else(|| n.to_string())
     };
-    let mut written = Vec::new();
+    let mut figures: Vec<(String, Figure)> = Vec::new();
     let mut save = |name: String, fig: Figure| -> Result<()> {
-        let p = dir.join(name);
-        fig.write(&p)?;
-        written.push(p);
+        figures.push((name, fig));
         Ok(())
     };
+    let states: Vec<Arc<[f64]>> = (0..e.states.nrows())
+        .map(|i| shared(&e.states, i))
+        .collect();
     let y_hat = spec.linear.c() * &e.states;
     for (i, name) in est.output_names.iter().enumerate() {
         let Ok(j) = data.output_index(name) else {
             continue;
         };
-        let measured = row(exp.outputs(), j);
-        let smoothed = row(&y_hat, i);
+        let measured = shared(exp.outputs(), j);
+        let smoothed = shared(&y_hat, i);
         let label = match sysid_core::channel_metrics(&measured, &smoothed) {
             Ok(m) if m.fit_percent.is_finite() => {
                 format!(
@@ -372,6 +377,7 @@ pub fn estimate_figures_with_target(
         };
         save(format!("measured_{name}.svg"), fig)?;
     }
+    drop(y_hat);
     let fig = Figure {
         title: "estimated states".into(),
         x_label: "t (s)".into(),
@@ -379,13 +385,15 @@ pub fn estimate_figures_with_target(
         series: est
             .state_names
             .iter()
-            .enumerate()
-            .map(|(i, n)| Series::line(unit(n), t.clone(), row(&e.states, i)))
+            .zip(&states)
+            .map(|(n, x)| Series::line(unit(n), t.clone(), x.clone()))
             .collect(),
         bands: vec![],
     };
     save("states.svg".into(), fig)?;
     let d = e.corrections_at_samples();
+    let corrections: Vec<Arc<[f64]>> = (0..d.nrows()).map(|i| shared(&d, i)).collect();
+    drop(d);
     let fig = Figure {
         title: "model correction d̂(t)".into(),
         x_label: "t (s)".into(),
@@ -393,25 +401,29 @@ pub fn estimate_figures_with_target(
         series: est
             .correction_names
             .iter()
-            .enumerate()
-            .map(|(i, n)| Series::line(unit(&format!("d_{n}")), t.clone(), row(&d, i)))
+            .zip(&corrections)
+            .map(|(n, dv)| Series::line(unit(&format!("d_{n}")), t.clone(), dv.clone()))
             .collect(),
         bands: vec![],
     };
     save("d_vs_time.svg".into(), fig)?;
-    for (ci, cname) in est.correction_names.iter().enumerate() {
-        let dv = row(&d, ci);
-        let against: Vec<(String, Vec<f64>)> = est
+    let inputs: Vec<(String, Arc<[f64]>)> = spec
+        .linear
+        .input_names()
+        .iter()
+        .filter_map(|n| {
+            data.input_index(n)
+                .ok()
+                .map(|j| (n.clone(), shared(exp.inputs(), j)))
+        })
+        .collect();
+    for (cname, dv) in est.correction_names.iter().zip(&corrections) {
+        let against = est
             .state_names
             .iter()
-            .enumerate()
-            .map(|(i, n)| (n.clone(), row(&e.states, i)))
-            .chain(spec.linear.input_names().iter().filter_map(|n| {
-                data.input_index(n)
-                    .ok()
-                    .map(|j| (n.clone(), row(exp.inputs(), j)))
-            }))
-            .collect();
+            .cloned()
+            .zip(states.iter().cloned())
+            .chain(inputs.iter().cloned());
         for (vname, v) in against {
             let fig = Figure {
                 title: format!("d_{cname} against {vname}"),
@@ -436,14 +448,14 @@ pub fn estimate_figures_with_target(
                     out.w_curve
                         .iter()
                         .map(|p| p.residual_variance[i] / out.noise.variance[i])
-                        .collect(),
+                        .collect::<Vec<f64>>(),
                 )
             })
             .collect();
         series.push(Series::points(
             "constraint ratio ρ (sweeps of the search)",
             x.clone(),
-            out.w_curve.iter().map(|p| p.ratio).collect(),
+            out.w_curve.iter().map(|p| p.ratio).collect::<Vec<f64>>(),
         ));
         let (xa, xb) = x
             .iter()
@@ -476,7 +488,23 @@ pub fn estimate_figures_with_target(
         };
         save("w_curve.svg".into(), fig)?;
     }
-    Ok(written)
+    write_figures(dir, figures)
+}
+
+/// Render and write figures (each atomically) on the available cores; returns their
+/// paths in the order given. The files do not depend on the order they are drawn in; the
+/// first error in the given order is returned.
+pub fn write_figures(dir: &Path, figures: Vec<(String, Figure)>) -> Result<Vec<PathBuf>> {
+    use rayon::prelude::*;
+    let written: Vec<Result<PathBuf>> = figures
+        .into_par_iter()
+        .map(|(name, fig)| {
+            let p = dir.join(name);
+            fig.write(&p)?;
+            Ok(p)
+        })
+        .collect();
+    written.into_iter().collect()
 }
 
 /// Robust MME (Huber, see [`mme_core::robust`]) with the model file's assumed model.
@@ -658,11 +686,19 @@ pub fn write_estimate(o: &EstimateOutcome, out: &Path) -> Result<EstimateSummary
     ensure_dir(out)?;
     let est = &o.output.estimate;
     let mut summary = o.summary.clone();
-    for i in 0..est.experiments.len() {
-        write_estimate_csv(&out.join(estimate_csv_name(i)), est, i)?;
-    }
+    // The CSV files and the figures are independent: written side by side.
+    let (csvs, drawn) = rayon::join(
+        || -> Result<()> {
+            for i in 0..est.experiments.len() {
+                write_estimate_csv(&out.join(estimate_csv_name(i)), est, i)?;
+            }
+            Ok(())
+        },
+        || estimate_figures_with_target(&o.output, &o.data, &o.spec, out, o.target_ratio),
+    );
+    csvs?;
     let mut figures = Vec::new();
-    for p in estimate_figures_with_target(&o.output, &o.data, &o.spec, out, o.target_ratio)? {
+    for p in drawn? {
         figures.push(
             p.file_name()
                 .map(|f| f.to_string_lossy().into_owned())

@@ -238,6 +238,12 @@ pub struct FitSummary {
     pub test_source: String,
     /// MME's `W` diagonal on the training data.
     pub w_by_correction: BTreeMap<String, f64>,
+    /// How MME's solve on the training data ended (`exact` for a given `W`, otherwise
+    /// the `W` search's ending: `converged`, `not_bracketed`, …). Anything but `exact`
+    /// or `converged` makes `mmenn fit` exit with status 3.
+    pub mme_termination: Option<sysid_core::Termination>,
+    /// The automatic `W` search on the training data, when it ran.
+    pub w_search: Option<mme_core::WSearch>,
     /// The regression update of the assumed model, when asked for (coefficients ± σ).
     pub model_update: Option<Vec<mme_core::CorrectionRegression>>,
     /// Free-run on the training record(s), first experiment.
@@ -534,6 +540,8 @@ pub fn compute_fit(
         training_pairs: x_train.ncols(),
         test_source,
         w_by_correction,
+        mme_termination: est.report.termination,
+        w_search: result.w_search.clone(),
         model_update: update_report,
         train,
         validation,
@@ -666,7 +674,7 @@ fn compare_figure(
                     .iter()
                     .zip(row(y, i))
                     .map(|(m, s)| m - s)
-                    .collect(),
+                    .collect::<Vec<f64>>(),
             )
             .coloured(2 * i + 1),
         );
@@ -690,16 +698,27 @@ fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {
             Series::points(
                 "training",
                 h.clone(),
-                rows.iter().map(|r| r.train_mse.log10()).collect(),
+                rows.iter()
+                    .map(|r| r.train_mse.log10())
+                    .collect::<Vec<f64>>(),
             ),
-            Series::points("test", h, rows.iter().map(|r| r.test_mse.log10()).collect()),
+            Series::points(
+                "test",
+                h,
+                rows.iter()
+                    .map(|r| r.test_mse.log10())
+                    .collect::<Vec<f64>>(),
+            ),
             Series::highlight(
                 marked
                     .first()
                     .map(|r| format!("chosen: {} hidden, init {} (test)", r.hidden, r.init))
                     .unwrap_or_default(),
-                marked.iter().map(|r| r.hidden as f64).collect(),
-                marked.iter().map(|r| r.test_mse.log10()).collect(),
+                marked.iter().map(|r| r.hidden as f64).collect::<Vec<f64>>(),
+                marked
+                    .iter()
+                    .map(|r| r.test_mse.log10())
+                    .collect::<Vec<f64>>(),
             ),
         ],
         bands: vec![],

@@ -9,6 +9,7 @@
 //! reductions are deterministic and only change what is drawn, never the data.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use plotters::prelude::*;
 
@@ -33,10 +34,10 @@ pub enum Mark {
 pub struct Series {
     /// Legend label (put fit % here for compare plots).
     pub label: String,
-    /// Abscissae.
-    pub x: Vec<f64>,
+    /// Abscissae (shared: one time axis serves every series of a figure).
+    pub x: Arc<[f64]>,
     /// Ordinates (NaN points are skipped).
-    pub y: Vec<f64>,
+    pub y: Arc<[f64]>,
     /// How it is drawn.
     pub mark: Mark,
     /// Palette entry (default: the series' position in the figure), so that one model
@@ -51,41 +52,57 @@ impl Series {
         self
     }
     /// A line series.
-    pub fn line(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn line(
+        label: impl Into<String>,
+        x: impl Into<Arc<[f64]>>,
+        y: impl Into<Arc<[f64]>>,
+    ) -> Self {
         Self {
             label: label.into(),
-            x,
-            y,
+            x: x.into(),
+            y: y.into(),
             mark: Mark::Line,
             colour: None,
         }
     }
     /// A dashed reference line through the given points.
-    pub fn dashed(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn dashed(
+        label: impl Into<String>,
+        x: impl Into<Arc<[f64]>>,
+        y: impl Into<Arc<[f64]>>,
+    ) -> Self {
         Self {
             label: label.into(),
-            x,
-            y,
+            x: x.into(),
+            y: y.into(),
             mark: Mark::Dashed,
             colour: None,
         }
     }
     /// Rings around chosen points.
-    pub fn highlight(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn highlight(
+        label: impl Into<String>,
+        x: impl Into<Arc<[f64]>>,
+        y: impl Into<Arc<[f64]>>,
+    ) -> Self {
         Self {
             label: label.into(),
-            x,
-            y,
+            x: x.into(),
+            y: y.into(),
             mark: Mark::Highlight,
             colour: None,
         }
     }
     /// A point series.
-    pub fn points(label: impl Into<String>, x: Vec<f64>, y: Vec<f64>) -> Self {
+    pub fn points(
+        label: impl Into<String>,
+        x: impl Into<Arc<[f64]>>,
+        y: impl Into<Arc<[f64]>>,
+    ) -> Self {
         Self {
             label: label.into(),
-            x,
-            y,
+            x: x.into(),
+            y: y.into(),
             mark: Mark::Points,
             colour: None,
         }
@@ -137,6 +154,14 @@ fn draw_err<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> M
     MmennError::Plot(e.to_string())
 }
 
+/// The finite points of a series, in order.
+fn finite(s: &Series) -> impl Iterator<Item = (f64, f64)> + '_ {
+    s.x.iter()
+        .zip(s.y.iter())
+        .filter(|(a, b)| a.is_finite() && b.is_finite())
+        .map(|(a, b)| (*a, *b))
+}
+
 /// Plot size in pixels.
 const SIZE: (u32, u32) = (900, 500);
 /// Columns a line is reduced to (a little more than the plot area is wide).
@@ -153,11 +178,18 @@ const MIN_CELL_PX: f64 = 3.0;
 /// whose abscissae are so unordered that the reduction does not shorten them enough, are
 /// thinned by a fixed stride after the envelope (never at random).
 pub fn decimate_line(pts: &[(f64, f64)], x0: f64, x1: f64, columns: usize) -> Vec<(f64, f64)> {
+    decimate_points(pts.iter().copied(), x0, x1, columns)
+}
+
+/// [`decimate_line`] over points as they come (no copy of the whole line is made).
+pub fn decimate_points(
+    pts: impl Iterator<Item = (f64, f64)>,
+    x0: f64,
+    x1: f64,
+    columns: usize,
+) -> Vec<(f64, f64)> {
     let columns = columns.max(1);
     let limit = 4 * columns;
-    if pts.len() <= limit {
-        return pts.to_vec();
-    }
     let width = x1 - x0;
     let column = |x: f64| -> usize {
         if width > 0.0 && width.is_finite() {
@@ -166,34 +198,65 @@ pub fn decimate_line(pts: &[(f64, f64)], x0: f64, x1: f64, columns: usize) -> Ve
             0
         }
     };
+    /// The run of consecutive points in one column: its column, first, lowest, highest
+    /// and last point with their positions in the run.
+    struct Run {
+        column: usize,
+        first: (f64, f64),
+        lo: (usize, (f64, f64)),
+        hi: (usize, (f64, f64)),
+        last: (usize, (f64, f64)),
+    }
+    let flush = |r: &Run, out: &mut Vec<(f64, f64)>| {
+        let mut keep = [(0, r.first), r.lo, r.hi, r.last];
+        keep.sort_unstable_by_key(|k| k.0);
+        let mut prev = usize::MAX;
+        for (k, p) in keep {
+            if k != prev {
+                out.push(p);
+                prev = k;
+            }
+        }
+    };
+    // The first `limit + 1` points as given: a line that short is returned unchanged.
+    let mut head: Vec<(f64, f64)> = Vec::with_capacity(limit + 1);
     let mut out = Vec::with_capacity(limit);
-    let mut start = 0;
-    while start < pts.len() {
-        let c = column(pts[start].0);
-        let mut end = start + 1;
-        while end < pts.len() && column(pts[end].0) == c {
-            end += 1;
+    let mut run: Option<Run> = None;
+    for p in pts {
+        if head.len() <= limit {
+            head.push(p);
         }
-        let run = &pts[start..end];
-        let (mut lo, mut hi) = (0, 0);
-        for (i, p) in run.iter().enumerate() {
-            if p.1 < run[lo].1 {
-                lo = i;
+        let c = column(p.0);
+        match &mut run {
+            Some(r) if r.column == c => {
+                let k = r.last.0 + 1;
+                if p.1 < r.lo.1.1 {
+                    r.lo = (k, p);
+                }
+                if p.1 > r.hi.1.1 {
+                    r.hi = (k, p);
+                }
+                r.last = (k, p);
             }
-            if p.1 > run[hi].1 {
-                hi = i;
+            _ => {
+                if let Some(r) = &run {
+                    flush(r, &mut out);
+                }
+                run = Some(Run {
+                    column: c,
+                    first: p,
+                    lo: (0, p),
+                    hi: (0, p),
+                    last: (0, p),
+                });
             }
         }
-        let mut keep = [0, lo, hi, run.len() - 1];
-        keep.sort_unstable();
-        let mut last = usize::MAX;
-        for k in keep {
-            if k != last {
-                out.push(run[k]);
-                last = k;
-            }
-        }
-        start = end;
+    }
+    if head.len() <= limit {
+        return head;
+    }
+    if let Some(r) = &run {
+        flush(r, &mut out);
     }
     if out.len() > 2 * limit {
         // Unordered abscissae: thin by a fixed stride, keeping the first and last point.
@@ -239,14 +302,14 @@ fn bin_points(
 /// Thin point series to at most `budget` dots together: untouched when they already fit;
 /// otherwise binned on cells of `MIN_CELL_PX` pixels, doubled until the dots fit.
 pub fn thin_points(
-    series: &[Vec<(f64, f64)>],
+    series: &[&[(f64, f64)]],
     xr: (f64, f64),
     yr: (f64, f64),
     plot_px: (u32, u32),
     budget: usize,
 ) -> Vec<Vec<(f64, f64)>> {
-    if series.iter().map(Vec::len).sum::<usize>() <= budget {
-        return series.to_vec();
+    if series.iter().map(|s| s.len()).sum::<usize>() <= budget {
+        return series.iter().map(|s| s.to_vec()).collect();
     }
     let mut cell_px = MIN_CELL_PX;
     loop {
@@ -312,38 +375,30 @@ impl Figure {
                 .y_desc(&self.y_label)
                 .draw()
                 .map_err(draw_err)?;
-            let finite: Vec<Vec<(f64, f64)>> = self
+            // Only point series are held as point lists (thinning passes over them more
+            // than once); lines are reduced as their points come.
+            let finite_points: Vec<Vec<(f64, f64)>> = self
                 .series
                 .iter()
-                .map(|s| {
-                    s.x.iter()
-                        .zip(&s.y)
-                        .filter(|(a, b)| a.is_finite() && b.is_finite())
-                        .map(|(a, b)| (*a, *b))
-                        .collect()
-                })
+                .filter(|s| s.mark == Mark::Points)
+                .map(|s| finite(s).collect())
                 .collect();
             let plot_px = chart.plotting_area().dim_in_pixel();
-            let point_idx: Vec<usize> = (0..self.series.len())
-                .filter(|&i| self.series[i].mark == Mark::Points)
-                .collect();
             let thinned = thin_points(
-                &point_idx
-                    .iter()
-                    .map(|&i| finite[i].clone())
-                    .collect::<Vec<_>>(),
+                &finite_points.iter().map(Vec::as_slice).collect::<Vec<_>>(),
                 (x0, x1),
                 (y0, y1),
                 plot_px,
                 DOT_BUDGET,
             );
+            drop(finite_points);
             let mut thinned = thinned.into_iter();
-            for (i, (s, pts)) in self.series.iter().zip(finite).enumerate() {
+            for (i, s) in self.series.iter().enumerate() {
                 let color = PALETTE[s.colour.unwrap_or(i) % PALETTE.len()];
                 match s.mark {
                     Mark::Line => chart
                         .draw_series(LineSeries::new(
-                            decimate_line(&pts, x0, x1, LINE_COLUMNS),
+                            decimate_points(finite(s), x0, x1, LINE_COLUMNS),
                             color.stroke_width(2),
                         ))
                         .map_err(draw_err)?
@@ -361,7 +416,7 @@ impl Figure {
                     }
                     Mark::Dashed => chart
                         .draw_series(DashedLineSeries::new(
-                            decimate_line(&pts, x0, x1, LINE_COLUMNS),
+                            decimate_points(finite(s), x0, x1, LINE_COLUMNS),
                             8,
                             5,
                             color.stroke_width(2),
@@ -373,7 +428,7 @@ impl Figure {
                         }),
                     Mark::Highlight => chart
                         .draw_series(
-                            pts.into_iter()
+                            finite(s)
                                 .take(DOT_BUDGET)
                                 .map(|p| Circle::new(p, 7, color.stroke_width(2))),
                         )
@@ -492,11 +547,15 @@ mod tests {
             x_label: "t (s)".into(),
             y_label: "theta (rad)".into(),
             series: vec![
-                Series::points("measured", x.clone(), x.iter().map(|t| t.sin()).collect()),
+                Series::points(
+                    "measured",
+                    x.clone(),
+                    x.iter().map(|t| t.sin()).collect::<Vec<f64>>(),
+                ),
                 Series::line(
                     "model (fit 97.3 %)",
                     x.clone(),
-                    x.iter().map(|t| t.sin() * 0.98).collect(),
+                    x.iter().map(|t| t.sin() * 0.98).collect::<Vec<f64>>(),
                 ),
             ],
             bands: vec![("99 % band".into(), 0.3)],
@@ -598,7 +657,7 @@ mod tests {
         let mut pts: Vec<(f64, f64)> = noise(n, 5).into_iter().zip(noise(n, 6)).collect();
         pts.push((3.0, 3.0)); // an isolated outlier
         let a = thin_points(
-            &[pts.clone()],
+            &[pts.as_slice()],
             (0.0, 3.0),
             (0.0, 3.0),
             (800, 400),
@@ -608,7 +667,7 @@ mod tests {
         assert!(a[0].contains(&(3.0, 3.0)));
         assert_eq!(
             a,
-            thin_points(&[pts], (0.0, 3.0), (0.0, 3.0), (800, 400), DOT_BUDGET)
+            thin_points(&[&pts], (0.0, 3.0), (0.0, 3.0), (800, 400), DOT_BUDGET)
         );
     }
 
@@ -622,7 +681,7 @@ mod tests {
             series: vec![Series::line(
                 "model",
                 x.clone(),
-                x.iter().map(|t| t.sin()).collect(),
+                x.iter().map(|t| t.sin()).collect::<Vec<f64>>(),
             )],
             bands: vec![],
         };

@@ -254,19 +254,24 @@ pub fn write_predict(o: &PredictOutcome, out: &Path) -> Result<()> {
             Series::points(
                 format!("{name} measured"),
                 t.clone(),
-                o.record.outputs().row(i).iter().copied().collect(),
+                o.record
+                    .outputs()
+                    .row(i)
+                    .iter()
+                    .copied()
+                    .collect::<Vec<f64>>(),
             ),
             Series::line(
                 format!("free-run simulation (fit {:.1} %)", free.fit_percent(name)),
                 t.clone(),
-                free.outputs.row(i).iter().copied().collect(),
+                free.outputs.row(i).iter().copied().collect::<Vec<f64>>(),
             ),
         ];
         if let Some(ks) = &o.summary.k_step {
             series.push(Series::line(
                 format!("{} (fit {:.1} %)", ks.horizon, ks.fit_percent(name)),
                 t.clone(),
-                ks.outputs.row(i).iter().copied().collect(),
+                ks.outputs.row(i).iter().copied().collect::<Vec<f64>>(),
             ));
         }
         let fig = Figure {

@@ -4,7 +4,7 @@
 //!
 //! Reporting only observes a job: it never changes what the job computes. Any workflow
 //! of this crate (fit's sizing sweep and trajectory refinement, compare's baselines,
-//! estimate's phases, and discovery later) takes a `&dyn ProgressSink`.
+//! estimate's phases, discover's workflow steps) takes a `&dyn ProgressSink`.
 //!
 //! # Reporting from a library function
 //!
@@ -16,11 +16,10 @@
 //! has no inner steps in [`stage`]. The sink is `Sync`: worker threads (rayon) may report
 //! through the same reference. A generic `P: ProgressSink` passes on as `&dyn` unchanged.
 //!
-//! For `discover` (the lead's module), the plan is: a stage per phase
-//! ("MME estimate", "localisation"), one task per round, `"discovery round {r} of
-//! {max}"`, advanced once per candidate term judged (`total` = candidates in the
-//! round, note = the candidate's name and its cost), and the free-run refinement
-//! reporting each calibration as a step.
+//! `discover` reports one task, `"discover"`, whose total is the workflow's plan of steps
+//! (the first MME run, four per round up to `--max-rounds`, three after the rounds;
+//! `discovery::workflow::Observer::steps`), shrinking when the rounds stop early, with
+//! the round and step that begins as the note.
 //!
 //! ```
 //! use mmenn::progress::{NoProgress, Progress, ProgressSink, stage};

@@ -258,3 +258,84 @@ fn band_limited_input_needs_the_first_order_hold() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// One recorded event: task, done, total, note.
+type Event = (String, usize, Option<usize>, String);
+
+/// Records progress reports and task ends, in order.
+#[derive(Default)]
+struct Recorder(std::sync::Mutex<Vec<Event>>);
+
+impl mmenn::progress::ProgressSink for Recorder {
+    fn report(&self, p: &mmenn::progress::Progress) {
+        self.0
+            .lock()
+            .unwrap()
+            .push((p.task.clone(), p.done, p.total, p.note.clone()));
+    }
+    fn finish(&self, task: &str) {
+        self.0
+            .lock()
+            .unwrap()
+            .push((format!("finished {task}"), 0, None, String::new()));
+    }
+}
+
+/// Issue 18: `discover` reports one task with a known total (the workflow's steps), so a
+/// terminal bar can show an ETA: the reports arrive in order (done never decreases and
+/// never exceeds the total), name the round and step, end with done = total, and the
+/// task is finished once, last.
+#[test]
+fn discover_reports_its_steps_against_a_known_total() {
+    let dir = scratch("progress");
+    let train = run_simulate(
+        &SimulationRequest {
+            system: "msd_cubic".into(),
+            recipe: Recipe::Train,
+            seed: 2,
+            ..Default::default()
+        },
+        &dir.join("train"),
+    )
+    .unwrap();
+    let opts = DiscoverOptions {
+        workflow: mmenn::discover::WorkflowConfig {
+            max_rounds: 3,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let rec = Recorder::default();
+    let s = mmenn::discover::run_discover_with_progress(
+        std::slice::from_ref(&train.data),
+        &train.model,
+        &[],
+        &opts,
+        &dir.join("out"),
+        &rec,
+    )
+    .unwrap();
+    let events = rec.0.into_inner().unwrap();
+    let (last, reports) = events.split_last().unwrap();
+    assert_eq!(last.0, "finished discover", "{events:?}");
+    assert!(reports.len() >= 6, "{events:?}");
+    let planned = 1
+        + opts.workflow.max_rounds * mmenn::discovery::workflow::STEPS_PER_ROUND
+        + mmenn::discovery::workflow::FINAL_STEPS;
+    assert_eq!(reports[0].1, 0);
+    assert_eq!(reports[0].2, Some(planned), "{events:?}");
+    assert_eq!(reports[0].3, "MME with the assumed model");
+    assert_eq!(reports[1].3, "round 1: noise floor of d̂");
+    let mut prev = 0;
+    for (task, done, total, _) in reports {
+        assert_eq!(task, mmenn::discover::DISCOVER_TASK);
+        let total = total.expect("a known total");
+        assert!(*done >= prev && *done <= total, "{events:?}");
+        prev = *done;
+    }
+    let end = &reports[reports.len() - 1];
+    assert_eq!(Some(end.1), end.2, "{events:?}");
+    // Every step begun is counted: the rounds run plus the first MME run.
+    assert!(end.1 > s.rounds.len() * 3, "{events:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -118,7 +118,13 @@ coefficient = 1.0
             MmennError::MmeTerms { source, terms } => {
                 assert!(terms.contains("theta/q"), "{terms}");
                 match source {
-                    MmeError::NonFiniteModel { state, time, .. } => {
+                    MmeError::NonFiniteModel {
+                        experiment,
+                        state,
+                        time,
+                        ..
+                    } => {
+                        assert_eq!(*experiment, 0);
                         assert_eq!(state, "omega");
                         assert!(time.abs() < 1e-12, "{time}");
                     }
@@ -128,7 +134,10 @@ coefficient = 1.0
             other => panic!("expected a named non-finite term, got {other:?}"),
         }
         let msg = err.to_string();
-        assert!(msg.contains("t = 0 s") && msg.contains("'omega'"), "{msg}");
+        assert!(
+            msg.contains("experiment 0") && msg.contains("t = 0 s") && msg.contains("'omega'"),
+            "{msg}"
+        );
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -434,6 +443,22 @@ fn cli_rejects_bad_arguments_and_prints_no_backtrace() {
         !dir.join("o").exists(),
         "a failed run left its output folder"
     );
+    // Asked for (--debug, or MMENN_BACKTRACE), the same error prints its whole chain in
+    // the multi-line debug form, still with status 1.
+    for (flag, env) in [
+        (true, ("MMENN_BACKTRACE", "0")),
+        (false, ("MMENN_BACKTRACE", "1")),
+    ] {
+        let mut debug_args = if flag { vec!["--debug"] } else { vec![] };
+        debug_args.extend(&args);
+        let (code, err) = mmenn(&dir, &debug_args, &[("RUST_BACKTRACE", "1"), env]);
+        assert_eq!(code, 1, "{err}");
+        assert!(
+            err.starts_with("error: ") && err.contains("missing.csv"),
+            "{err}"
+        );
+        assert!(err.trim_end().lines().count() > 1, "{err}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -459,6 +484,82 @@ fn an_unconverged_w_search_exits_non_zero() {
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("did not converge"), "{err}");
     assert!(dir.join("o").join("report.md").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 21: `fit` and `discover` on the same unreachable covariance constraint write
+/// their results and exit with status 3 (not 0, not the input-error status 1), naming the
+/// W search; on data with noise of the stated variance the same runs exit 0.
+#[test]
+fn fit_and_discover_exit_3_when_the_w_search_does_not_converge() {
+    let dir = scratch("wsearch-fit");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(
+        dir.join("m.toml"),
+        PENDULUM.replace("noise_variance = [0.01]", "noise_variance = [100.0]"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("ok.toml"), PENDULUM).unwrap();
+    // The same oscillation with noise of σ = 0.1 (variance 0.01, as PENDULUM states):
+    // a sum of twelve uniforms from a fixed xorshift sequence.
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let noisy: String = oscillation_csv()
+        .lines()
+        .enumerate()
+        .map(|(k, line)| {
+            if k == 0 {
+                return format!("{line}\n");
+            }
+            let (head, y) = line.rsplit_once(',').unwrap();
+            let e: f64 = (0..12).map(|_| uniform()).sum::<f64>() - 6.0;
+            format!("{head},{}\n", y.parse::<f64>().unwrap() + 0.1 * e)
+        })
+        .collect();
+    std::fs::write(dir.join("noisy.csv"), noisy).unwrap();
+    let fit = [
+        "--quiet", "fit", "--data", "d.csv", "--model", "m.toml", "--hidden", "2", "--inits", "1",
+    ];
+    let discover = [
+        "--quiet",
+        "discover",
+        "--data",
+        "d.csv",
+        "--model",
+        "m.toml",
+        "--max-rounds",
+        "1",
+        "--stand-in-draws",
+        "0",
+    ];
+    for (args, out) in [(&fit[..], "fit"), (&discover[..], "discover")] {
+        let mut a = args.to_vec();
+        a.extend(["--out", out]);
+        let (code, err) = mmenn(&dir, &a, &[]);
+        assert_eq!(code, 3, "{out}: {err}");
+        assert!(
+            err.contains("W search") && err.contains("did not converge"),
+            "{out}: {err}"
+        );
+        assert!(dir.join(out).join("report.md").exists(), "{out}");
+        // Noise of the variance the model states makes the constraint reachable.
+        let ok: Vec<&str> = a
+            .iter()
+            .map(|s| match *s {
+                "m.toml" => "ok.toml",
+                "d.csv" => "noisy.csv",
+                other => other,
+            })
+            .chain(["--force"])
+            .collect();
+        let (code, err) = mmenn(&dir, &ok, &[]);
+        assert_eq!(code, 0, "{out} on noise of the stated variance: {err}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -188,3 +188,115 @@ fn empty_measured_cells_are_missing_samples() {
     assert!(e.output(0)[0].is_nan() && e.output(2)[0].is_nan());
     assert!((e.output(1)[0] - 2.0).abs() < 1e-15);
 }
+
+/// Tables compare equal with NaN cells equal to each other (file lines compared only when
+/// `lines` is set).
+fn same_table(a: &Table, b: &Table, lines: bool) -> bool {
+    a.header == b.header
+        && (!lines || a.lines == b.lines)
+        && a.columns.len() == b.columns.len()
+        && a.columns.iter().zip(&b.columns).all(|(x, y)| {
+            x.len() == y.len()
+                && x.iter()
+                    .zip(y)
+                    .all(|(p, q)| p.to_bits() == q.to_bits() || (p.is_nan() && q.is_nan()))
+        })
+}
+
+/// The fast path of `parse_table` gives what the general (`csv` crate) reader gives —
+/// the same values and file lines, or the same typed error — on plain files, blank lines,
+/// CRLF line ends, padded cells, empty cells, and on the files it hands over (quotes, a
+/// bare carriage return, ragged rows, text, infinities). A file large enough for the
+/// two-thread split (over 1 MiB, with blank lines on both sides of the cut) as well.
+/// Both count file lines themselves (the `csv` crate's own count is one low after CRLF
+/// line ends and after an empty line that follows a record).
+#[test]
+fn fast_parse_agrees_with_the_general_reader() {
+    let cases = [
+        "t,u,y\n0,1,2\n0.1,1.5,\n0.2,-1e-3,nan\n",
+        "t,u,y\r\n0,1,2\r\n0.1,1.5,3\r\n",
+        "t,u,y\n0,1,2\n\n   \n0.1, 1.5 ,\t3\n",
+        "t,u,y\n\n0,0,0\n\n\n1,1,1\r\n\r\n2,2,2\n",
+        "t,u,y\n0,1,2\n0.1,1.5,3",
+        " t , u ,y\n0,1,2\n",
+        "t,\"u\",y\n0,1,2\n",
+        "t,u,y\n0,1,2\r0.1,1,2\n",
+        "t,u,y\n0,1,\r3\n",
+        "t,u,y\n0,1\n",
+        "t,u,y\n0,1,2,3\n",
+        "t,u,y\n0,abc,2\n",
+        "t,u,y\n0,inf,2\n",
+        "t,u,y\n0,,2\n , , \n",
+        "t,u,t\n0,1,2\n",
+        "t,,y\n0,1,2\n",
+        "t,\x0Bu,y\n0,\x0B1,2\n",
+        "t\n0\n\n1\n",
+        "t\n0\n \n1\n",
+        "",
+        "\nt,u\n0,1\n",
+        "t,u,y\n",
+    ];
+    for text in cases {
+        let fast = parse_table(Path::new("d.csv"), text.as_bytes());
+        let general = parse_table_general(Path::new("d.csv"), text.as_bytes());
+        match (&fast, &general) {
+            (Ok(a), Ok(b)) => {
+                assert!(same_table(a, b, true), "{text:?}: {a:?} vs {b:?}");
+                if text.starts_with("t,u,y\r\n") {
+                    assert_eq!(a.lines, vec![2, 3], "{text:?}");
+                }
+            }
+            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string(), "{text:?}"),
+            _ => panic!("{text:?}: fast {fast:?}, general {general:?}"),
+        }
+    }
+    let mut big = String::from("t,u,y\n");
+    for k in 0..60_000 {
+        if k % 7_919 == 0 {
+            big.push_str("\r\n");
+        }
+        big.push_str(&format!(
+            "{},{},{}\r\n",
+            k as f64 * 0.01,
+            (k as f64).sin(),
+            k % 3
+        ));
+        if k % 11 == 0 {
+            big.push_str(&format!("{},1,\n", k as f64 * 0.01 + 0.005));
+        }
+    }
+    assert!(big.len() > 1 << 20);
+    let a = parse_table(Path::new("d.csv"), big.as_bytes()).unwrap();
+    let b = parse_table_general(Path::new("d.csv"), big.as_bytes()).unwrap();
+    if !same_table(&a, &b, true) {
+        let n = a.lines.len().min(b.lines.len());
+        let k = (0..n)
+            .find(|&k| {
+                a.lines[k] != b.lines[k] || a.columns[1][k].to_bits() != b.columns[1][k].to_bits()
+            })
+            .unwrap_or(n);
+        panic!(
+            "rows {} vs {}; first difference at row {k}: fast line {:?} {:?}, general line {:?} {:?}",
+            a.lines.len(),
+            b.lines.len(),
+            a.lines.get(k),
+            a.columns.iter().map(|c| c.get(k)).collect::<Vec<_>>(),
+            b.lines.get(k),
+            b.columns.iter().map(|c| c.get(k)).collect::<Vec<_>>()
+        );
+    }
+    // The file lines of the data rows, by counting.
+    let expected: Vec<usize> = big
+        .split('\n')
+        .enumerate()
+        .skip(1)
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, _)| i + 1)
+        .collect();
+    assert_eq!(a.lines, expected);
+    // A bad cell in the second half names its line through the general reader.
+    big.push_str("9999,oops,1\n");
+    let lines = big.lines().count();
+    let (line, column, _) = problem(parse_table(Path::new("d.csv"), big.as_bytes()));
+    assert_eq!((line, column.as_deref()), (lines, Some("u")));
+}

@@ -41,8 +41,8 @@ pub(super) fn figures(
         for p in &round.localisation.profiles {
             let mut series = vec![Series::points(
                 "MME d̂ (assumed model)",
-                p.points.iter().map(|q| q[0]).collect(),
-                p.points.iter().map(|q| q[1]).collect(),
+                p.points.iter().map(|q| q[0]).collect::<Vec<f64>>(),
+                p.points.iter().map(|q| q[1]).collect::<Vec<f64>>(),
             )];
             series.extend(term_curve(s, &p.equation, &p.variable, &p.points));
             Figure {
@@ -114,7 +114,7 @@ fn term_curve(
     let x: Vec<f64> = (0..CURVE_POINTS)
         .map(|k| lo + (hi - lo) * k as f64 / (CURVE_POINTS - 1) as f64)
         .collect();
-    let y = x
+    let y: Vec<f64> = x
         .iter()
         .map(|&v| parts.iter().map(|(c, g)| c * g.eval(&[v])).sum())
         .collect();
@@ -163,12 +163,12 @@ fn gap_figures(
                 Series::line(
                     format!("assumed model (fit {fit_b:.1} %)"),
                     t.clone(),
-                    run.before.row(i).iter().copied().collect(),
+                    run.before.row(i).iter().copied().collect::<Vec<f64>>(),
                 ),
                 Series::line(
                     format!("discovered model (fit {fit_a:.1} %)"),
                     t.clone(),
-                    run.after.row(i).iter().copied().collect(),
+                    run.after.row(i).iter().copied().collect::<Vec<f64>>(),
                 ),
             ],
             vec![

@@ -172,8 +172,8 @@ fn pca_figure(title: &str, set: &FeatureSet) -> Result<Figure> {
                 .collect();
             Series::points(
                 format!("c2 = {c}"),
-                rows.iter().map(|&i| s[(i, 0)]).collect(),
-                rows.iter().map(|&i| s[(i, 1)]).collect(),
+                rows.iter().map(|&i| s[(i, 0)]).collect::<Vec<f64>>(),
+                rows.iter().map(|&i| s[(i, 1)]).collect::<Vec<f64>>(),
             )
         })
         .collect();

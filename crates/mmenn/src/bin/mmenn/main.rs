@@ -29,6 +29,26 @@ impl std::fmt::Display for NotConverged {
 
 impl std::error::Error for NotConverged {}
 
+/// Exit status 3 ([`NotConverged`]) when an MME solve (its `W` search) did not end
+/// `exact` or `converged`: the results are written, but not to be trusted.
+fn check_mme_converged(
+    command: &str,
+    termination: Option<mmenn::sysid_core::Termination>,
+    out: &Path,
+) -> Result<()> {
+    match termination {
+        Some(mmenn::sysid_core::Termination::Exact | mmenn::sysid_core::Termination::Converged)
+        | None => Ok(()),
+        Some(ended) => Err(NotConverged(format!(
+            "{command}: MME's W search (covariance constraint) did not converge ({}); the \
+             results in {} are written for inspection only (see report.md)",
+            mmenn::words::termination(Some(ended)),
+            out.display()
+        ))
+        .into()),
+    }
+}
+
 /// Stage `out` for `command` (see [`StagedDir`]).
 fn stage(out: &Path, command: &str, force: bool, inputs: &[&PathBuf]) -> Result<StagedDir> {
     Ok(StagedDir::begin(
@@ -400,7 +420,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         }
     }
     println!("wrote {} files into {}", s.files.len(), args.out.display());
-    Ok(())
+    check_mme_converged("fit", s.mme_termination, &args.out)
 }
 
 fn predict(args: PredictArgs, force: bool) -> Result<()> {
@@ -490,7 +510,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
+fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
     if a.list_effects {
         list_effects();
         return Ok(());
@@ -506,14 +526,20 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
             stand_in_draws: a.stand_in_draws,
             ..Default::default()
         },
-        progress: !quiet,
         ..Default::default()
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([model]).collect();
     let staged = stage(out, "discover", force, &inputs)?;
     let data = prepared(&a.data, &a.prep, staged.path())?;
     let val = prepared(&a.val, &a.prep, &staged.path().join("val"))?;
-    let s = mmenn::discover::run_discover(&data, model, &val, &opts, staged.path())?;
+    let s = mmenn::discover::run_discover_with_progress(
+        &data,
+        model,
+        &val,
+        &opts,
+        staged.path(),
+        progress,
+    )?;
     staged.commit()?;
     println!("verdict: {}", mmenn::words::verdict(s.verdict));
     for w in &s.warnings {
@@ -581,7 +607,7 @@ fn discover(a: DiscoverArgs, force: bool, quiet: bool) -> Result<()> {
         show("validation", v);
     }
     println!("wrote {}", out.join(&s.model).display());
-    Ok(())
+    check_mme_converged("discover", s.mme_termination, out)
 }
 
 #[allow(clippy::print_stdout)]
@@ -671,7 +697,7 @@ fn main() -> ExitCode {
         Command::Show(a) => show(a),
         Command::Greyest(a) => greyest(a, force, &progress),
         Command::Compare(a) => compare(a, force, &progress),
-        Command::Discover(a) => discover(a, force, cli.quiet),
+        Command::Discover(a) => discover(a, force, &progress),
         Command::Monitor(c) => monitor(c, force),
     };
     match result {

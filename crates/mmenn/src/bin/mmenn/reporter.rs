@@ -83,6 +83,10 @@ impl mmenn::progress::ProgressSink for Reporter {
         }
         match &mut *shown {
             Shown::Bar(_, b) => {
+                // A task's plan may change as it runs (discover's rounds stop early).
+                if let Some(n) = p.total {
+                    b.set_length(n as u64);
+                }
                 b.set_position(p.done as u64);
                 b.set_message(p.note.clone());
             }
