@@ -48,7 +48,7 @@ pub(crate) mod sensitivity;
 #[cfg(test)]
 mod tests;
 
-pub use initial::{data_start, fit_initial_states};
+pub use initial::fit_initial_states;
 
 /// Add named effects to `model` as `[[terms]]`: each effect's integrable form
 /// (`model_effect`, `model_term`) with its coefficient, on its state's equation.
