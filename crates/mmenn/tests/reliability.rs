@@ -329,7 +329,7 @@ fn max_samples_message_names_the_value() {
 fn trajectory_refinement_of_a_huge_record_is_refused_before_allocating() {
     use mmenn::nn::{
         Architecture, HybridParts, Mlp, NnError, ShootingRecord, TrajectoryConfig,
-        refine_on_trajectories,
+        train_on_trajectories,
     };
     let lin = parse_model(Path::new("m.toml"), PENDULUM).unwrap().linear;
     let n = 1_000_000;
@@ -352,7 +352,7 @@ fn trajectory_refinement_of_a_huge_record_is_refused_before_allocating() {
         states: &states,
     }];
     let clock = Instant::now();
-    let err = refine_on_trajectories(
+    let err = train_on_trajectories(
         &mut net,
         &parts,
         &records,
