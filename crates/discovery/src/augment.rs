@@ -43,7 +43,12 @@ use sysid_core::{
 use crate::error::{DiscoveryError, Result};
 use crate::propose::FoundEffect;
 
+mod initial;
 pub(crate) mod sensitivity;
+#[cfg(test)]
+mod tests;
+
+pub use initial::fit_initial_states;
 
 /// Add named effects to `model` as `[[terms]]`: each effect's integrable form
 /// (`model_effect`, `model_term`) with its coefficient, on its state's equation.
@@ -740,123 +745,4 @@ fn jacobian_fd(
     }
     let rows = cols.first().map_or(0, |c| c.len());
     Ok(DMatrix::from_fn(rows, p, |i, j| cols[j][i]))
-}
-
-/// The state at the first sample of every record that reproduces its measured outputs
-/// with the least norm (`x = C⁺y(t0)`, unmeasured directions 0; a missing output counts
-/// as unmeasured): a start for fitting initial states that owes nothing to any model.
-pub fn data_start(model: &TermModel, data: &Dataset) -> Vec<Vec<f64>> {
-    let c = model.linear().c();
-    let n = c.ncols();
-    data.experiments()
-        .iter()
-        .map(|exp| {
-            let rows: Vec<usize> = (0..c.nrows())
-                .filter(|&i| exp.outputs()[(i, 0)].is_finite())
-                .collect();
-            if rows.is_empty() {
-                return vec![0.0; n];
-            }
-            let cr = DMatrix::from_fn(rows.len(), n, |r, j| c[(rows[r], j)]);
-            let y = DVector::from_iterator(rows.len(), rows.iter().map(|&i| exp.outputs()[(i, 0)]));
-            match cr.pseudo_inverse(1e-12) {
-                Ok(pinv) => (pinv * y).iter().copied().collect(),
-                Err(_) => vec![0.0; n],
-            }
-        })
-        .collect()
-}
-
-/// Initial states of `model` fitted by free-run error on every record of `data`
-/// (coefficients fixed; `config`'s `terms` and `initial_state` are overridden), from
-/// each start in `starts` and from [`data_start`]; the lowest cost wins. One start can
-/// strand the fit: an initial state fitted with a wrong model puts a dry-friction model
-/// into a stick–slip valley whose free run forgets where it started, and the gradient
-/// with it. Errors: those of [`calibrate`] when every start fails.
-pub fn fit_initial_states(
-    model: &TermModel,
-    data: &Dataset,
-    starts: &[&[Vec<f64>]],
-    config: &CalibrationConfig,
-) -> Result<Calibration> {
-    let config = CalibrationConfig {
-        terms: Some(vec![]),
-        initial_state: InitialState::Estimate,
-        ..config.clone()
-    };
-    let from_data = data_start(model, data);
-    // A non-finite cost never beats a finite one.
-    let mut best: Option<Calibration> = None;
-    let mut first_error = None;
-    for start in starts
-        .iter()
-        .copied()
-        .chain(std::iter::once(from_data.as_slice()))
-    {
-        match calibrate(model, data, start, &config) {
-            Ok(fit) => {
-                let key = |c: &Calibration| {
-                    if c.cost_after.is_finite() {
-                        c.cost_after
-                    } else {
-                        f64::INFINITY
-                    }
-                };
-                if best.as_ref().is_none_or(|b| key(&fit) < key(b)) {
-                    best = Some(fit);
-                }
-            }
-            Err(e) => {
-                first_error.get_or_insert(e);
-            }
-        }
-    }
-    match best {
-        Some(b) => Ok(b),
-        // Every start failed, so an error was kept (the data start is always tried).
-        None => Err(first_error.unwrap_or(DiscoveryError::InvalidConfig {
-            field: "starts",
-            value: 0.0,
-            reason: "no initial-state start could be calibrated",
-        })),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use sysid_core::{Channel, Experiment};
-
-    /// ẋ = −a·x + u with the term −b·x³ hidden: data simulated with b = 0.5 (no noise);
-    /// calibration from b = 0.2 recovers 0.5 (noise-free, so to solver precision).
-    #[test]
-    fn recovers_a_cubic_coefficient_without_noise() {
-        let linear = crate::test_support::scalar_model(-0.3, 1.0);
-        let truth = TermModel::from_specs(linear.clone(), [("x", "cubic_stiffness", "x^3", -0.5)])
-            .unwrap_or_else(|e| panic!("{e}"));
-        let len = 301;
-        let dt = 0.05;
-        let u = DMatrix::from_fn(1, len, |_, k| 1.5 * (0.7 * k as f64 * dt).sin());
-        let integrator = Integrator::Rk4 { substeps: 4 };
-        let blank = Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, len))
-            .unwrap_or_else(|e| panic!("{e}"));
-        let y = simulate_outputs(&truth, linear.c(), &[1.0], &blank, &integrator)
-            .unwrap_or_else(|e| panic!("{e}"));
-        let data = Dataset::new(
-            vec![Channel::new("u")],
-            vec![Channel::new("x")],
-            vec![Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"))],
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-        let start = TermModel::from_specs(linear, [("x", "cubic_stiffness", "x^3", -0.2)])
-            .unwrap_or_else(|e| panic!("{e}"));
-        let cal = calibrate(&start, &data, &[vec![1.0]], &CalibrationConfig::default())
-            .unwrap_or_else(|e| panic!("{e}"));
-        assert!(
-            (cal.coefficients_after[0] + 0.5).abs() < 1e-6,
-            "{:?}",
-            cal.coefficients_after
-        );
-        assert!(cal.cost_after < 1e-10 * cal.cost_before);
-    }
 }

@@ -588,6 +588,13 @@ pub fn prune(
 
 /// What [`prune`] leaves.
 #[derive(Debug, Clone)]
+#[cfg_attr(
+    not(test),
+    expect(
+        dead_code,
+        reason = "the workflow reads `dropped`; the unit tests read all"
+    )
+)]
 pub struct Pruned {
     /// The model without the dropped terms.
     pub model: TermModel,

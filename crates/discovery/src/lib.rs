@@ -1,26 +1,26 @@
 #![doc = include_str!("../README.md")]
 
-pub mod augment;
-pub mod candidates;
-pub mod catalogue;
+mod augment;
+mod candidates;
+mod catalogue;
 pub mod error;
-pub mod floor;
-pub mod gauge;
+mod floor;
+mod gauge;
 mod json;
-pub mod judge;
-pub mod localise;
-pub mod propose;
-pub mod refine;
-pub mod roles;
-pub mod samples;
+mod judge;
+mod localise;
+mod propose;
+mod refine;
+mod roles;
+mod samples;
 mod screen;
-pub mod select;
-pub mod standin;
-pub mod stats;
+mod select;
+mod standin;
+mod stats;
 mod term_set;
 #[cfg(test)]
 mod test_support;
-pub mod transfer;
+mod transfer;
 pub mod workflow;
 
 pub use augment::{

@@ -20,8 +20,6 @@ use nn::{Mlp, SweepConfig, SweepRow};
 use serde::Serialize;
 use sysid_core::{Dataset, Experiment, MmeEstimate};
 
-use crate::atomic::{ensure_dir, write_atomic};
-use crate::data_file::write_csv;
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_spec, mme_config};
 /// `model.json` lives in [`crate::hybrid`]; these names stay reachable from here.
@@ -30,19 +28,20 @@ pub use crate::hybrid::{HYBRID_FORMAT, HybridFile, HybridModel, hybrid_model};
 pub use crate::model::FreeRunReport;
 use crate::model::{InitialRule, Judgement, LoadedModel, ModelDynamics, ModelKind, judge_free_run};
 use crate::model_file::{ModelSpec, format_model};
-use crate::plot::{Figure, Series};
 /// `predict` lives in [`crate::predict`]; these names stay reachable from here.
 pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
 pub use guard::{CandidateScore, GuardCandidate, GuardReport};
+pub use output::write_fit;
 use trajectory::refine_network;
 pub use trajectory::{RefineChoice, RefineSummary};
 
 mod choices;
 mod d_figures;
 mod guard;
+mod output;
 mod trajectory;
 
 /// Options of [`run_fit`].
@@ -565,66 +564,6 @@ pub fn compute_fit(
     })
 }
 
-/// Write what [`compute_fit`] computed into `out`: `model.json`, `sweep.csv`,
-/// `summary.json`, `report.md` and the figures (atomically, each file).
-pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
-    ensure_dir(out)?;
-    let spec = &o.spec;
-    compare_figure(spec, &o.train_record, &o.train, "training")
-        .write(&out.join("compare_train.svg"))?;
-    if let (Some(j), Some(exp)) = (&o.validation, &o.validation_record) {
-        compare_figure(spec, exp, j, "validation").write(&out.join("compare_validation.svg"))?;
-    }
-    // d̂ and the network's fit of it on the training record.
-    for (i, name) in spec.linear.correction_names().iter().enumerate() {
-        let idx: Vec<f64> = (0..o.d_train.ncols()).map(|k| k as f64).collect();
-        let fig = Figure {
-            title: format!("d_{name}: MME estimate and network"),
-            x_label: "training pair".into(),
-            y_label: match spec.unit_of(&format!("d_{name}")) {
-                Some(u) => format!("d_{name} ({u})"),
-                None => format!("d_{name}"),
-            },
-            series: vec![
-                Series::points("MME d̂", idx.clone(), row(&o.d_train, i)),
-                Series::line(
-                    match sysid_core::channel_metrics(&row(&o.d_train, i), &row(&o.d_network, i)) {
-                        Ok(m) if m.fit_percent.is_finite() => {
-                            format!("NN(x̂, u) (fit {:.1} % to d̂)", m.fit_percent)
-                        }
-                        _ => "NN(x̂, u)".to_string(),
-                    },
-                    idx,
-                    row(&o.d_network, i),
-                ),
-            ],
-            bands: vec![],
-        };
-        fig.write(&out.join(format!("nn_d_{name}.svg")))?;
-        d_figures::d_against_variables(
-            name,
-            &row(&o.d_train, i),
-            &row(&o.d_network, i),
-            &o.x_train,
-            &network_variables(spec),
-            spec,
-            out,
-        )?;
-    }
-    write_sweep(&out.join("sweep.csv"), &o.sweep)?;
-    sweep_figure(&o.sweep, o.chosen).write(&out.join("sweep.svg"))?;
-    write_atomic(
-        &out.join("model.json"),
-        serde_json::to_string_pretty(&o.model)?.as_bytes(),
-    )?;
-    write_atomic(
-        &out.join("summary.json"),
-        serde_json::to_string_pretty(&o.summary)?.as_bytes(),
-    )?;
-    crate::html::write_report(out, &fit_report(&o.summary))?;
-    Ok(())
-}
-
 /// The network's inputs by name: every state, then every input.
 fn network_variables(spec: &ModelSpec) -> Vec<String> {
     spec.linear
@@ -633,188 +572,4 @@ fn network_variables(spec: &ModelSpec) -> Vec<String> {
         .chain(spec.linear.input_names())
         .cloned()
         .collect()
-}
-
-fn compare_figure(
-    spec: &ModelSpec,
-    exp: &Experiment,
-    rep: &Judgement,
-    which: &str,
-) -> crate::plot::Panels {
-    let t = exp.times();
-    let y = &rep.outputs;
-    let mut series = Vec::new();
-    let mut residuals = Vec::new();
-    let outputs = spec.linear.output_names();
-    let with_unit = |n: &str| match spec.units.get(n) {
-        Some(u) => format!("{n} ({u})"),
-        None => n.to_string(),
-    };
-    let y_label = match outputs {
-        [one] => with_unit(one),
-        _ => "output (units in the legend)".to_string(),
-    };
-    for (i, name) in outputs.iter().enumerate() {
-        series.push(Series::points(
-            format!("{} measured", with_unit(name)),
-            t.clone(),
-            row(exp.outputs(), i),
-        ));
-        let fit = rep.channels.get(name).map_or(f64::NAN, |m| m.fit_percent);
-        series.push(Series::line(
-            format!("{name} MME/NN free-run (fit {fit:.1} %)"),
-            t.clone(),
-            row(y, i),
-        ));
-        residuals.push(
-            Series::line(
-                format!("{name} measured − simulated"),
-                t.clone(),
-                row(exp.outputs(), i)
-                    .iter()
-                    .zip(row(y, i))
-                    .map(|(m, s)| m - s)
-                    .collect::<Vec<f64>>(),
-            )
-            .coloured(2 * i + 1),
-        );
-    }
-    crate::plot::Panels::time_with_residuals(
-        format!("MME/NN hybrid model, free-run simulation ({which} data)"),
-        y_label,
-        series,
-        residuals,
-    )
-}
-
-fn sweep_figure(rows: &[SweepRow], chosen: usize) -> Figure {
-    let h: Vec<f64> = rows.iter().map(|r| r.hidden as f64).collect();
-    let marked: Vec<&SweepRow> = rows.get(chosen).into_iter().collect();
-    Figure {
-        title: "network sizing sweep (thesis Figs. 4.5, 4.9)".into(),
-        x_label: "hidden units".into(),
-        y_label: "log10 MSE of d".into(),
-        series: vec![
-            Series::points(
-                "training",
-                h.clone(),
-                rows.iter()
-                    .map(|r| r.train_mse.log10())
-                    .collect::<Vec<f64>>(),
-            ),
-            Series::points(
-                "test",
-                h,
-                rows.iter()
-                    .map(|r| r.test_mse.log10())
-                    .collect::<Vec<f64>>(),
-            ),
-            Series::highlight(
-                marked
-                    .first()
-                    .map(|r| format!("chosen: {} hidden, init {} (test)", r.hidden, r.init))
-                    .unwrap_or_default(),
-                marked.iter().map(|r| r.hidden as f64).collect::<Vec<f64>>(),
-                marked
-                    .iter()
-                    .map(|r| r.test_mse.log10())
-                    .collect::<Vec<f64>>(),
-            ),
-        ],
-        bands: vec![],
-    }
-}
-
-fn write_sweep(path: &Path, rows: &[SweepRow]) -> Result<()> {
-    let header: Vec<String> = [
-        "hidden",
-        "init",
-        "seed",
-        "train_mse",
-        "val_mse",
-        "test_mse",
-        "epochs",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    let cols: Vec<Vec<f64>> = vec![
-        rows.iter().map(|r| r.hidden as f64).collect(),
-        rows.iter().map(|r| r.init as f64).collect(),
-        rows.iter().map(|r| r.seed as f64).collect(),
-        rows.iter().map(|r| r.train_mse).collect(),
-        rows.iter().map(|r| r.val_mse.unwrap_or(f64::NAN)).collect(),
-        rows.iter().map(|r| r.test_mse).collect(),
-        rows.iter().map(|r| r.epochs as f64).collect(),
-    ];
-    let refs: Vec<&[f64]> = cols.iter().map(Vec::as_slice).collect();
-    write_csv(path, &header, &refs)
-}
-
-fn metrics_table(rep: &FreeRunReport) -> String {
-    let mut s =
-        String::from("| channel | fit % | R² | RMSE | error variance |\n|---|---|---|---|---|\n");
-    for (n, m) in &rep.channels {
-        s.push_str(&format!(
-            "| {n} | {:.2} | {:.5} | {:.4e} | {:.4e} |\n",
-            m.fit_percent, m.r2, m.rmse, m.error_variance
-        ));
-    }
-    s
-}
-
-fn fit_report(s: &FitSummary) -> String {
-    let mut r = String::from("# MME/NN hybrid model\n\n");
-    let training = match s.training {
-        Training::Trainlm => "Levenberg–Marquardt with MATLAB trainlm's damping schedule",
-        Training::Accelerated => {
-            "Levenberg–Marquardt, trainlm's schedule for 10 steps, then gain-ratio damping \
-             with geodesic acceleration"
-        }
-    };
-    let selection = match s.selection {
-        NetworkSelection::CorrectionMse => "the thesis rule on the test MSE of d̂",
-        NetworkSelection::FreeRun => "smallest free-run output error on the training data",
-    };
-    r.push_str(&format!(
-        "Network: {} hidden tanh units, picked from the sizing sweep by {selection}; trained \
-         by {training}. Train MSE of d̂ {:.3e}, test MSE {:.3e} (test set: {}). {} training \
-         pairs (x̂, u) → d̂. MME W by corrected state: {}.\n\n",
-        s.hidden,
-        s.chosen.train_mse,
-        s.chosen.test_mse,
-        s.test_source,
-        s.training_pairs,
-        crate::words::named_values(&s.w_by_correction)
-    ));
-    r.push_str(
-        "*Fit %* = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖): 100 is perfect, 0 is no better than \
-         the mean. *R²* = 1 − Σ(y − ŷ)² / Σ(y − mean y)². *RMSE*: root mean square of \
-         y − ŷ, in the channel's unit. *Error variance*: variance of y − ŷ. ŷ is the \
-         free-run simulation (no measurement used after the initial state).\n\n",
-    );
-    r.push_str(&format!(
-        "## Training data — {}, {} scored\n\nInitial state: {}.\n\n",
-        s.train.horizon, s.train.scored, s.train.x0_source
-    ));
-    r.push_str(&metrics_table(&s.train));
-    if let Some(v) = &s.validation {
-        r.push_str(&format!(
-            "\n## Validation data — {}, {} scored\n\nInitial state: {}.\n\n",
-            v.horizon, v.scored, v.x0_source
-        ));
-        r.push_str(&metrics_table(v));
-    }
-    if let Some(refine) = &s.refinement {
-        r.push_str(&refine.markdown());
-    }
-    r.push_str(&s.guard.markdown());
-    r.push_str(
-        "\nFigures: `compare_*.svg` (measured output and the hybrid model's free run), \
-         `nn_d_*.svg` (MME's d̂ and the network's fit of it, over the training pairs and \
-         against each state and input), `sweep.svg` (MSE of d̂ per \
-         network size, the chosen network ringed); the sweep table is `sweep.csv`.\n",
-    );
-    r.push_str(&crate::html::figures_section(&s.files));
-    r
 }

@@ -21,6 +21,6 @@ pub use sweep::{
     sizing_sweep,
 };
 pub use trajectory::{
-    HybridParts, RefineProgress, RefineReport, ShootingRecord, TrajectoryConfig,
-    refine_on_trajectories,
+    HybridParts, ShootingRecord, TrajectoryConfig, TrajectoryProgress, TrajectoryReport,
+    train_on_trajectories,
 };

@@ -1,4 +1,4 @@
-//! Refinement of a correction network on trajectories (thesis §7.1, future work): after
+//! Training of a correction network on trajectories (thesis §7.1, future work): after
 //! training on MME's `d̂`, the weights are adjusted by Levenberg–Marquardt so that the
 //! hybrid model `ẋ = f(x, u) + E·NN(x, u)`, `y = C x`, simulated free-run over short
 //! windows (multiple shooting), reproduces the measured outputs.
@@ -25,13 +25,13 @@ use crate::mlp::Mlp;
 mod shooting;
 use shooting::{Buffers, Linearisation, Shooter, Window};
 
-/// Most bytes the dense least-squares matrices of [`refine_on_trajectories`] may take (the
+/// Most bytes the dense least-squares matrices of [`train_on_trajectories`] may take (the
 /// Jacobian `rows × θ`, its normal matrix and a damped copy `θ × θ` twice): 2 GiB. The
 /// unknowns `θ` are the weights plus one start state per window, so both grow with the
 /// record length; a problem beyond this bound is refused before anything is allocated.
 pub const MAX_TRAJECTORY_BYTES: u128 = 2 << 30;
 
-/// Settings of [`refine_on_trajectories`].
+/// Settings of [`train_on_trajectories`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct TrajectoryConfig {
@@ -150,7 +150,7 @@ pub struct ShootingRecord<'a> {
 
 /// State after one accepted step, passed to the progress callback.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct RefineProgress {
+pub struct TrajectoryProgress {
     /// Accepted steps so far.
     pub iteration: usize,
     /// Training objective (mean squared scaled residual).
@@ -164,7 +164,7 @@ pub struct RefineProgress {
 /// What refinement did. Objectives are mean squared residuals in units of each channel's
 /// standard deviation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RefineReport {
+pub struct TrajectoryReport {
     /// Why it stopped: [`Termination::MaxIterations`] ([`TrajectoryConfig::max_iterations`]
     /// steps accepted), [`Termination::NoDescent`] (no step lowered the training objective
     /// before μ reached its limit), [`Termination::Converged`] (an accepted step lowered it
@@ -194,7 +194,7 @@ pub struct RefineReport {
     pub output_scale: Vec<f64>,
 }
 
-impl RefineReport {
+impl TrajectoryReport {
     /// Training objective of the initial weights.
     pub fn initial_train_objective(&self) -> f64 {
         self.train_history[0]
@@ -328,14 +328,14 @@ fn observed(records: &[ShootingRecord<'_>], windows: &[Window]) -> usize {
 /// an observed sample, non-finite states or inputs, and
 /// [`NnError::TrajectoryDiverged`] when the *initial* network already diverges on a
 /// window. On error `net` is unchanged.
-pub fn refine_on_trajectories<F: Dynamics>(
+pub fn train_on_trajectories<F: Dynamics>(
     net: &mut Mlp,
     parts: &HybridParts<'_, F>,
     train_records: &[ShootingRecord<'_>],
     val_records: &[ShootingRecord<'_>],
     config: &TrajectoryConfig,
-    progress: Option<&mut dyn FnMut(RefineProgress)>,
-) -> Result<RefineReport> {
+    progress: Option<&mut dyn FnMut(TrajectoryProgress)>,
+) -> Result<TrajectoryReport> {
     config.validate()?;
     check_problem(net, parts, train_records)?;
     if !val_records.is_empty() {
@@ -492,7 +492,7 @@ pub fn refine_on_trajectories<F: Dynamics>(
         val_history.push(v);
         best = (v, theta.clone(), 0);
     }
-    let mut problem = Refinement {
+    let mut problem = TrajectoryProblem {
         shooter: &shooter,
         windows: &train_w,
         x_hat: &x_hat,
@@ -521,7 +521,7 @@ pub fn refine_on_trajectories<F: Dynamics>(
     };
     let solution = levenberg_marquardt(&mut problem, &theta, &settings)
         .unwrap_or_else(|never: std::convert::Infallible| match never {});
-    let Refinement {
+    let TrajectoryProblem {
         val_history, best, ..
     } = problem;
     let iterations = solution.report.steps.len();
@@ -538,7 +538,7 @@ pub fn refine_on_trajectories<F: Dynamics>(
         .iter()
         .map(|c| c / m_train as f64)
         .collect();
-    Ok(RefineReport {
+    Ok(TrajectoryReport {
         termination: solution.report.termination,
         iterations,
         best_iteration,
@@ -553,7 +553,7 @@ pub fn refine_on_trajectories<F: Dynamics>(
 
 /// The weights and training-window start states as one least-squares problem, with the
 /// held-out bookkeeping after every accepted step.
-struct Refinement<'s, 'a, 'p, F, V> {
+struct TrajectoryProblem<'s, 'a, 'p, F, V> {
     shooter: &'s Shooter<'a, F>,
     windows: &'s [Window],
     x_hat: &'s [f64],
@@ -572,10 +572,10 @@ struct Refinement<'s, 'a, 'p, F, V> {
     best: (f64, Vec<f64>, usize),
     fails: usize,
     max_fail: usize,
-    progress: Option<&'s mut (dyn FnMut(RefineProgress) + 'p)>,
+    progress: Option<&'s mut (dyn FnMut(TrajectoryProgress) + 'p)>,
 }
 
-impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> Refinement<'_, '_, '_, F, V> {
+impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> TrajectoryProblem<'_, '_, '_, F, V> {
     /// Load `theta` into the working network and start states.
     fn load(&mut self, theta: &[f64]) {
         let nw = self.work.n_weights();
@@ -588,7 +588,7 @@ impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> Refinement<'_, '_
 }
 
 impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> LeastSquaresProblem
-    for Refinement<'_, '_, '_, F, V>
+    for TrajectoryProblem<'_, '_, '_, F, V>
 {
     type Error = std::convert::Infallible;
 
@@ -640,7 +640,7 @@ impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> LeastSquaresProbl
             }
         }
         if let Some(cb) = self.progress.as_mut() {
-            cb(RefineProgress {
+            cb(TrajectoryProgress {
                 iteration: step.iteration,
                 train_objective: step.cost / self.m_train as f64,
                 val_objective: v,

@@ -236,6 +236,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
     let mut jtj = DMatrix::zeros(p, p);
     let mut a = DMatrix::zeros(p, p);
     let mut g = DVector::zeros(p);
+    let mut delta = DVector::zeros(p);
     let mut trial = vec![0.0; p];
     let mut trial_r = DVector::zeros(rows);
     let mut d = vec![0.0f64; p];
@@ -279,7 +280,8 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
                 a[(j, j)] += mu * dj * dj;
             }
             if let Some(chol) = Cholesky::new(std::mem::replace(&mut a, DMatrix::zeros(0, 0))) {
-                let mut delta = -&g;
+                delta.copy_from(&g);
+                delta.neg_mut();
                 chol.solve_mut(&mut delta);
                 a = chol.unpack();
                 for ((t, th), dl) in trial.iter_mut().zip(&theta).zip(delta.iter()) {
@@ -297,7 +299,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
                             let rho = (cost - new_cost) / predicted.max(f64::MIN_POSITIVE);
                             mu *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(settings.mu_floor_factor);
                             nu = 2.0;
-                            step = Some((delta, scaled.sqrt(), new_cost));
+                            step = Some((scaled.sqrt(), new_cost));
                             break;
                         }
                     }
@@ -309,7 +311,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             mu *= nu;
             nu *= 2.0;
         }
-        let Some((delta, scaled_step, new_cost)) = step else {
+        let Some((scaled_step, new_cost)) = step else {
             report.termination = Termination::NoDescent;
             break;
         };

@@ -1,11 +1,11 @@
 //! The trajectory-refinement step of `mmenn fit` (thesis §7.1): after the network has
 //! learned MME's `d̂`, its weights are refined by multiple shooting on the training
-//! records' free-run output error ([`nn::refine_on_trajectories`]), and the validation
+//! records' free-run output error ([`nn::train_on_trajectories`]), and the validation
 //! free-run is reported before and after.
 
 use std::collections::BTreeMap;
 
-use nn::{HybridParts, Mlp, RefineReport, ShootingRecord, TrajectoryConfig};
+use nn::{HybridParts, Mlp, ShootingRecord, TrajectoryConfig, TrajectoryReport};
 use serde::Serialize;
 use sysid_core::{Dataset, MmeEstimate};
 
@@ -43,7 +43,7 @@ impl std::str::FromStr for RefineChoice {
 pub struct RefineSummary {
     /// The optimiser's report (objective = mean squared output error over the shooting
     /// windows, in units of each channel's standard deviation).
-    pub report: RefineReport,
+    pub report: TrajectoryReport,
     /// Free-run fit % per output channel on the validation record with the network
     /// trained on `d̂` only (when validation data are given).
     pub validation_fit_before: Option<BTreeMap<String, f64>>,
@@ -148,7 +148,7 @@ pub(super) fn refine_network(
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
     const TASK: &str = "trajectory refinement";
     let most = config.max_iterations;
-    let mut on_step = |p: nn::RefineProgress| {
+    let mut on_step = |p: nn::TrajectoryProgress| {
         let note = match p.val_objective {
             Some(v) => format!("objective {:.4e}, held out {v:.4e}", p.train_objective),
             None => format!("objective {:.4e}", p.train_objective),
@@ -158,7 +158,7 @@ pub(super) fn refine_network(
     };
     progress.report(&crate::progress::Progress::new(TASK, 0, Some(most)));
     let report =
-        nn::refine_on_trajectories(network, &parts, &train, &val, &config, Some(&mut on_step));
+        nn::train_on_trajectories(network, &parts, &train, &val, &config, Some(&mut on_step));
     progress.finish(TASK);
     let report = report?;
     Ok(RefineSummary {

@@ -51,14 +51,14 @@ impl Buffers {
 }
 
 /// The hybrid model of one weight vector (`None` only if the parts do not fit, which
-/// `refine_on_trajectories` rules out first).
+/// `train_on_trajectories` rules out first).
 pub(super) type Hybrid<'m, F> = Option<CorrectedModel<&'m F, NetView<'m>>>;
 
 impl<F: Dynamics> Shooter<'_, F> {
     /// The hybrid model `ẋ = f(x, u) + E·NN([x; u])` with `net` as its correction.
     pub(super) fn model<'m>(&'m self, net: &'m Mlp) -> Hybrid<'m, F> {
         let n = self.parts.base.n_states();
-        // Shapes are checked once in `refine_on_trajectories`, so this cannot fail; a
+        // Shapes are checked once in `train_on_trajectories`, so this cannot fail; a
         // failure would read as a diverged window.
         CorrectedModel::new(
             self.parts.base,

@@ -7,7 +7,7 @@ use crate::common::with_threads;
 use nalgebra::DMatrix;
 use nn::{
     Architecture, HybridParts, Mlp, NetCorrection, NnError, ShootingRecord, TrajectoryConfig,
-    refine_on_trajectories,
+    train_on_trajectories,
 };
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
@@ -119,7 +119,7 @@ fn refinement_is_a_descent_method_and_recovers_the_teacher() {
             states,
         }];
         let report =
-            refine_on_trajectories(&mut net, &parts, &records, &[], &config(), None).unwrap();
+            train_on_trajectories(&mut net, &parts, &records, &[], &config(), None).unwrap();
         // Every accepted step lowers the objective strictly, so the history is decreasing
         // and the returned weights are no worse than the initial ones.
         for pair in report.train_history.windows(2) {
@@ -159,7 +159,7 @@ fn validation_records_replace_held_out_windows() {
         experiment: &vexp,
         states: &vxs,
     }];
-    let report = refine_on_trajectories(&mut net, &parts, &train, &val, &config(), None).unwrap();
+    let report = train_on_trajectories(&mut net, &parts, &train, &val, &config(), None).unwrap();
     // 300 samples → windows [0,40], …, [280,299]: 8 training windows; 200 → 5 held out.
     assert_eq!((report.train_windows, report.val_windows), (8, 5));
     let best = report.val_history[report.best_iteration];
@@ -192,7 +192,7 @@ fn same_bits_for_any_thread_count() {
                 ..config()
             };
             let report =
-                refine_on_trajectories(&mut net, &parts, &records, &[], &cfg, None).unwrap();
+                train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None).unwrap();
             let bits: Vec<u64> = net.weights().iter().map(|v| v.to_bits()).collect();
             (bits, report)
         })
@@ -222,7 +222,7 @@ fn bad_problems_are_typed_errors() {
         ..config()
     };
     assert!(matches!(
-        refine_on_trajectories(&mut net, &parts, &records, &[], &cfg, None),
+        train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None),
         Err(NnError::InvalidConfig {
             field: "window",
             ..
@@ -231,7 +231,7 @@ fn bad_problems_are_typed_errors() {
     // A 2-input network cannot read 2 states and 1 input.
     let mut small = Mlp::new(&Architecture::single(2, 3, 1), 0).unwrap();
     assert!(matches!(
-        refine_on_trajectories(&mut small, &parts, &records, &[], &config(), None),
+        train_on_trajectories(&mut small, &parts, &records, &[], &config(), None),
         Err(NnError::Length { .. })
     ));
     let short = xs.columns(0, 50).into_owned();
@@ -240,7 +240,7 @@ fn bad_problems_are_typed_errors() {
         states: &short,
     }];
     assert!(matches!(
-        refine_on_trajectories(&mut net, &parts, &bad, &[], &config(), None),
+        train_on_trajectories(&mut net, &parts, &bad, &[], &config(), None),
         Err(NnError::Shape {
             matrix: "record states",
             ..
@@ -253,7 +253,7 @@ fn bad_problems_are_typed_errors() {
         ..config()
     };
     assert_eq!(
-        refine_on_trajectories(&mut net, &parts, &records, &[], &cfg, None).unwrap_err(),
+        train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None).unwrap_err(),
         NnError::TrajectoryDiverged {
             record: 0,
             sample: 0
@@ -297,7 +297,7 @@ fn first_order_hold_records_are_shot_with_interpolated_inputs() {
             max_iterations: 0,
             ..config()
         };
-        refine_on_trajectories(&mut net, &parts, &records, &[], &cfg, None)
+        train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None)
             .unwrap()
             .objective_at_estimates
     };
@@ -312,7 +312,7 @@ fn first_order_hold_records_are_shot_with_interpolated_inputs() {
         states: &xs,
     }];
     let mut net = student(0.3, 5);
-    let report = refine_on_trajectories(&mut net, &parts, &records, &[], &config(), None).unwrap();
+    let report = train_on_trajectories(&mut net, &parts, &records, &[], &config(), None).unwrap();
     assert!(
         report.final_train_objective() < 1e-4 * report.initial_train_objective(),
         "{:?} {:?}",

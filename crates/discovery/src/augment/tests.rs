@@ -1,0 +1,35 @@
+use super::*;
+use sysid_core::{Channel, Experiment};
+
+/// ẋ = −a·x + u with the term −b·x³ hidden: data simulated with b = 0.5 (no noise);
+/// calibration from b = 0.2 recovers 0.5 (noise-free, so to solver precision).
+#[test]
+fn recovers_a_cubic_coefficient_without_noise() {
+    let linear = crate::test_support::scalar_model(-0.3, 1.0);
+    let truth = TermModel::from_specs(linear.clone(), [("x", "cubic_stiffness", "x^3", -0.5)])
+        .unwrap_or_else(|e| panic!("{e}"));
+    let len = 301;
+    let dt = 0.05;
+    let u = DMatrix::from_fn(1, len, |_, k| 1.5 * (0.7 * k as f64 * dt).sin());
+    let integrator = Integrator::Rk4 { substeps: 4 };
+    let blank = Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, len))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let y = simulate_outputs(&truth, linear.c(), &[1.0], &blank, &integrator)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let data = Dataset::new(
+        vec![Channel::new("u")],
+        vec![Channel::new("x")],
+        vec![Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"))],
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let start = TermModel::from_specs(linear, [("x", "cubic_stiffness", "x^3", -0.2)])
+        .unwrap_or_else(|e| panic!("{e}"));
+    let cal = calibrate(&start, &data, &[vec![1.0]], &CalibrationConfig::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        (cal.coefficients_after[0] + 0.5).abs() < 1e-6,
+        "{:?}",
+        cal.coefficients_after
+    );
+    assert!(cal.cost_after < 1e-10 * cal.cost_before);
+}
