@@ -468,8 +468,11 @@ fn gap_cause(b: Benchmark) -> &'static str {
              calibrated rates (0.179–0.181 V against 0.189 V; the fill converges to nearly \
              nothing) or worse with held ones (0.193–0.205 V), and the test record no better \
              (0.242–0.254 V against 0.244 V), and a cross-section that \
-             varies with the level fits the training record better (0.143–0.176 V) but not \
-             the test record (0.235–0.282 V) (explore_tanks on 7a8efb5; not kept). The \
+             varies with the level (lower tank, or both: `TanksOptions::area2`, `area1`) fits \
+             the training record better (0.143–0.150 V) but not the test record (0.235 and \
+             0.282 V), and calibrated on the first 80 % of the training record it scores \
+             worse on the last 20 % than this structure (0.269 and 0.366 V against 0.242 V), \
+             so a held-out choice would not take it either (explore_tanks on 35b555b). The \
              hybrid's network training with `mmenn fit` on this model and record (up to 3 hidden units × 3 \
              initialisations, refinement windows of 128 samples, W held at 1.877e4) with \
              seeds 1–7, then `mmenn predict --x0-window 50` on the test record (48923f2), \
