@@ -818,15 +818,21 @@ fn physics_rows(
     Ok(())
 }
 
+/// The linear output-error model of the physics structure and its fit's wall time.
+struct OeRows {
+    fit: mmenn::sysid_baselines::OeFit,
+    seconds: f64,
+}
+
 /// Rows of the linear output-error model of the physics structure on the test records;
-/// returns the fit (MME/NN on it starts from its model).
+/// returns the fit (MME/NN on it starts from its model) and its wall time.
 fn oe_rows(
     s: &Setup,
     protocol: &str,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     benchmark: Benchmark,
-) -> Result<mmenn::sysid_baselines::OeFit> {
+) -> Result<OeRows> {
     let oe_cfg = OeConfig {
         free: s.oe_free.iter().map(|p| p.to_string()).collect(),
         ..OeConfig::default()
@@ -880,7 +886,10 @@ fn oe_rows(
         params.join(", ")
     ));
 
-    Ok(oe)
+    Ok(OeRows {
+        fit: oe,
+        seconds: oe_seconds,
+    })
 }
 
 /// Rows of MME/NN on the output-error model (the thesis method: the network as trained
@@ -889,7 +898,7 @@ fn oe_rows(
 fn oe_hybrid_rows(
     ctx: &Ctx,
     s: &Setup,
-    oe: &mmenn::sysid_baselines::OeFit,
+    oe: &OeRows,
     protocol: &str,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
@@ -908,7 +917,7 @@ fn oe_hybrid_rows(
     write_model(
         &model_toml,
         &ModelSpec {
-            linear: oe.model.model.clone(),
+            linear: oe.fit.model.model.clone(),
             noise_variance: s.noise.clone(),
             units,
             terms: Vec::new(),
@@ -1001,17 +1010,7 @@ fn oe_hybrid_rows(
     if fit.is_ok() {
         // Built on the linear OE model: its fit time counts too.
         let label = "MME/NN (OE model + network)";
-        let oe_seconds = table
-            .column("train_s")
-            .and_then(|j| {
-                table
-                    .rows
-                    .iter()
-                    .find(|r| r.key[0] == "linear OE (physics structure)")
-                    .and_then(|r| r.values[j])
-            })
-            .unwrap_or(0.0);
-        table.set_for_model(label, "train_s", oe_seconds + fit_seconds);
+        table.set_for_model(label, "train_s", oe.seconds + fit_seconds);
         table.set_for_model(label, "threads", rayon::current_num_threads() as f64);
     }
 
