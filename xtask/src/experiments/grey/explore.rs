@@ -1,0 +1,263 @@
+//! Exploration harness (ignored; reads /work/shared/data; prints training and test
+//! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
+//! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 area1 area2 trainx0
+//! holdout (calibrate on the first 80 %, score the last 20 %) sub hz
+//! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
+//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full; `GREY_SB` keys q dd vv
+//! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
+//! `GREY_DUMP=/tmp/prefix` writes the training and first test run as CSV. E.g.
+//! `GREY_TANKS="pump0=1 lin=1 c=1" cargo test --release -p xtask explore_tanks --
+//! --ignored --nocapture`.
+use super::*;
+use mmenn::benchmarks::{Benchmark, load};
+
+fn data(b: Benchmark) -> mmenn::benchmarks::BenchmarkData {
+    load(
+        b,
+        &std::path::Path::new("/work/shared/data").join(b.folder()),
+    )
+    .unwrap()
+}
+
+fn report(b: Benchmark, label: &str, spec: &GreySpec) {
+    let d = data(b);
+    let (scale, unit) = b.reporting_unit();
+    let w = b.init_window();
+    let tests: Vec<(String, Experiment)> = d
+        .tests
+        .iter()
+        .map(|t| (t.name.clone(), t.data.experiments()[0].clone()))
+        .collect();
+    let clock = std::time::Instant::now();
+    let fit = match fit_grey(spec, &d.estimation.experiments()[0], &tests, w) {
+        Ok(f) => f,
+        Err(e) => {
+            println!("{label}: failed {e:#}");
+            return;
+        }
+    };
+    let secs = clock.elapsed().as_secs_f64();
+    let est = &d.estimation.experiments()[0];
+    let yest: Vec<f64> = est.outputs().row(0).iter().copied().collect();
+    let proto = window_state(spec, &fit.model, est, w)
+        .ok()
+        .and_then(|x| free_run(spec, &fit.model, est, &x).ok())
+        .map(|s| scale * rmse_after(&yest, &s, w))
+        .unwrap_or(f64::NAN);
+    let mut line = format!(
+        "{label}: train {:.4} {unit} (train window-x0 {proto:.4}) ({secs:.1} s)",
+        scale * fit.train_rmse
+    );
+    for (t, (_, e)) in fit.tests.iter().zip(&tests) {
+        let y: Vec<f64> = e.outputs().row(0).iter().copied().collect();
+        match &t.sim {
+            Ok(s) => line += &format!(" | {} {:.4}", t.name, scale * rmse_after(&y, s, w)),
+            Err(m) => line += &format!(" | {} diverged {m}", t.name),
+        }
+    }
+    println!("{line}");
+    if let Ok(path) = std::env::var("GREY_DUMP") {
+        let est = &d.estimation.experiments()[0];
+        let tr = free_run(spec, &fit.model, est, &fit.x0).unwrap_or_default();
+        let mut text = String::from("u,y,sim,tu,ty,tsim\n");
+        let te = &tests[0].1;
+        let ts = fit.tests[0].sim.clone().unwrap_or_default();
+        for k in 0..est.len().max(te.len()) {
+            let g = |m: &nalgebra::DMatrix<f64>, k: usize| {
+                if k < m.ncols() { m[(0, k)] } else { f64::NAN }
+            };
+            text += &format!(
+                "{},{},{},{},{},{}\n",
+                g(est.inputs(), k),
+                g(est.outputs(), k),
+                tr.get(k).copied().unwrap_or(f64::NAN),
+                g(te.inputs(), k),
+                g(te.outputs(), k),
+                ts.get(k).copied().unwrap_or(f64::NAN)
+            );
+        }
+        std::fs::write(format!("{path}-{}.csv", label.replace(' ', "_")), text).unwrap();
+        // Every test record (input, measured, simulated), one file each.
+        for (t, (name, e)) in fit.tests.iter().zip(&tests) {
+            let sim = t.sim.clone().unwrap_or_default();
+            let mut text = String::from("u,y,sim\n");
+            for k in 0..e.len() {
+                text += &format!(
+                    "{},{},{}\n",
+                    e.inputs()[(0, k)],
+                    e.outputs()[(0, k)],
+                    sim.get(k).copied().unwrap_or(f64::NAN)
+                );
+            }
+            let file = format!("{path}-{}-{name}.csv", label.replace(' ', "_"));
+            std::fs::write(file, text).unwrap();
+        }
+    }
+    let terms: Vec<String> = fit
+        .model
+        .terms()
+        .iter()
+        .map(|t| format!("{} {:+.4e}", t.effect, t.coefficient))
+        .collect();
+    println!("    {} x0 {:?}", terms.join(", "), fit.x0);
+}
+
+fn kv(item: &str) -> Vec<(String, f64)> {
+    item.split_whitespace()
+        .filter_map(|p| p.split_once('='))
+        .map(|(k, v)| (k.to_string(), v.parse().unwrap()))
+        .collect()
+}
+
+#[test]
+#[ignore]
+fn explore_emps() {
+    let all = std::env::var("GREY_EMPS").unwrap_or_default();
+    for item in all.split(';').filter(|s| !s.trim().is_empty()) {
+        let mut o = EmpsOptions {
+            eps: 3e-4,
+            asymmetric: false,
+            start: None,
+        };
+        let mut substeps = 1;
+        let mut full = false;
+        for (k, v) in kv(item) {
+            match k.as_str() {
+                "eps" => o.eps = v,
+                "asym" => o.asymmetric = v != 0.0,
+                "g" => o.start.get_or_insert([0.0; 4])[0] = v,
+                "fv" => o.start.get_or_insert([0.0; 4])[1] = v,
+                "fc" => o.start.get_or_insert([0.0; 4])[2] = v,
+                "off" => o.start.get_or_insert([0.0; 4])[3] = v,
+                "sub" => substeps = v as usize,
+                "full" => full = v != 0.0,
+                _ => panic!("unknown key {k}"),
+            }
+        }
+        let mut spec = emps_model(&o).unwrap();
+        spec.integrator = Integrator::Rk4 { substeps };
+        if full {
+            spec.horizons = vec![1.0];
+        }
+        report(Benchmark::Emps, item.trim(), &spec);
+    }
+}
+
+#[test]
+#[ignore]
+fn explore_silverbox() {
+    let all = std::env::var("GREY_SB").unwrap_or_default();
+    // The linear oscillator of the full run's ARX(2,2) start (docs/results).
+    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    for item in all.split(';').filter(|s| !s.trim().is_empty()) {
+        let mut extra = Vec::new();
+        let mut substeps = 2;
+        for (key, v) in kv(item) {
+            match key.as_str() {
+                "q" => extra.push(SilverboxExtra::QuadraticSpring),
+                "dd" => extra.push(SilverboxExtra::DisplacementDamping),
+                "q5" => extra.push(SilverboxExtra::QuinticSpring),
+                "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
+                "sub" => substeps = v as usize,
+                "v3" => extra.push(SilverboxExtra::Monomial("v^3")),
+                "yv" => extra.push(SilverboxExtra::Monomial("y*v")),
+                "vv" => extra.push(SilverboxExtra::QuadraticDrag),
+                "v2" => extra.push(SilverboxExtra::Monomial("v^2")),
+                "yv2" => extra.push(SilverboxExtra::Monomial("y*v^2")),
+                "ya" => extra.push(SilverboxExtra::Monomial("y*abs(y)")),
+                "yav" => extra.push(SilverboxExtra::Monomial("abs(y)*v")),
+                "vay" => extra.push(SilverboxExtra::Monomial("abs(v)*y")),
+                _ => panic!("unknown key {key}"),
+            }
+        }
+        let mut spec = silverbox_model(k, c, b, &extra).unwrap();
+        spec.integrator = Integrator::Rk4 { substeps };
+        report(Benchmark::Silverbox, item.trim(), &spec);
+    }
+}
+
+#[test]
+#[ignore]
+fn explore_tanks() {
+    let all = std::env::var("GREY_TANKS").unwrap_or_default();
+    for item in all.split(';').filter(|s| !s.trim().is_empty()) {
+        let mut o = TanksOptions {
+            linear_outflow: false,
+            pump_offset: false,
+            overflow_rate: None,
+            ..TanksOptions::default()
+        };
+        let mut trainx0 = false;
+        let mut holdout = false;
+        let mut substeps = 8;
+        let mut hz = 2;
+        for (k, v) in kv(item) {
+            match k.as_str() {
+                "rate" => o.rate = v,
+                "k2" => o.free_k2 = v != 0.0,
+                "smooth" => o.smooth = Some(v),
+                "sensor" => o.sensor = Some(v),
+                "lin" => o.linear_outflow = v != 0.0,
+                "h1" => o.h1_top = v,
+                "h2" => o.h2_top = v,
+                "pump0" => o.pump_offset = v != 0.0,
+                "bias" => o.sensor_offset = v,
+                "c" => o.overflow_rate = Some(v),
+                "lin1" => o.linear_outflow1 = v != 0.0,
+                "area2" => o.area2 = v != 0.0,
+                "area1" => o.area1 = v != 0.0,
+                "holdout" => holdout = v != 0.0,
+                "sub" => substeps = v as usize,
+                "hz" => hz = v as usize,
+                "trainx0" => trainx0 = v != 0.0,
+                _ => panic!("unknown key {k}"),
+            }
+        }
+        let mut spec = tanks_model(&o).unwrap();
+        spec.test_from_training_x0 = trainx0;
+        spec.integrator = Integrator::Rk4 { substeps };
+        if hz == 4 {
+            spec.horizons = vec![0.1, 0.25, 0.5, 1.0];
+        }
+        if holdout {
+            held_out(item.trim(), &spec);
+        } else {
+            report(Benchmark::CascadedTanks, item.trim(), &spec);
+        }
+    }
+}
+
+/// Calibrate on the first 80 % of the Cascaded Tanks training record and score the
+/// free run on the last 20 % (state fitted to its first 50 samples, as the test
+/// protocol does).
+fn held_out(label: &str, spec: &GreySpec) {
+    let d = data(Benchmark::CascadedTanks);
+    let est = &d.estimation.experiments()[0];
+    let n = est.len();
+    let cut = n * 4 / 5;
+    let part = |a: usize, b: usize| {
+        Experiment::new(
+            est.t0() + a as f64 * est.dt(),
+            est.dt(),
+            est.inputs().columns(a, b - a).into_owned(),
+            est.outputs().columns(a, b - a).into_owned(),
+        )
+        .unwrap()
+        .with_intersample(est.intersample())
+    };
+    let (fit_part, held) = (part(0, cut), part(cut, n));
+    match fit_grey(spec, &fit_part, &[("held".into(), held.clone())], 50) {
+        Ok(f) => {
+            let y: Vec<f64> = held.outputs().row(0).iter().copied().collect();
+            let r = match &f.tests[0].sim {
+                Ok(s) => rmse_after(&y, s, 50),
+                Err(_) => f64::NAN,
+            };
+            println!(
+                "{label}: first 80 % {:.4} V | held-out last 20 % {r:.4} V",
+                f.train_rmse
+            );
+        }
+        Err(e) => println!("{label}: failed {e:#}"),
+    }
+}

@@ -1,0 +1,171 @@
+use super::*;
+use mmenn::sysid_core::Term;
+
+/// A model with the given coefficients (in term order).
+fn with_coefficients(model: &TermModel, c: &[f64]) -> TermModel {
+    let (linear, terms) = model.clone().into_parts();
+    let terms: Vec<Term> = terms
+        .into_iter()
+        .zip(c)
+        .map(|(t, &c)| Term {
+            coefficient: c,
+            ..t
+        })
+        .collect();
+    TermModel::new(linear, terms).unwrap()
+}
+
+fn run(spec: &GreySpec, model: &TermModel, x0: &[f64], u: &[f64], dt: f64) -> DMatrix<f64> {
+    let n = model.linear().n_states();
+    let e = Experiment::new(
+        0.0,
+        dt,
+        DMatrix::from_row_slice(1, u.len(), u),
+        DMatrix::zeros(1, u.len()),
+    )
+    .unwrap()
+    .with_intersample(spec.intersample);
+    simulate_outputs(model, &DMatrix::identity(n, n), x0, &e, &spec.integrator).unwrap()
+}
+
+/// The outflows act on the positive part of each level: started below empty with the
+/// pump off, no term drains further (the pump offset refills the upper tank, the
+/// inflow is ≥ 0), so the levels never fall below their start and stay bounded. With
+/// `√|h|` and the calibrated `+k5·h2` the lower level ran away below zero (the MME/NN
+/// blow-up on b801ccd, h2 = −1e12 at t = 2044 s).
+#[test]
+fn tanks_levels_below_empty_do_not_run_away() {
+    let spec = tanks_model(&TanksOptions::default()).unwrap();
+    // outflow, pump, overflow, inflow, outflow, overflow_inflow, overflow,
+    // linear_outflow, pump_offset: the calibrated values of the full run.
+    let c = [
+        -0.033, 0.027, -1.0, 0.084, -0.147, 1.38, -1.0, 0.0196, 0.0172,
+    ];
+    let model = with_coefficients(&spec.model, &c);
+    let u = vec![0.0; 1024];
+    let x = run(&spec, &model, &[-1.0, -1.0], &u, 4.0);
+    for k in 0..u.len() {
+        for i in 0..2 {
+            let h = x[(i, k)];
+            assert!(
+                h.is_finite() && (-1.0 - 1e-9..=10.0).contains(&h),
+                "h{} = {h} at {k}",
+                i + 1
+            );
+        }
+    }
+    // The upper tank settles where its outflow balances the pump offset:
+    // k1·√h1 = k0, h1 = (0.0172/0.033)² = 0.2717 (analytic).
+    let h1 = x[(0, u.len() - 1)];
+    assert!((h1 - (0.0172f64 / 0.033).powi(2)).abs() < 1e-3, "h1 = {h1}");
+}
+
+/// The upper level is unmeasured: scaling it by `s` maps `(k1, k4, k0, k2, c2, H1)` to
+/// `(k1·√s, k4·s, k0·s, k2/√s, c2/s, s·H1)` with the same lower level, so calibrating
+/// `k2` with `H1` held fits the overflow level in effect (analytic identity, checked
+/// on a run whose upper tank overflows).
+#[test]
+fn tanks_overflow_level_is_absorbed_by_the_upper_level_scale() {
+    let s = 1.7_f64;
+    let base = TanksOptions::default();
+    let a = tanks_model(&base).unwrap();
+    let b = tanks_model(&TanksOptions {
+        h1_top: base.h1_top * s,
+        ..base
+    })
+    .unwrap();
+    // outflow, pump, overflow, inflow, outflow, overflow_inflow, overflow,
+    // linear_outflow, pump_offset
+    let c = [
+        -0.033, 0.027, -1.0, 0.084, -0.147, 1.38, -1.0, 0.0196, 0.0172,
+    ];
+    let r = s.sqrt();
+    let cs = [
+        c[0] * r,
+        c[1] * s,
+        c[2],
+        c[3] / r,
+        c[4],
+        c[5] / s,
+        c[6],
+        c[7],
+        c[8] * s,
+    ];
+    let (ma, mb) = (
+        with_coefficients(&a.model, &c),
+        with_coefficients(&b.model, &cs),
+    );
+    let u: Vec<f64> = (0..400)
+        .map(|k| 2.8 + 3.0 * (k as f64 * 4.0 * std::f64::consts::TAU / 800.0).sin())
+        .collect();
+    let ya = run(&a, &ma, &[7.6, 5.2], &u, 4.0);
+    let yb = run(&b, &mb, &[7.6 * s, 5.2], &u, 4.0);
+    let top = ya.row(0).max();
+    assert!(
+        top > base.h1_top,
+        "the upper tank never overflowed (max {top})"
+    );
+    for k in 0..u.len() {
+        assert!((ya[(1, k)] - yb[(1, k)]).abs() < 1e-9, "lower level at {k}");
+        assert!(
+            (ya[(0, k)] * s - yb[(0, k)]).abs() < 1e-8,
+            "upper level at {k}"
+        );
+    }
+}
+
+/// The asymmetric EMPS model started from a symmetric one is that model
+/// (`(v + |v|)/2 + (v − |v|)/2 = v`, no Coulomb asymmetry yet).
+#[test]
+fn emps_asymmetric_start_equals_the_symmetric_model() {
+    let sym = emps_spec(3e-4).unwrap();
+    let asym = emps_asymmetric_from(&sym.model, 3e-4).unwrap();
+    let u: Vec<f64> = (0..3000)
+        .map(|k| 2.0 * (k as f64 * 1e-3 * 3.0).sin() - 0.3)
+        .collect();
+    let ys = run(&sym, &sym.model, &[0.1, 0.0], &u, 1e-3);
+    let ya = run(&asym, &asym.model, &[0.1, 0.0], &u, 1e-3);
+    let moving = ys.row(1).amax();
+    assert!(moving > 1e-3, "the carriage hardly moved ({moving} m/s)");
+    for k in 0..u.len() {
+        assert!((ys[(0, k)] - ya[(0, k)]).abs() < 1e-12, "position at {k}");
+    }
+}
+
+/// With its calibrated paths at zero (the start), the Silverbox input stage leaves the
+/// oscillator as it is; the input stage itself tracks the input (first-order lag).
+#[test]
+fn silverbox_input_stage_at_zero_is_the_plain_oscillator() {
+    let (k, c, b) = (1.9e5, 40.0, 1.9e5);
+    let plain = silverbox_model(k, c, b, &[SilverboxExtra::QuadraticSpring]).unwrap();
+    let staged = silverbox_model(
+        k,
+        c,
+        b,
+        &[
+            SilverboxExtra::QuadraticSpring,
+            SilverboxExtra::Feedthrough(2e-4),
+        ],
+    )
+    .unwrap();
+    let dt = 16_384.0 / 1e7;
+    let u: Vec<f64> = (0..2000)
+        .map(|k| 0.1 * (k as f64 * dt * 400.0).sin())
+        .collect();
+    // Both on the staged model's integrator (4 RK4 sub-steps).
+    let yp = run(&staged, &plain.model, &[0.0, 0.0], &u, dt);
+    let ys = run(&staged, &staged.model, &[0.0, 0.0, 0.0], &u, dt);
+    let amp = yp.row(0).amax();
+    assert!(amp > 1e-3, "the oscillator hardly moved ({amp})");
+    for j in 0..u.len() {
+        assert!((yp[(0, j)] - ys[(0, j)]).abs() < 1e-12, "output at {j}");
+    }
+    // w lags u by about τ: |w − u| ≤ τ·max|u'| + transient.
+    let slope = 0.1 * 400.0;
+    for j in 100..u.len() {
+        assert!(
+            (ys[(2, j)] - u[j]).abs() < 2.0 * 2e-4 * slope,
+            "stage at {j}"
+        );
+    }
+}

@@ -1,0 +1,223 @@
+//! Notes of the real-benchmark tables: published anchors and targets, published
+//! training times, and why a physics-first model misses a target where it does.
+
+use super::*;
+
+/// Where the published dynoNet EMPS number was measured, with the evidence.
+pub(super) const DYNONET_NOTE: &str = "dynoNet's 2.64 mm (Forgione & Piga; paper source \
+     doc/paper/ms.tex of github.com/forgi86/dynonet: \"on the test dataset … RMSE = 2.64\") \
+     was scored on the estimation record: the repository's examples/EMPS/EMPS_test.py (at \
+     5669940) sets dataset = 'test' and chooses DATA_EMPS_PULSES.mat as its file name, then \
+     loads DATA_EMPS.mat, the training record, and reports the RMSE over every sample of a \
+     free run from the model's zero initial conditions. The rows marked \"estimation \
+     (dynoNet's protocol)\" score our models the same way (the estimation record, every \
+     sample, free run from the calibrated initial state); on the official test record the \
+     best published number is continuous-time SUBNET's 4.61 mm";
+
+/// Issue 16's target 4 for each test record that has one: the best published free-run
+/// RMSE, its source, and the best black box, in the published unit.
+pub(super) fn targets(b: Benchmark) -> &'static [(&'static str, f64, &'static str, f64)] {
+    match b {
+        Benchmark::CascadedTanks => {
+            &[("test", 0.18, "grey box with overflow, 0.18–0.191 V", 0.306)]
+        }
+        Benchmark::Silverbox => &[
+            ("test_multisine", 0.30, "GP-NARX 0.301 mV", 0.301),
+            (
+                "test_arrow_full",
+                0.26,
+                "PNLSS 0.26 mV (older protocol)",
+                0.60,
+            ),
+        ],
+        Benchmark::Emps => &[
+            (
+                "test",
+                2.64,
+                "dynoNet 2.64 mm, scored on the estimation record (see the notes); on this \
+                 record continuous-time SUBNET 4.61 mm",
+                4.61,
+            ),
+            (
+                DYNONET_RECORD,
+                2.64,
+                "dynoNet 2.64 mm under its published script's protocol",
+                2.64,
+            ),
+        ],
+    }
+}
+
+/// Training times the published anchors state, where their sources state one.
+pub(super) fn published_times(b: Benchmark) -> &'static str {
+    match b {
+        Benchmark::Emps => {
+            "dynoNet: 50 000 Adam iterations on the whole record, about 1900 s with the loss \
+             still falling (comment in examples/EMPS/EMPS_train.py of github.com/forgi86/dynonet; \
+             hardware not stated); the other anchors' sources as used here (shared/data/README.md) \
+             state none"
+        }
+        _ => "none stated in the sources used here (shared/data/README.md)",
+    }
+}
+
+/// Why a physics-first model misses the target where it does (what the runs show; see the
+/// grey-box notes).
+pub(super) fn gap_cause(b: Benchmark) -> &'static str {
+    match b {
+        Benchmark::CascadedTanks => {
+            "the grey box's test error is spread over the whole record (RMSE 0.12–0.37 V in \
+             every 64-sample stretch) rather than held in its overflow episodes: the samples \
+             where the sensor reads its top (10 V) carry 1.5 % of the test squared error and \
+             clipping the simulated level at 10 V changes the test RMSE by 0.0001 V (the \
+             lower tank's overflow, which holds the level at the sensor top, is in the model); \
+             a saturating first-order sensor instead of that overflow, a smooth overflow, a \
+             linear term in the upper outflow or a sensor offset each fit the training record \
+             worse or the test record worse (explore_tanks on d52faee). The hybrid's gain is \
+             judged on 204 held-out training samples, which do not rank its variants on the \
+             test record: with 256-sample shooting windows the guard keeps the refined network \
+             (held-out 0.155 V against 0.160 V) and the test RMSE rises to 0.199 V; 4–6 \
+             initialisations give 0.1791 V on test with a slightly worse held-out score \
+             (0.1603 V), so they are not taken. The upper level is not measured, so its test \
+             state comes from the first 50 samples of the lower level alone. The hybrid's \
+             test RMSE moves with the seed of its network training more than its distance \
+             to the target (below). Both records also show an effect the model has no state \
+             for: every descent of the reading through about 5.5 V that had been above 6.9 V \
+             drops 0.34–0.63 V within one 4-s sample (training at 1432 and 3756 s, test at \
+             776, 1876, 2456, 2748, 3296 and 3776 s), while descents from 6.5 V or lower and \
+             every ascent through the same band move 0.1–0.2 V per sample, and the grey box's \
+             test error next to these drops reaches 0.76 V — a hysteresis of the level or of \
+             its sensor. A hysteretic offset of the reading (a state filling above 6.5–6.7 V \
+             and emptying below 5.0–5.2 V) fits the training record a little better with \
+             calibrated rates (0.179–0.181 V against 0.189 V; the fill converges to nearly \
+             nothing) or worse with held ones (0.193–0.205 V), and the test record no better \
+             (0.242–0.254 V against 0.244 V), and a cross-section that \
+             varies with the level (lower tank, or both: `TanksOptions::area2`, `area1`) fits \
+             the training record better (0.143–0.150 V) but not the test record (0.235 and \
+             0.282 V), and calibrated on the first 80 % of the training record it scores \
+             worse on the last 20 % than this structure (0.269 and 0.366 V against 0.242 V), \
+             so a held-out choice would not take it either (explore_tanks on 35b555b). The \
+             hybrid's network training with `mmenn fit` on this model and record (up to 3 hidden units × 3 \
+             initialisations, refinement windows of 128 samples, W held at 1.877e4) with \
+             seeds 1–7, then `mmenn predict --x0-window 50` on the test record (48923f2), \
+             gives 0.1818, 0.1788, 0.1814, 0.1787, 0.1789, 0.1786 and 0.1801 V, and the mean \
+             of the first five members' free runs 0.1796 V, so a result this close to 0.18 V \
+             meets or misses it by chance"
+        }
+        Benchmark::Silverbox => {
+            "test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
+             free-run error (0.2392 mV); on test_arrow_full the grey box's error is 0.231 mV up \
+             to sample 29 049, where the output first exceeds the largest training amplitude \
+             (0.216 V), and 0.410 mV after it: the last 28 % of the record carries 55 % of the \
+             squared error (samples with |y| in 0.1–0.2 V: 0.49 mV, 0.2–0.25 V: 1.06 mV, \
+             above 0.25 V: 1.71 mV; below 0.1 V: 0.26 mV; explore_silverbox with quadratic \
+             drag on 7a8efb5). The polynomial spring and damping fitted on the training \
+             amplitudes do not hold at the arrow's largest ones, and the network, trained on \
+             the same amplitudes, does not change that. Quadratic drag (v·|v|) is what moved \
+             the arrow most: without it (training 0.2565 mV) test_arrow_full was 0.378 mV. \
+             With it, a further quintic spring, cubic damping (v³) or an odd quadratic spring \
+             (y·|y|) lowers the training RMSE by at most 0.0016 mV and moves test_arrow_full \
+             to 0.288–0.322 mV (explore_silverbox on 7a8efb5), so the training record does \
+             not pick the extrapolation among them; without the quadratic spring the arrow is \
+             worse (0.369 mV, training 0.2959 mV)"
+        }
+        Benchmark::Emps => {
+            "the published 2.64 mm was not measured on the test record: dynoNet's script scores \
+             the estimation record (first note), and under that protocol the rows marked \
+             \"estimation (dynoNet's protocol)\" compare with it. On the official test record \
+             the training free run is at 2.43 mm but the test error of the grey box (5.97 mm) \
+             is almost all slow drift: its 1-s moving average carries 5.76 mm RMS and the rest \
+             0.45 mm; it does not depend on speed (5.8–6.2 mm RMS at every |v| band from rest \
+             to 0.2 m/s), moves in steps during the strokes and stays between them (segment \
+             means from −11.3 to +8.6 mm), and grows with position (slope −0.042 mm/mm; \
+             removing an affine function of position leaves 3.9 mm) — measured with \
+             explore_emps on 7b7e0a7. The position is the integral of the simulated velocity: \
+             a force the input vir does not carry (the test record adds force pulses) or a \
+             flexibility the training record does not excite (data README) leaves a permanent \
+             position offset that the open-loop model cannot remove; the same training run \
+             started from a state fitted to its first 20 samples (the test protocol) gives \
+             5.21 mm instead of 2.43 mm from the calibrated state, so part of it is the \
+             20-sample state itself. Training error does not rank the structures on the \
+             test record (the asymmetric-friction row)"
+        }
+    }
+}
+
+/// The physics-first rows against target 4, per test record with a target.
+pub(super) fn target_note(b: Benchmark, table: &Table) -> String {
+    let (_, unit) = b.reporting_unit();
+    let mut parts = Vec::new();
+    let mut missed = false;
+    for &(record, target, best, black_box) in targets(b) {
+        let ours: Vec<String> = table
+            .rows
+            .iter()
+            .filter(|r| {
+                r.key[1] == record
+                    && (r.key[0].starts_with("physics-first grey box") || r.key[0] == hybrid::LABEL)
+            })
+            .map(|r| {
+                let name = if r.key[0] == hybrid::LABEL {
+                    "MME/NN on the grey box".to_string()
+                } else {
+                    r.key[0].clone()
+                };
+                match r.values[0] {
+                    Some(v) => {
+                        let verdict = if v <= target {
+                            "meets it"
+                        } else if v < black_box {
+                            "misses it, below the best black box"
+                        } else {
+                            "misses it"
+                        };
+                        missed |= v > target;
+                        format!("{name} {v:.4} {unit} ({verdict})")
+                    }
+                    None => {
+                        missed = true;
+                        format!("{name}: {}", r.remark.as_deref().unwrap_or("no number"))
+                    }
+                }
+            })
+            .collect();
+        parts.push(format!(
+            "{record}: target ≤ {target} {unit} (best published: {best}; best black box \
+             {black_box} {unit}) — {}",
+            ours.join("; ")
+        ));
+    }
+    let mut note = format!(
+        "Target 4 of issue 16 (free-run RMSE, {OFFICIAL}; every physics-first model chosen \
+         without the test records): {}.",
+        parts.join(". ")
+    );
+    if missed {
+        note.push_str(&format!(
+            " Where a target is missed, the cause: {}.",
+            gap_cause(b)
+        ));
+    }
+    note
+}
+
+/// Published anchors of one record of the glance table: the published linear model's
+/// RMSE (where there is one) and the best published result with its source, in the
+/// table's unit (shared/data/README.md).
+pub fn anchors(table_id: &str, record: &str) -> (Option<f64>, Option<(f64, &'static str)>) {
+    match (table_id, record) {
+        ("real_cascaded_tanks", "test") => (Some(0.588), Some((0.18, "grey box with overflow"))),
+        ("real_silverbox", "test_multisine") => (Some(6.96), Some((0.301, "GP-NARX"))),
+        ("real_silverbox", "test_arrow_full") => {
+            (Some(14.4), Some((0.26, "PNLSS, older protocol")))
+        }
+        ("real_silverbox", "test_arrow_no_extrapolation") => (Some(6.58), Some((0.259, "GP-NARX"))),
+        ("real_emps", "test") => (Some(5.53), Some((4.61, "CT-SUBNET"))),
+        ("real_emps", DYNONET_RECORD) => (None, Some((2.64, "dynoNet"))),
+        _ => (None, None),
+    }
+}
+
+/// Marks the linear SS variant that is the benchmark's linear baseline, where there are
+/// several (the glance table reads it).
+pub const LINEAR_BASELINE: &str = "the linear baseline, chosen on held-out training data";
