@@ -652,37 +652,72 @@ pub fn table_to_experiment(
     inputs: &[String],
     outputs: &[String],
 ) -> Result<Experiment> {
+    let (t0, dt, ju, jy) = checked_channels(table, inputs, outputs)?;
+    let pick = |js: &[usize]| {
+        DMatrix::from_fn(js.len(), table.lines.len(), |i, k| table.columns[js[i]][k])
+    };
+    experiment(t0, dt, pick(&ju), pick(&jy))
+}
+
+/// [`table_to_experiment`] consuming the table: a matrix of one channel takes its
+/// column as it is (no copy), unless the column serves both inputs and outputs.
+pub fn table_into_experiment(
+    mut table: Table,
+    inputs: &[String],
+    outputs: &[String],
+) -> Result<Experiment> {
+    let (t0, dt, ju, jy) = checked_channels(&table, inputs, outputs)?;
+    let n = table.lines.len();
+    let shared = ju.iter().any(|j| jy.contains(j));
+    let mut pick = |js: &[usize]| match js {
+        [j] if !shared => DMatrix::from_vec(1, n, std::mem::take(&mut table.columns[*j])),
+        _ => DMatrix::from_fn(js.len(), n, |i, k| table.columns[js[i]][k]),
+    };
+    let u = pick(&ju);
+    let y = pick(&jy);
+    experiment(t0, dt, u, y)
+}
+
+fn experiment(t0: f64, dt: f64, u: DMatrix<f64>, y: DMatrix<f64>) -> Result<Experiment> {
+    Experiment::new(t0, dt, u, y).map_err(|source| MmennError::Core {
+        context: "building an experiment",
+        source,
+    })
+}
+
+/// The checks of [`table_to_experiment`] in its order (time column, then each input —
+/// present and complete —, then each output present): `t0`, `dt` and the column indices
+/// of the inputs and of the outputs.
+fn checked_channels(
+    table: &Table,
+    inputs: &[String],
+    outputs: &[String],
+) -> Result<(f64, f64, Vec<usize>, Vec<usize>)> {
     let t_col = table
         .column_index("t")
         .ok_or_else(|| table.err(1, None, CsvProblem::NoTimeColumn))?;
     let (t0, dt) = check_time(table, &table.columns[t_col])?;
     let n = table.lines.len();
-    let pick = |names: &[String], complete: bool| -> Result<DMatrix<f64>> {
-        let mut m = DMatrix::zeros(names.len(), n);
-        for (i, name) in names.iter().enumerate() {
+    let find = |names: &[String], complete: bool| -> Result<Vec<usize>> {
+        let mut js = Vec::with_capacity(names.len());
+        for name in names {
             let j = table
                 .column_index(name)
                 .ok_or_else(|| table.err(1, None, CsvProblem::MissingChannel(name.clone())))?;
-            for k in 0..n {
-                let v = table.columns[j][k];
-                if complete && v.is_nan() {
-                    return Err(table.err(
-                        table.lines[k],
-                        Some(name),
-                        CsvProblem::Missing { kind: "an input" },
-                    ));
-                }
-                m[(i, k)] = v;
+            if complete && let Some(k) = table.columns[j][..n].iter().position(|v| v.is_nan()) {
+                return Err(table.err(
+                    table.lines[k],
+                    Some(name),
+                    CsvProblem::Missing { kind: "an input" },
+                ));
             }
+            js.push(j);
         }
-        Ok(m)
+        Ok(js)
     };
-    let u = pick(inputs, true)?;
-    let y = pick(outputs, false)?;
-    Experiment::new(t0, dt, u, y).map_err(|source| MmennError::Core {
-        context: "building an experiment",
-        source,
-    })
+    let ju = find(inputs, true)?;
+    let jy = find(outputs, false)?;
+    Ok((t0, dt, ju, jy))
 }
 
 /// Read several CSV files (one experiment each) into a dataset with the given input and
@@ -695,8 +730,7 @@ pub fn read_dataset(
 ) -> Result<Dataset> {
     let mut experiments = Vec::with_capacity(paths.len());
     for p in paths {
-        let table = read_table(p)?;
-        experiments.push(table_to_experiment(&table, inputs, outputs)?);
+        experiments.push(table_into_experiment(read_table(p)?, inputs, outputs)?);
     }
     let channel = |n: &String| Channel {
         name: n.clone(),
@@ -747,7 +781,8 @@ pub fn read_with_validation(
 }
 
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
-/// Numbers are the shortest text that reads back to the same bits (ryu).
+/// Numbers are the shortest text that reads back to the same bits, written as ryu writes
+/// them ([`push_shortest`]).
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
     let mut out = Vec::new();
     // Writing into a Vec cannot fail.
@@ -770,7 +805,7 @@ pub fn write_csv_to(
     // A shortest round-trip number is at most 24 characters; most are about 20.
     let chunk = rows.min(CSV_CHUNK_ROWS);
     let mut s: Vec<u8> = Vec::with_capacity(chunk * (columns.len() * 25 + 1) + 64);
-    let mut buf = ryu::Buffer::new();
+    let mut buf = zmij::Buffer::new();
     s.extend_from_slice(header.join(",").as_bytes());
     s.push(b'\n');
     for k in 0..rows {
@@ -780,9 +815,7 @@ pub fn write_csv_to(
             }
             let v = c[k];
             if !v.is_nan() {
-                // The shortest text that reads back to the same bits (ryu; `inf`, `-inf`
-                // for infinities), formatted without a string per value.
-                s.extend_from_slice(buf.format(v).as_bytes());
+                push_shortest(&mut s, &mut buf, v);
             }
         }
         s.push(b'\n');
@@ -792,6 +825,21 @@ pub fn write_csv_to(
         }
     }
     out.write_all(&s)
+}
+
+/// Append the shortest text that reads back to the same bits of `v` (not NaN; `inf`,
+/// `-inf` for infinities), byte for byte as ryu writes it (the files written before
+/// used ryu): zmij finds the same digits faster but writes a positive exponent as `e+N`
+/// where ryu writes `eN`, so the `+` is dropped.
+fn push_shortest(s: &mut Vec<u8>, buf: &mut zmij::Buffer, v: f64) {
+    let text = buf.format(v).as_bytes();
+    match text.iter().position(|&b| b == b'+') {
+        Some(plus) => {
+            s.extend_from_slice(&text[..plus]);
+            s.extend_from_slice(&text[plus + 1..]);
+        }
+        None => s.extend_from_slice(text),
+    }
 }
 
 /// Write columns to a CSV file atomically (see [`format_csv`]).

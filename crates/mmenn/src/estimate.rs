@@ -292,20 +292,64 @@ fn row(m: &nalgebra::DMatrix<f64>, i: usize) -> Vec<f64> {
     m.row(i).iter().copied().collect()
 }
 
+/// Row `i` of a matrix as a shared column, written straight into its one allocation
+/// (a mapped range has a known length, so nothing is collected twice).
+fn shared_row(m: &nalgebra::DMatrix<f64>, i: usize) -> Arc<[f64]> {
+    let (rows, data) = (m.nrows(), m.as_slice());
+    (0..m.ncols()).map(|k| data[i + k * rows]).collect()
+}
+
+/// One experiment's estimate as columns, made once and shared by `estimate.csv` and the
+/// figures: sample times, every state, and `d̂` per corrected state at the samples (the
+/// piece that starts at the sample, as [`sysid_core::ExperimentEstimate::corrections_at_samples`]).
+struct EstimateColumns {
+    t: Arc<[f64]>,
+    states: Vec<Arc<[f64]>>,
+    corrections: Vec<Arc<[f64]>>,
+}
+
+impl EstimateColumns {
+    fn of(e: &sysid_core::ExperimentEstimate) -> Self {
+        let n = e.len();
+        let pieces = e.corrections.ncols();
+        let (q, c) = (e.corrections.nrows(), e.corrections.as_slice());
+        let correction = |i: usize| -> Arc<[f64]> {
+            (0..n)
+                .map(|k| {
+                    if pieces == 0 {
+                        0.0
+                    } else {
+                        c[i + (k * e.substeps).min(pieces - 1) * q]
+                    }
+                })
+                .collect()
+        };
+        Self {
+            t: (0..n).map(|k| e.t0 + k as f64 * e.dt).collect(),
+            states: (0..e.states.nrows())
+                .map(|i| shared_row(&e.states, i))
+                .collect(),
+            corrections: (0..q).map(correction).collect(),
+        }
+    }
+}
+
 /// Write one experiment's estimate as CSV: `t`, every state, `d_<state>` per corrected state.
 pub fn write_estimate_csv(path: &Path, est: &MmeEstimate, experiment: usize) -> Result<()> {
-    let e = &est.experiments[experiment];
-    let t: Vec<f64> = (0..e.len()).map(|k| e.t0 + k as f64 * e.dt).collect();
-    let d = e.corrections_at_samples();
+    write_columns_csv(
+        path,
+        est,
+        &EstimateColumns::of(&est.experiments[experiment]),
+    )
+}
+
+fn write_columns_csv(path: &Path, est: &MmeEstimate, cols: &EstimateColumns) -> Result<()> {
     let mut header = vec!["t".to_string()];
     header.extend(est.state_names.iter().cloned());
     header.extend(est.correction_names.iter().map(|c| format!("d_{c}")));
-    let cols: Vec<Vec<f64>> = (0..e.states.nrows())
-        .map(|i| row(&e.states, i))
-        .chain((0..d.nrows()).map(|i| row(&d, i)))
-        .collect();
-    let mut refs: Vec<&[f64]> = vec![&t];
-    refs.extend(cols.iter().map(Vec::as_slice));
+    let mut refs: Vec<&[f64]> = vec![&cols.t];
+    refs.extend(cols.states.iter().map(|c| &c[..]));
+    refs.extend(cols.corrections.iter().map(|c| &c[..]));
     write_csv(path, &header, &refs)
 }
 
@@ -330,12 +374,24 @@ pub fn estimate_figures_with_target(
     dir: &Path,
     target_ratio: f64,
 ) -> Result<Vec<PathBuf>> {
+    let cols = EstimateColumns::of(&out.estimate.experiments[0]);
+    figures_of(out, data, spec, dir, target_ratio, &cols)
+}
+
+/// [`estimate_figures_with_target`] with the first experiment's columns made already.
+fn figures_of(
+    out: &MmeOutput,
+    data: &Dataset,
+    spec: &ModelSpec,
+    dir: &Path,
+    target_ratio: f64,
+    cols: &EstimateColumns,
+) -> Result<Vec<PathBuf>> {
     let est = &out.estimate;
     let (e, exp) = (&est.experiments[0], &data.experiments()[0]);
     // Every column is copied out of its matrix once and shared by the figures.
-    let t: Arc<[f64]> = exp.times().into();
-    let shared =
-        |m: &nalgebra::DMatrix<f64>, i: usize| -> Arc<[f64]> { m.row(i).iter().copied().collect() };
+    let t = cols.t.clone();
+    let shared = shared_row;
     let unit = |n: &str| {
         spec.unit_of(n)
             .map(|u| format!("{n} ({u})"))
@@ -346,9 +402,7 @@ pub fn estimate_figures_with_target(
         figures.push((name, fig));
         Ok(())
     };
-    let states: Vec<Arc<[f64]>> = (0..e.states.nrows())
-        .map(|i| shared(&e.states, i))
-        .collect();
+    let states = &cols.states;
     let y_hat = spec.linear.c() * &e.states;
     for (i, name) in est.output_names.iter().enumerate() {
         let Ok(j) = data.output_index(name) else {
@@ -385,15 +439,13 @@ pub fn estimate_figures_with_target(
         series: est
             .state_names
             .iter()
-            .zip(&states)
+            .zip(states)
             .map(|(n, x)| Series::line(unit(n), t.clone(), x.clone()))
             .collect(),
         bands: vec![],
     };
     save("states.svg".into(), fig)?;
-    let d = e.corrections_at_samples();
-    let corrections: Vec<Arc<[f64]>> = (0..d.nrows()).map(|i| shared(&d, i)).collect();
-    drop(d);
+    let corrections = &cols.corrections;
     let fig = Figure {
         title: "model correction d̂(t)".into(),
         x_label: "t (s)".into(),
@@ -401,7 +453,7 @@ pub fn estimate_figures_with_target(
         series: est
             .correction_names
             .iter()
-            .zip(&corrections)
+            .zip(corrections)
             .map(|(n, dv)| Series::line(unit(&format!("d_{n}")), t.clone(), dv.clone()))
             .collect(),
         bands: vec![],
@@ -417,7 +469,7 @@ pub fn estimate_figures_with_target(
                 .map(|j| (n.clone(), shared(exp.inputs(), j)))
         })
         .collect();
-    for (cname, dv) in est.correction_names.iter().zip(&corrections) {
+    for (cname, dv) in est.correction_names.iter().zip(corrections) {
         let against = est
             .state_names
             .iter()
@@ -567,7 +619,7 @@ pub fn run_estimate_with(
         &spec.units,
     )?;
     let read = clock.elapsed().as_secs_f64();
-    let mut outcome = compute_estimate(&data, &spec, opts, robust)?;
+    let mut outcome = compute_estimate_owned(data, &spec, opts, robust)?;
     outcome
         .summary
         .phase_seconds
@@ -599,9 +651,19 @@ pub fn compute_estimate(
     opts: &EstimateOptions,
     robust: Option<&mme_core::RobustConfig>,
 ) -> Result<EstimateOutcome> {
+    compute_estimate_owned(data.clone(), spec, opts, robust)
+}
+
+/// [`compute_estimate`] keeping `data` (no copy of the record).
+fn compute_estimate_owned(
+    data: Dataset,
+    spec: &ModelSpec,
+    opts: &EstimateOptions,
+    robust: Option<&mme_core::RobustConfig>,
+) -> Result<EstimateOutcome> {
     let mut phases = BTreeMap::new();
     // MME follows the model file's inputs-between-samples setting.
-    let data = data.clone().with_intersample(spec.intersample);
+    let data = data.with_intersample(spec.intersample);
     let clock = Instant::now();
     let config = mme_config(spec, opts);
     let (result, outliers, robust_passes) = match robust {
@@ -686,15 +748,18 @@ pub fn write_estimate(o: &EstimateOutcome, out: &Path) -> Result<EstimateSummary
     ensure_dir(out)?;
     let est = &o.output.estimate;
     let mut summary = o.summary.clone();
-    // The CSV files and the figures are independent: written side by side.
+    // The CSV files and the figures are independent: written side by side, from one
+    // set of columns for the first experiment.
+    let first = EstimateColumns::of(&est.experiments[0]);
     let (csvs, drawn) = rayon::join(
         || -> Result<()> {
-            for i in 0..est.experiments.len() {
+            write_columns_csv(&out.join(estimate_csv_name(0)), est, &first)?;
+            for i in 1..est.experiments.len() {
                 write_estimate_csv(&out.join(estimate_csv_name(i)), est, i)?;
             }
             Ok(())
         },
-        || estimate_figures_with_target(&o.output, &o.data, &o.spec, out, o.target_ratio),
+        || figures_of(&o.output, &o.data, &o.spec, out, o.target_ratio, &first),
     );
     csvs?;
     let mut figures = Vec::new();
