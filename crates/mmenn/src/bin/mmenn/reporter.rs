@@ -13,12 +13,14 @@ enum Shown {
 
 /// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
 /// every few seconds of a task's progress reports (a task shorter than that prints
-/// nothing, so a failing command's stderr stays its one error line); nothing with
+/// nothing, so a failing command's stderr stays its one error line), and for a step
+/// that reports nothing while it runs (a `stage`, such as MME's `W` search) a line from
+/// a watcher thread every few seconds saying how long it has been running; nothing with
 /// `--quiet`.
 pub(crate) struct Reporter {
     quiet: bool,
     terminal: bool,
-    shown: std::sync::Mutex<Shown>,
+    shown: std::sync::Arc<std::sync::Mutex<Shown>>,
 }
 
 /// Seconds between plain progress lines when stderr is not a terminal.
@@ -30,10 +32,38 @@ const WORTH_A_LINE_SECONDS: u64 = 2;
 impl Reporter {
     pub(crate) fn new(quiet: bool) -> Self {
         use std::io::IsTerminal;
+        let terminal = std::io::stderr().is_terminal();
+        let shown = std::sync::Arc::new(std::sync::Mutex::new(Shown::Nothing));
+        if !quiet && !terminal {
+            // The watcher ends with the process; it only reads the clock and prints.
+            let watched = std::sync::Arc::clone(&shown);
+            let _ = std::thread::Builder::new()
+                .name("progress lines".into())
+                .spawn(move || Self::watch(&watched));
+        }
         Self {
             quiet,
-            terminal: std::io::stderr().is_terminal(),
-            shown: std::sync::Mutex::new(Shown::Nothing),
+            terminal,
+            shown,
+        }
+    }
+
+    /// Once a second: a line for the task shown in plain lines when it has printed
+    /// nothing for [`LINE_EVERY_SECONDS`] (no report came in that time).
+    #[allow(clippy::print_stderr)]
+    fn watch(shown: &std::sync::Mutex<Shown>) {
+        loop {
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            let Ok(mut shown) = shown.lock() else {
+                return;
+            };
+            if let Shown::Lines(task, start, last, printed) = &mut *shown
+                && last.elapsed().as_secs() >= LINE_EVERY_SECONDS
+            {
+                *last = std::time::Instant::now();
+                *printed = true;
+                eprintln!("{task}: running for {:.0} s", start.elapsed().as_secs_f64());
+            }
         }
     }
 
