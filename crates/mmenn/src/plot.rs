@@ -652,6 +652,38 @@ mod tests {
         }
     }
 
+    /// The saturating cast gives `floor(v).max(0)` clamped to the last cell, as the
+    /// `floor` call it replaced, on negative, fractional, integral, huge, infinite and
+    /// NaN values.
+    #[test]
+    fn cell_index_is_the_clamped_floor() {
+        let values = [
+            -1e300,
+            -3.5,
+            -1.0,
+            -0.5,
+            -0.0,
+            0.0,
+            0.25,
+            0.999_999_999_999_999_9,
+            1.0,
+            2.5,
+            299.0,
+            299.999,
+            300.0,
+            1e20,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for n in [1, 7, 300] {
+            for v in values {
+                let floor = (v.floor().max(0.0) as usize).min(n - 1);
+                assert_eq!(cell_index(v, n), floor, "v = {v}, n = {n}");
+            }
+        }
+    }
+
     #[test]
     fn decimation_keeps_every_column_extreme_in_order() {
         let n = 200_000;
