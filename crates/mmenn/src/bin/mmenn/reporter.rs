@@ -23,8 +23,23 @@ pub(crate) struct Reporter {
     shown: std::sync::Arc<std::sync::Mutex<Shown>>,
 }
 
-/// Seconds between plain progress lines when stderr is not a terminal.
+/// Seconds between plain progress lines when stderr is not a terminal, in a task's
+/// first minute; after that a line every [`LATER_LINE_EVERY_SECONDS`].
 const LINE_EVERY_SECONDS: u64 = 5;
+
+/// Seconds between plain progress lines of a task running for over a minute.
+const LATER_LINE_EVERY_SECONDS: u64 = 30;
+
+/// Whether a plain line is due for a task that started at `start` and last printed (or
+/// started) at `last`.
+fn line_due(start: std::time::Instant, last: std::time::Instant) -> bool {
+    let every = if start.elapsed().as_secs() < 60 {
+        LINE_EVERY_SECONDS
+    } else {
+        LATER_LINE_EVERY_SECONDS
+    };
+    last.elapsed().as_secs() >= every
+}
 
 /// A finished task gets a "done in …" line when it took at least this long.
 const WORTH_A_LINE_SECONDS: u64 = 2;
@@ -49,7 +64,7 @@ impl Reporter {
     }
 
     /// Once a second: a line for the task shown in plain lines when it has printed
-    /// nothing for [`LINE_EVERY_SECONDS`] (no report came in that time).
+    /// nothing for a while ([`line_due`]; no report came in that time).
     #[allow(clippy::print_stderr)]
     fn watch(shown: &std::sync::Mutex<Shown>) {
         loop {
@@ -58,7 +73,7 @@ impl Reporter {
                 return;
             };
             if let Shown::Lines(task, start, last, printed) = &mut *shown
-                && last.elapsed().as_secs() >= LINE_EVERY_SECONDS
+                && line_due(*start, *last)
             {
                 *last = std::time::Instant::now();
                 *printed = true;
@@ -120,8 +135,8 @@ impl mmenn::progress::ProgressSink for Reporter {
                 b.set_position(p.done as u64);
                 b.set_message(p.note.clone());
             }
-            Shown::Lines(_, _, last, printed) => {
-                if last.elapsed().as_secs() >= LINE_EVERY_SECONDS {
+            Shown::Lines(_, start, last, printed) => {
+                if line_due(*start, *last) {
                     *last = std::time::Instant::now();
                     *printed = true;
                     let of = p.total.map(|n| format!(" of {n}")).unwrap_or_default();
