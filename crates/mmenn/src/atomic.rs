@@ -64,12 +64,26 @@ pub fn clean_stale_temps(dir: &Path, only: Option<&str>) -> usize {
     removed
 }
 
+/// Whether `dir` is a [`StagedDir`] staging folder of this process (`.NAME.PID.staging`
+/// with our PID): nobody else reads it, and it is put in place by one rename as a whole.
+fn is_own_staging(dir: &Path) -> bool {
+    dir.file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| temp_parts(n, &["staging"]))
+        .is_some_and(|(_, pid, _)| pid == std::process::id())
+}
+
 /// Write `bytes` to `path` atomically (temp file + fsync + rename in the same directory).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic_with(path, |f| f.write_all(bytes))
 }
 
 /// [`write_atomic`] with the contents streamed by `fill` into the temporary file.
+///
+/// Directly inside this process's own staging folder (see [`StagedDir`]) the file is
+/// written in place and fsynced, without a temporary name and a rename: the folder is
+/// private until [`StagedDir::commit`] renames it as a whole, which is the atomic step
+/// (the fsync makes the contents durable before that rename).
 pub fn write_atomic_with(
     path: &Path,
     fill: impl FnOnce(&mut std::fs::File) -> std::io::Result<()>,
@@ -78,6 +92,18 @@ pub fn write_atomic_with(
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),
     };
+    let io = |source| MmennError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    if is_own_staging(&dir) {
+        let result = (|| {
+            let mut f = std::fs::File::create(path)?;
+            fill(&mut f)?;
+            f.sync_all()
+        })();
+        return result.map_err(io);
+    }
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -85,10 +111,6 @@ pub fn write_atomic_with(
     // Leftovers of killed writers of the same file go first.
     clean_stale_temps(&dir, Some(&name));
     let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let io = |source| MmennError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         fill(&mut f)?;
@@ -379,6 +401,36 @@ mod tests {
             .count();
         assert_eq!(leftovers, 0);
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Inside this process's staging folder files are written in place (no temporary
+    /// name is ever left there, so none can reach the committed folder), and the commit
+    /// still delivers every file whole.
+    #[test]
+    fn staged_files_are_written_in_place_and_committed_whole() {
+        let root = std::env::temp_dir().join(format!("mmenn-staged-{}", std::process::id()));
+        let target = root.join("out");
+        let staged = StagedDir::begin(
+            &target,
+            StageOptions {
+                command: "test".into(),
+                ..StageOptions::default()
+            },
+        )
+        .unwrap();
+        assert!(is_own_staging(staged.path()));
+        assert!(!is_own_staging(&root));
+        write_atomic(&staged.path().join("a.txt"), b"alpha").unwrap();
+        write_atomic_with(&staged.path().join("b.txt"), |f| f.write_all(b"beta")).unwrap();
+        assert_eq!(
+            list_files(staged.path()).unwrap(),
+            vec!["a.txt".to_string(), "b.txt".to_string()]
+        );
+        let files = staged.commit().unwrap();
+        assert_eq!(files, vec!["a.txt".to_string(), "b.txt".to_string()]);
+        assert_eq!(std::fs::read(target.join("a.txt")).unwrap(), b"alpha");
+        assert_eq!(std::fs::read(target.join("b.txt")).unwrap(), b"beta");
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

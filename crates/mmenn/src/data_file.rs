@@ -49,12 +49,26 @@ impl Table {
 
 /// Read a numeric CSV table. Empty cells and `NaN` become NaN; anything else that is not a
 /// number is an error naming line and column.
+///
+/// A plain numeric file is read a block at a time straight into the columns (see
+/// [`parse_table`] for what counts as plain); anything else is read whole and parsed by
+/// the general reader.
 pub fn read_table(path: &Path) -> Result<Table> {
-    let text = std::fs::read(path).map_err(|source| MmennError::Io {
+    let io = |source| MmennError::Io {
         path: path.to_path_buf(),
         source,
-    })?;
-    parse_table(path, &text)
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let len = file.metadata().map_err(io)?.len();
+    if let Some(parsed) = usize::try_from(len)
+        .ok()
+        .and_then(|len| fast::read(&file, len))
+    {
+        return fast_table(path, parsed);
+    }
+    drop(file);
+    let text = std::fs::read(path).map_err(io)?;
+    parse_table_general(path, &text)
 }
 
 /// Parse CSV bytes (see [`read_table`]); `path` is only used in errors.
@@ -66,16 +80,21 @@ pub fn read_table(path: &Path) -> Result<Table> {
 /// again by the general reader below, which produces the same values and the typed
 /// errors naming file, line and column.
 pub fn parse_table(path: &Path, bytes: &[u8]) -> Result<Table> {
-    if let Some((header, columns, lines)) = fast::parse(bytes) {
-        check_header(path, &header)?;
-        return Ok(Table {
-            path: path.to_path_buf(),
-            header,
-            columns,
-            lines,
-        });
+    if let Some(parsed) = fast::parse(bytes) {
+        return fast_table(path, parsed);
     }
     parse_table_general(path, bytes)
+}
+
+/// The table of what the fast path parsed, once its header passes [`check_header`].
+fn fast_table(path: &Path, (header, columns, lines): fast::Parsed) -> Result<Table> {
+    check_header(path, &header)?;
+    Ok(Table {
+        path: path.to_path_buf(),
+        header,
+        columns,
+        lines,
+    })
 }
 
 /// Header checks shared by both parse paths: no empty and no repeated column name.
@@ -98,133 +117,7 @@ fn check_header(path: &Path, header: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// The fast path of [`parse_table`] for plain numeric CSV. Returns `None` (and the
-/// caller falls back to the general reader) for anything it does not handle exactly
-/// as the `csv` crate with `Trim::All` and `f64::from_str` would.
-mod fast {
-    /// Header, columns, file line of each row.
-    pub(super) type Parsed = (Vec<String>, Vec<Vec<f64>>, Vec<usize>);
-
-    /// Files at least this large are parsed on two threads.
-    const PARALLEL_BYTES: usize = 1 << 20;
-
-    /// `csv`'s `Trim::All` trims ASCII whitespace; `\r` and `\n` are left in a cell so
-    /// that a bare carriage return (a record end for `csv`) fails the parse and sends the
-    /// file to the general reader.
-    fn trim(cell: &str) -> &str {
-        cell.trim_matches(|c| c == ' ' || c == '\t' || c == '\x0C')
-    }
-
-    /// One line without its `\n` and one trailing `\r`.
-    fn strip_cr(line: &str) -> &str {
-        line.strip_suffix('\r').unwrap_or(line)
-    }
-
-    pub(super) fn parse(bytes: &[u8]) -> Option<Parsed> {
-        if !bytes.is_ascii() || bytes.contains(&b'"') {
-            return None;
-        }
-        let text = std::str::from_utf8(bytes).ok()?;
-        let (first, body) = match text.find('\n') {
-            Some(i) => (&text[..i], &text[i + 1..]),
-            None => (text, ""),
-        };
-        let first = strip_cr(first);
-        if trim(first).is_empty() || first.contains(['\r', '\x0B']) {
-            // Empty file, leading blank line, a bare CR or a vertical tab (which a
-            // Unicode trim would remove from a name): the general reader decides.
-            return None;
-        }
-        let header: Vec<String> = first.split(',').map(|h| trim(h).to_string()).collect();
-        let width = header.len();
-        let (columns, lines) = if body.len() >= PARALLEL_BYTES {
-            // Split at a line end near the middle; each half counts its own lines.
-            let mid = body.len() / 2;
-            let cut = body[mid..].find('\n').map_or(body.len(), |i| mid + i + 1);
-            let (a, b) = body.split_at(cut);
-            let (ra, rb) = std::thread::scope(|s| {
-                let hb = s.spawn(|| rows(b, width));
-                let ra = rows(a, width);
-                (ra, hb.join().ok().flatten())
-            });
-            let (mut ca, mut la, na) = ra?;
-            let (cb, lb, _) = rb?;
-            for (c, more) in ca.iter_mut().zip(cb) {
-                c.extend_from_slice(&more);
-            }
-            la.extend(lb.into_iter().map(|l| l + na));
-            (ca, la)
-        } else {
-            let (c, l, _) = rows(body, width)?;
-            (c, l)
-        };
-        // File lines are 1-based and the header is line 1.
-        let lines = lines.into_iter().map(|l| l + 2).collect();
-        Some((header, columns, lines))
-    }
-
-    /// Rows of `text` (whole lines): columns, 0-based line index of each row within
-    /// `text`, and the number of lines `text` holds.
-    fn rows(text: &str, width: usize) -> Option<(Vec<Vec<f64>>, Vec<usize>, usize)> {
-        let guess = text
-            .find('\n')
-            .map_or(1, |i| text.len() / (i + 1).max(1) + 16);
-        let mut columns: Vec<Vec<f64>> = (0..width).map(|_| Vec::with_capacity(guess)).collect();
-        let mut lines = Vec::with_capacity(guess);
-        let bytes = text.as_bytes();
-        let mut count = 0;
-        let mut pos = 0;
-        while pos < bytes.len() {
-            let i = count;
-            count += 1;
-            let end = bytes[pos..]
-                .iter()
-                .position(|&b| b == b'\n')
-                .map_or(bytes.len(), |e| pos + e);
-            let line = strip_cr(&text[pos..end]);
-            pos = end + 1;
-            // Cells by one pass over the line's bytes.
-            let lb = line.as_bytes();
-            let mut j = 0;
-            let mut start = 0;
-            let mut blank = true;
-            for at in 0..=lb.len() {
-                if at < lb.len() && lb[at] != b',' {
-                    continue;
-                }
-                if j == width {
-                    return None; // more cells than the header
-                }
-                let cell = trim(&line[start..at]);
-                start = at + 1;
-                let v = if cell.is_empty() {
-                    f64::NAN
-                } else {
-                    blank = false;
-                    let v: f64 = cell.parse().ok()?;
-                    if v.is_infinite() {
-                        return None;
-                    }
-                    v
-                };
-                columns[j].push(v);
-                j += 1;
-            }
-            if j != width || (width == 1 && blank) {
-                if j == 1 && blank && width > 1 {
-                    // Blank line: skipped, as the general reader does.
-                    columns[0].pop();
-                    continue;
-                }
-                // Too few cells, or an empty cell in a one-column file (blank line or
-                // missing value): the general reader decides.
-                return None;
-            }
-            lines.push(i);
-        }
-        Some((columns, lines, count))
-    }
-}
+mod fast;
 
 /// File lines of records by counting `\n` up to each record's first byte. (The `csv`
 /// crate's own line count is one low after a CRLF line end and after an empty line that
@@ -652,37 +545,72 @@ pub fn table_to_experiment(
     inputs: &[String],
     outputs: &[String],
 ) -> Result<Experiment> {
+    let (t0, dt, ju, jy) = checked_channels(table, inputs, outputs)?;
+    let pick = |js: &[usize]| {
+        DMatrix::from_fn(js.len(), table.lines.len(), |i, k| table.columns[js[i]][k])
+    };
+    experiment(t0, dt, pick(&ju), pick(&jy))
+}
+
+/// [`table_to_experiment`] consuming the table: a matrix of one channel takes its
+/// column as it is (no copy), unless the column serves both inputs and outputs.
+pub fn table_into_experiment(
+    mut table: Table,
+    inputs: &[String],
+    outputs: &[String],
+) -> Result<Experiment> {
+    let (t0, dt, ju, jy) = checked_channels(&table, inputs, outputs)?;
+    let n = table.lines.len();
+    let shared = ju.iter().any(|j| jy.contains(j));
+    let mut pick = |js: &[usize]| match js {
+        [j] if !shared => DMatrix::from_vec(1, n, std::mem::take(&mut table.columns[*j])),
+        _ => DMatrix::from_fn(js.len(), n, |i, k| table.columns[js[i]][k]),
+    };
+    let u = pick(&ju);
+    let y = pick(&jy);
+    experiment(t0, dt, u, y)
+}
+
+fn experiment(t0: f64, dt: f64, u: DMatrix<f64>, y: DMatrix<f64>) -> Result<Experiment> {
+    Experiment::new(t0, dt, u, y).map_err(|source| MmennError::Core {
+        context: "building an experiment",
+        source,
+    })
+}
+
+/// The checks of [`table_to_experiment`] in its order (time column, then each input —
+/// present and complete —, then each output present): `t0`, `dt` and the column indices
+/// of the inputs and of the outputs.
+fn checked_channels(
+    table: &Table,
+    inputs: &[String],
+    outputs: &[String],
+) -> Result<(f64, f64, Vec<usize>, Vec<usize>)> {
     let t_col = table
         .column_index("t")
         .ok_or_else(|| table.err(1, None, CsvProblem::NoTimeColumn))?;
     let (t0, dt) = check_time(table, &table.columns[t_col])?;
     let n = table.lines.len();
-    let pick = |names: &[String], complete: bool| -> Result<DMatrix<f64>> {
-        let mut m = DMatrix::zeros(names.len(), n);
-        for (i, name) in names.iter().enumerate() {
+    let find = |names: &[String], complete: bool| -> Result<Vec<usize>> {
+        let mut js = Vec::with_capacity(names.len());
+        for name in names {
             let j = table
                 .column_index(name)
                 .ok_or_else(|| table.err(1, None, CsvProblem::MissingChannel(name.clone())))?;
-            for k in 0..n {
-                let v = table.columns[j][k];
-                if complete && v.is_nan() {
-                    return Err(table.err(
-                        table.lines[k],
-                        Some(name),
-                        CsvProblem::Missing { kind: "an input" },
-                    ));
-                }
-                m[(i, k)] = v;
+            if complete && let Some(k) = table.columns[j][..n].iter().position(|v| v.is_nan()) {
+                return Err(table.err(
+                    table.lines[k],
+                    Some(name),
+                    CsvProblem::Missing { kind: "an input" },
+                ));
             }
+            js.push(j);
         }
-        Ok(m)
+        Ok(js)
     };
-    let u = pick(inputs, true)?;
-    let y = pick(outputs, false)?;
-    Experiment::new(t0, dt, u, y).map_err(|source| MmennError::Core {
-        context: "building an experiment",
-        source,
-    })
+    let ju = find(inputs, true)?;
+    let jy = find(outputs, false)?;
+    Ok((t0, dt, ju, jy))
 }
 
 /// Read several CSV files (one experiment each) into a dataset with the given input and
@@ -695,8 +623,7 @@ pub fn read_dataset(
 ) -> Result<Dataset> {
     let mut experiments = Vec::with_capacity(paths.len());
     for p in paths {
-        let table = read_table(p)?;
-        experiments.push(table_to_experiment(&table, inputs, outputs)?);
+        experiments.push(table_into_experiment(read_table(p)?, inputs, outputs)?);
     }
     let channel = |n: &String| Channel {
         name: n.clone(),
@@ -747,7 +674,8 @@ pub fn read_with_validation(
 }
 
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
-/// Numbers are the shortest text that reads back to the same bits (ryu).
+/// Numbers are the shortest text that reads back to the same bits, written as ryu writes
+/// them ([`push_shortest`]).
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
     let mut out = Vec::new();
     // Writing into a Vec cannot fail.
@@ -770,7 +698,7 @@ pub fn write_csv_to(
     // A shortest round-trip number is at most 24 characters; most are about 20.
     let chunk = rows.min(CSV_CHUNK_ROWS);
     let mut s: Vec<u8> = Vec::with_capacity(chunk * (columns.len() * 25 + 1) + 64);
-    let mut buf = ryu::Buffer::new();
+    let mut buf = zmij::Buffer::new();
     s.extend_from_slice(header.join(",").as_bytes());
     s.push(b'\n');
     for k in 0..rows {
@@ -780,9 +708,7 @@ pub fn write_csv_to(
             }
             let v = c[k];
             if !v.is_nan() {
-                // The shortest text that reads back to the same bits (ryu; `inf`, `-inf`
-                // for infinities), formatted without a string per value.
-                s.extend_from_slice(buf.format(v).as_bytes());
+                push_shortest(&mut s, &mut buf, v);
             }
         }
         s.push(b'\n');
@@ -792,6 +718,27 @@ pub fn write_csv_to(
         }
     }
     out.write_all(&s)
+}
+
+/// Append the shortest text that reads back to the same bits of `v` (not NaN; `inf`,
+/// `-inf` for infinities), byte for byte as ryu writes it (the files written before
+/// used ryu): zmij finds the same digits faster but writes a positive exponent as `e+N`
+/// where ryu writes `eN`, so the `+` is dropped.
+fn push_shortest(s: &mut Vec<u8>, buf: &mut zmij::Buffer, v: f64) {
+    let text = buf.format(v).as_bytes();
+    // Both write an exponent only below 1e-5 and from 1e16 up (the test against ryu
+    // covers both sides of either switch); a positive one is all that differs.
+    if v.abs() < 1e16 {
+        s.extend_from_slice(text);
+        return;
+    }
+    match text.iter().position(|&b| b == b'+') {
+        Some(plus) => {
+            s.extend_from_slice(&text[..plus]);
+            s.extend_from_slice(&text[plus + 1..]);
+        }
+        None => s.extend_from_slice(text),
+    }
 }
 
 /// Write columns to a CSV file atomically (see [`format_csv`]).

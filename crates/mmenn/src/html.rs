@@ -72,14 +72,16 @@ pub fn markdown_to_html(markdown: &str, image: &dyn Fn(&str) -> Option<String>) 
         .find_map(|l| l.strip_prefix("# "))
         .unwrap_or("report")
         .trim();
-    let mut body = String::new();
-    render_blocks(markdown, image, &mut body);
-    format!(
+    // One string: the head, the body rendered straight after it, the end.
+    let mut html = format!(
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <title>{}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n{body}</body>\n</html>\n",
+         <title>{}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n",
         escape(&strip_inline(title))
-    )
+    );
+    render_blocks(markdown, image, &mut html);
+    html.push_str("</body>\n</html>\n");
+    html
 }
 
 /// `&`, `<`, `>`, `"` and `'` as entities.
@@ -291,12 +293,19 @@ fn embed(alt: &str, src: &str, image: &dyn Fn(&str) -> Option<String>) -> String
     match image(src) {
         Some(svg) if svg_is_passive(&svg) => {
             let start = svg.find("<svg").unwrap_or(0);
-            let mut s = svg[start..].trim_end().to_string();
+            let text = svg[start..].trim_end();
             // A title for screen readers, inside the root element.
-            if let Some(end) = s.find('>') {
-                s.insert_str(end + 1, &format!("<title>{}</title>", escape(alt)));
+            match text.find('>') {
+                Some(end) => {
+                    let title = format!("<title>{}</title>", escape(alt));
+                    let mut s = String::with_capacity(text.len() + title.len());
+                    s.push_str(&text[..=end]);
+                    s.push_str(&title);
+                    s.push_str(&text[end + 1..]);
+                    s
+                }
+                None => text.to_string(),
             }
-            s
         }
         Some(svg) => format!(
             "<img alt=\"{}\" src=\"data:image/svg+xml;base64,{}\">",

@@ -193,7 +193,7 @@ pub fn decimate_points(
     let width = x1 - x0;
     let column = |x: f64| -> usize {
         if width > 0.0 && width.is_finite() {
-            (((x - x0) / width * columns as f64).floor().max(0.0) as usize).min(columns - 1)
+            cell_index((x - x0) / width * columns as f64, columns)
         } else {
             0
         }
@@ -271,10 +271,17 @@ pub fn decimate_points(
     out
 }
 
+/// `floor(v)` clamped to `0..n` (`n ≥ 1`; NaN gives 0). A float-to-integer cast
+/// truncates toward zero and saturates, so it equals `floor(v).max(0)` for every `v`
+/// without a call to `floor`.
+fn cell_index(v: f64, n: usize) -> usize {
+    (v as usize).min(n - 1)
+}
+
 /// Bin points (finite, any order) on a grid over `[x0, x1] × [y0, y1]` with `cols × rows`
 /// cells and keep, per occupied cell, the first point that fell in it (in data order).
 fn bin_points(
-    pts: &[(f64, f64)],
+    pts: impl Iterator<Item = (f64, f64)>,
     (x0, x1): (f64, f64),
     (y0, y1): (f64, f64),
     (cols, rows): (usize, usize),
@@ -282,14 +289,14 @@ fn bin_points(
     let cell = |v: f64, lo: f64, hi: f64, n: usize| -> usize {
         let w = hi - lo;
         if w > 0.0 && w.is_finite() {
-            (((v - lo) / w * n as f64).floor().max(0.0) as usize).min(n - 1)
+            cell_index((v - lo) / w * n as f64, n)
         } else {
             0
         }
     };
     let mut seen = vec![false; cols * rows];
     let mut out = Vec::new();
-    for &(x, y) in pts {
+    for (x, y) in pts {
         let k = cell(y, y0, y1, rows) * cols + cell(x, x0, x1, cols);
         if !seen[k] {
             seen[k] = true;
@@ -308,18 +315,37 @@ pub fn thin_points(
     plot_px: (u32, u32),
     budget: usize,
 ) -> Vec<Vec<(f64, f64)>> {
-    if series.iter().map(|s| s.len()).sum::<usize>() <= budget {
-        return series.iter().map(|s| s.to_vec()).collect();
+    thin_with(
+        series.len(),
+        |i| series[i].iter().copied(),
+        xr,
+        yr,
+        plot_px,
+        budget,
+    )
+}
+
+/// [`thin_points`] over `n` series whose points `points(i)` gives afresh on each call
+/// (each pass reads them again; no series is copied whole unless it fits).
+fn thin_with<I: Iterator<Item = (f64, f64)>>(
+    n: usize,
+    points: impl Fn(usize) -> I,
+    xr: (f64, f64),
+    yr: (f64, f64),
+    plot_px: (u32, u32),
+    budget: usize,
+) -> Vec<Vec<(f64, f64)>> {
+    if (0..n).map(|i| points(i).count()).sum::<usize>() <= budget {
+        return (0..n).map(|i| points(i).collect()).collect();
     }
     let mut cell_px = MIN_CELL_PX;
     loop {
         let cols = ((f64::from(plot_px.0) / cell_px).ceil() as usize).max(1);
         let rows = ((f64::from(plot_px.1) / cell_px).ceil() as usize).max(1);
-        let binned: Vec<Vec<(f64, f64)>> = series
-            .iter()
-            .map(|s| bin_points(s, xr, yr, (cols, rows)))
+        let binned: Vec<Vec<(f64, f64)>> = (0..n)
+            .map(|i| bin_points(points(i), xr, yr, (cols, rows)))
             .collect();
-        if binned.iter().map(Vec::len).sum::<usize>() <= budget || cols * rows <= series.len() {
+        if binned.iter().map(Vec::len).sum::<usize>() <= budget || cols * rows <= n {
             return binned;
         }
         cell_px *= 1.5;
@@ -375,23 +401,22 @@ impl Figure {
                 .y_desc(&self.y_label)
                 .draw()
                 .map_err(draw_err)?;
-            // Only point series are held as point lists (thinning passes over them more
-            // than once); lines are reduced as their points come.
-            let finite_points: Vec<Vec<(f64, f64)>> = self
+            // Point series are thinned by passes over their columns (no copy of the
+            // points); lines are reduced as their points come.
+            let point_series: Vec<&Series> = self
                 .series
                 .iter()
                 .filter(|s| s.mark == Mark::Points)
-                .map(|s| finite(s).collect())
                 .collect();
             let plot_px = chart.plotting_area().dim_in_pixel();
-            let thinned = thin_points(
-                &finite_points.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+            let thinned = thin_with(
+                point_series.len(),
+                |i| finite(point_series[i]),
                 (x0, x1),
                 (y0, y1),
                 plot_px,
                 DOT_BUDGET,
             );
-            drop(finite_points);
             let mut thinned = thinned.into_iter();
             for (i, s) in self.series.iter().enumerate() {
                 let color = PALETTE[s.colour.unwrap_or(i) % PALETTE.len()];
@@ -623,6 +648,38 @@ mod tests {
             assert!(svg.len() < 1_000_000, "{}: {} bytes", fig.title, svg.len());
             for s in &fig.series {
                 assert!(svg.contains(&s.label));
+            }
+        }
+    }
+
+    /// The saturating cast gives `floor(v).max(0)` clamped to the last cell, as the
+    /// `floor` call it replaced, on negative, fractional, integral, huge, infinite and
+    /// NaN values.
+    #[test]
+    fn cell_index_is_the_clamped_floor() {
+        let values = [
+            -1e300,
+            -3.5,
+            -1.0,
+            -0.5,
+            -0.0,
+            0.0,
+            0.25,
+            0.999_999_999_999_999_9,
+            1.0,
+            2.5,
+            299.0,
+            299.999,
+            300.0,
+            1e20,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ];
+        for n in [1, 7, 300] {
+            for v in values {
+                let floor = (v.floor().max(0.0) as usize).min(n - 1);
+                assert_eq!(cell_index(v, n), floor, "v = {v}, n = {n}");
             }
         }
     }

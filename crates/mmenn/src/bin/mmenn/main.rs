@@ -133,7 +133,7 @@ fn parse_param(text: &str) -> Result<(String, f64)> {
 }
 
 #[allow(clippy::print_stdout)]
-fn simulate(args: SimulateArgs, force: bool) -> Result<()> {
+fn simulate(args: SimulateArgs, force: bool, progress: &Reporter) -> Result<()> {
     if args.list {
         for s in plants::systems() {
             println!(
@@ -178,7 +178,9 @@ fn simulate(args: SimulateArgs, force: bool) -> Result<()> {
             protect: vec!["data.csv".into(), "truth.csv".into(), "model.toml".into()],
         },
     )?;
-    mmenn::simulate::run_simulate(&request, staged.path())?;
+    mmenn::progress::stage(progress, "simulation", || {
+        mmenn::simulate::run_simulate(&request, staged.path()).map_err(anyhow::Error::from)
+    })?;
     staged.commit()?;
     println!(
         "wrote {}, {}, {}",
@@ -423,7 +425,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     check_mme_converged("fit", s.mme_termination, &args.out)
 }
 
-fn predict(args: PredictArgs, force: bool) -> Result<()> {
+fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     let x0 = match args.x0 {
         Some(v) => mmenn::fit::InitialChoice::Given(v),
         None => mmenn::fit::InitialChoice::Fit,
@@ -435,7 +437,10 @@ fn predict(args: PredictArgs, force: bool) -> Result<()> {
         horizon: args.horizon,
     };
     let data = prepared(std::slice::from_ref(&args.data), &args.prep, staged.path())?;
-    let s = mmenn::predict::run_predict_with(&args.model, &data[0], &opts, staged.path())?;
+    let s = mmenn::progress::stage(progress, "prediction", || {
+        mmenn::predict::run_predict_with(&args.model, &data[0], &opts, staged.path())
+            .map_err(anyhow::Error::from)
+    })?;
     staged.commit()?;
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
     if let Some(k) = &s.k_step {
@@ -611,7 +616,7 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
 }
 
 #[allow(clippy::print_stdout)]
-fn monitor(cmd: MonitorCommand, force: bool) -> Result<()> {
+fn monitor(cmd: MonitorCommand, force: bool, progress: &Reporter) -> Result<()> {
     match cmd {
         MonitorCommand::Train(a) => {
             let mut classes = Vec::new();
@@ -633,7 +638,10 @@ fn monitor(cmd: MonitorCommand, force: bool) -> Result<()> {
             let mut inputs: Vec<&PathBuf> = classes.iter().flat_map(|(_, f)| f).collect();
             inputs.push(&a.model);
             let staged = stage(&a.out, "monitor train", force, &inputs)?;
-            let m = mmenn::monitor::train_monitor(&classes, &a.model, &opts, staged.path())?;
+            let m = mmenn::progress::stage(progress, "monitor training", || {
+                mmenn::monitor::train_monitor(&classes, &a.model, &opts, staged.path())
+                    .map_err(anyhow::Error::from)
+            })?;
             staged.commit()?;
             println!(
                 "trained on {} records; classify will use {} with {}",
@@ -651,7 +659,9 @@ fn monitor(cmd: MonitorCommand, force: bool) -> Result<()> {
             }
         }
         MonitorCommand::Classify(a) => {
-            let c = mmenn::monitor::classify(&a.monitor, &a.data)?;
+            let c = mmenn::progress::stage(progress, "classification", || {
+                mmenn::monitor::classify(&a.monitor, &a.data).map_err(anyhow::Error::from)
+            })?;
             println!(
                 "condition: {} ({}; {})",
                 c.condition, c.classifier, c.score_kind
@@ -690,15 +700,15 @@ fn main() -> ExitCode {
     let force = cli.force;
     let progress = Reporter::new(cli.quiet);
     let result = match cli.command {
-        Command::Simulate(a) => simulate(a, force),
+        Command::Simulate(a) => simulate(a, force, &progress),
         Command::Estimate(a) => estimate(a, force, &progress),
         Command::Fit(a) => fit(a, force, &progress),
-        Command::Predict(a) => predict(a, force),
+        Command::Predict(a) => predict(a, force, &progress),
         Command::Show(a) => show(a),
         Command::Greyest(a) => greyest(a, force, &progress),
         Command::Compare(a) => compare(a, force, &progress),
         Command::Discover(a) => discover(a, force, &progress),
-        Command::Monitor(c) => monitor(c, force),
+        Command::Monitor(c) => monitor(c, force, &progress),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -13,16 +13,33 @@ enum Shown {
 
 /// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
 /// every few seconds of a task's progress reports (a task shorter than that prints
-/// nothing, so a failing command's stderr stays its one error line); nothing with
+/// nothing, so a failing command's stderr stays its one error line), and for a step
+/// that reports nothing while it runs (a `stage`, such as MME's `W` search) a line from
+/// a watcher thread every few seconds saying how long it has been running; nothing with
 /// `--quiet`.
 pub(crate) struct Reporter {
     quiet: bool,
     terminal: bool,
-    shown: std::sync::Mutex<Shown>,
+    shown: std::sync::Arc<std::sync::Mutex<Shown>>,
 }
 
-/// Seconds between plain progress lines when stderr is not a terminal.
+/// Seconds between plain progress lines when stderr is not a terminal, in a task's
+/// first minute; after that a line every [`LATER_LINE_EVERY_SECONDS`].
 const LINE_EVERY_SECONDS: u64 = 5;
+
+/// Seconds between plain progress lines of a task running for over a minute.
+const LATER_LINE_EVERY_SECONDS: u64 = 30;
+
+/// Whether a plain line is due for a task that started at `start` and last printed (or
+/// started) at `last`.
+fn line_due(start: std::time::Instant, last: std::time::Instant) -> bool {
+    let every = if start.elapsed().as_secs() < 60 {
+        LINE_EVERY_SECONDS
+    } else {
+        LATER_LINE_EVERY_SECONDS
+    };
+    last.elapsed().as_secs() >= every
+}
 
 /// A finished task gets a "done in …" line when it took at least this long.
 const WORTH_A_LINE_SECONDS: u64 = 2;
@@ -30,10 +47,38 @@ const WORTH_A_LINE_SECONDS: u64 = 2;
 impl Reporter {
     pub(crate) fn new(quiet: bool) -> Self {
         use std::io::IsTerminal;
+        let terminal = std::io::stderr().is_terminal();
+        let shown = std::sync::Arc::new(std::sync::Mutex::new(Shown::Nothing));
+        if !quiet && !terminal {
+            // The watcher ends with the process; it only reads the clock and prints.
+            let watched = std::sync::Arc::clone(&shown);
+            let _ = std::thread::Builder::new()
+                .name("progress lines".into())
+                .spawn(move || Self::watch(&watched));
+        }
         Self {
             quiet,
-            terminal: std::io::stderr().is_terminal(),
-            shown: std::sync::Mutex::new(Shown::Nothing),
+            terminal,
+            shown,
+        }
+    }
+
+    /// Once a second: a line for the task shown in plain lines when it has printed
+    /// nothing for a while ([`line_due`]; no report came in that time).
+    #[allow(clippy::print_stderr)]
+    fn watch(shown: &std::sync::Mutex<Shown>) {
+        loop {
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            let Ok(mut shown) = shown.lock() else {
+                return;
+            };
+            if let Shown::Lines(task, start, last, printed) = &mut *shown
+                && line_due(*start, *last)
+            {
+                *last = std::time::Instant::now();
+                *printed = true;
+                eprintln!("{task}: running for {:.0} s", start.elapsed().as_secs_f64());
+            }
         }
     }
 
@@ -90,8 +135,8 @@ impl mmenn::progress::ProgressSink for Reporter {
                 b.set_position(p.done as u64);
                 b.set_message(p.note.clone());
             }
-            Shown::Lines(_, _, last, printed) => {
-                if last.elapsed().as_secs() >= LINE_EVERY_SECONDS {
+            Shown::Lines(_, start, last, printed) => {
+                if line_due(*start, *last) {
                     *last = std::time::Instant::now();
                     *printed = true;
                     let of = p.total.map(|n| format!(" of {n}")).unwrap_or_default();
