@@ -283,6 +283,7 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         segment: args.shooting,
         substeps: args.substeps,
         max_iterations: args.max_iterations,
+        budget: args.budget.start(),
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "greyest", force, &inputs)?;
