@@ -515,6 +515,48 @@ fn a_spent_budget_exits_4_naming_the_stage() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Issue 19: `fit --train-on-trajectories yes|no` is the flag, and the old spellings
+/// `--refine trajectory|none` and `--refine-window` still parse (hidden aliases): with a
+/// missing model file each run gets as far as reading it (exit 1, the input error), while
+/// a value neither spelling knows is a command-line error (exit 2).
+#[test]
+fn trajectory_training_flag_and_its_old_spelling_both_parse() {
+    let dir = scratch("refine-alias");
+    let base = [
+        "fit",
+        "--data",
+        "missing.csv",
+        "--model",
+        "m.toml",
+        "--out",
+        "o",
+    ];
+    for extra in [
+        &["--train-on-trajectories", "no"][..],
+        &[
+            "--train-on-trajectories",
+            "yes",
+            "--trajectory-window",
+            "50",
+        ],
+        &["--refine", "none"],
+        &["--refine", "trajectory", "--refine-window", "50"],
+    ] {
+        let args: Vec<&str> = base.iter().chain(extra).copied().collect();
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 1, "{extra:?}: {err}");
+        assert!(err.contains("m.toml"), "{extra:?}: {err}");
+    }
+    let args: Vec<&str> = base
+        .iter()
+        .chain(&["--refine", "sometimes"])
+        .copied()
+        .collect();
+    let (code, err) = mmenn(&dir, &args, &[]);
+    assert_eq!(code, 2, "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Issue 21: `fit` and `discover` on the same unreachable covariance constraint write
 /// their results and exit with status 3 (not 0, not the input-error status 1), naming the
 /// W search; on data with noise of the stated variance the same runs exit 0.
