@@ -139,12 +139,19 @@ pub struct MmeConfig {
     pub noise_variance: NoiseSpec,
     /// Sub-steps `s` per sample interval (`d` is constant on each of the `s` pieces).
     /// `None` chooses `s` from the model (see [`crate::discretize::default_substeps`]):
-    /// the smallest `s ≥ 1` with `dt/s ≤ τ_min/10`, `τ_min = 1/max|λ(A)|`, capped at 64.
+    /// the smallest `s ≥ 1` with `dt/s ≤ τ_min/10`, `τ_min = 1/max|λ(A)|`, capped at 64
+    /// (the nonlinear estimator, with `A` its Jacobian at the start, lets a stiff model's
+    /// fast relaxation modes need only stability: [`crate::discretize::nonlinear_substeps`]).
     pub substeps: Option<usize>,
     /// Iteration budget of the nonlinear estimator (ignored by the linear one).
     pub iterations: IterationOptions,
     /// Starting trajectory of the nonlinear estimator (ignored by the linear one).
     pub start: StartTrajectory,
+    /// The job's budget (default unlimited): every sweep of the linear estimator and every
+    /// iteration of the nonlinear one charges its sub-steps, and the estimate stops with
+    /// [`sysid_core::CoreError::BudgetExhausted`] (inside [`crate::MmeError::Core`]) once it
+    /// is spent.
+    pub budget: sysid_core::Budget,
 }
 
 /// A `W` validated against the number of corrections: either fixed, or a shape to scale.

@@ -118,6 +118,49 @@ pub fn default_substeps(a: &DMatrix<f64>, dt: f64) -> usize {
     }
 }
 
+/// Largest `|h·λ|` a sub-step may span on a fast relaxation mode of a stiff model (real
+/// negative `λ`): classical RK4 is stable on the negative real axis up to 2.785, so 2.0
+/// keeps a margin while the mode is damped (its RK4 factor at `hλ = −2` is 1/3).
+pub const STIFF_STEP: f64 = 2.0;
+
+/// Default sub-steps for the nonlinear estimator, from the model's Jacobian `a` at the
+/// start: [`default_substeps`], unless that rule asks for more than
+/// [`MAX_DEFAULT_SUBSTEPS`] — the model is stiff at this sample period, as a steep
+/// friction law makes it near zero velocity. Then the accuracy rule (`dt/s ≤ τ/10`)
+/// applies only to the modes that are not fast relaxations, and a fast relaxation
+/// (eigenvalue with `Re λ < 0` and `|Im λ| ≤ |Re λ|`) only has to be stable:
+/// `|h·λ| ≤ STIFF_STEP`. The count is capped at [`MAX_DEFAULT_SUBSTEPS`] as before, so a
+/// stiff model never takes more sub-steps than it did, and a model that is not stiff
+/// takes exactly as many.
+pub fn nonlinear_substeps(a: &DMatrix<f64>, dt: f64) -> usize {
+    let wanted = |rate: f64, fraction: f64| -> f64 {
+        let s = (dt * rate / fraction).ceil();
+        if s.is_finite() && s >= 1.0 { s } else { 1.0 }
+    };
+    let base = default_substeps(a, dt);
+    let Some(rate) = spectral_radius(a) else {
+        return base;
+    };
+    if wanted(rate, SUBSTEP_FRACTION) <= MAX_DEFAULT_SUBSTEPS as f64 {
+        return base;
+    }
+    let Some(schur) =
+        nalgebra::linalg::Schur::try_new(a.clone(), f64::EPSILON, SCHUR_MAX_ITERATIONS)
+    else {
+        return base;
+    };
+    let (mut slow, mut fast) = (0.0_f64, 0.0_f64);
+    for z in schur.complex_eigenvalues().iter() {
+        if z.re < 0.0 && z.im.abs() <= -z.re {
+            fast = fast.max(z.norm());
+        } else {
+            slow = slow.max(z.norm());
+        }
+    }
+    let s = wanted(slow, SUBSTEP_FRACTION).max(wanted(fast, STIFF_STEP));
+    (s as usize).clamp(1, MAX_DEFAULT_SUBSTEPS)
+}
+
 /// The sub-step count to use for an experiment sampled every `dt`.
 pub(crate) fn substeps_for(requested: Option<usize>, a: &DMatrix<f64>, dt: f64) -> Result<usize> {
     match requested {

@@ -27,7 +27,7 @@ use sysid_core::{
 use crate::binding::{Binding, bind};
 use crate::config::{IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight, StartTrajectory};
 use crate::config::{check_iterations, check_noise, resolve_weight};
-use crate::discretize::{default_substeps, substeps_for};
+use crate::discretize::{nonlinear_substeps, substeps_for};
 use crate::error::{MmeError, Result};
 use crate::estimate::{Phases, assemble, resolve_noise};
 use crate::evaluate::{Solve, Summary};
@@ -263,6 +263,7 @@ struct NonlinearRun<'a, F> {
     ws: Workspace,
     history: Vec<IterationRecord>,
     termination: Termination,
+    budget: sysid_core::Budget,
 }
 
 impl<'a, F: Dynamics> NonlinearRun<'a, F> {
@@ -284,6 +285,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             history: Vec::new(),
             termination: Termination::MaxIterations,
             binding,
+            budget: config.budget.clone(),
         };
         if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
@@ -320,7 +322,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                     at.check(a.as_slice(), n, |c| {
                         format!("∂f/∂{}", model.names.states[c])
                     })?;
-                    default_substeps(&a, exp.dt())
+                    nonlinear_substeps(&a, exp.dt())
                 }
             };
             crate::discretize::check_grid(e, exp.len(), s, n, q, true)?;
@@ -649,6 +651,14 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
             let mut failed = false;
             let mut small_prediction = true;
             for (e, cost_e) in costs.iter_mut().enumerate() {
+                self.budget
+                    .charge(
+                        self.grids[e].steps as u64,
+                        "nonlinear MME iteration",
+                        iteration - 1,
+                        Some(self.opts.max_iterations),
+                    )
+                    .map_err(sysid_core::CoreError::from)?;
                 let cur = self.trajs[e].clone();
                 let (star, j_lq, _, _) = self.lq_step(e, &cur, w, inv_r, LogDet::Skip)?;
                 let predicted = *cost_e - j_lq;

@@ -7,7 +7,7 @@
 
 use mmenn::LoadedModel;
 use mmenn::compare::{CompareOptions, compute_compare};
-use mmenn::fit::{FitOptions, HiddenChoice, RefineChoice};
+use mmenn::fit::{FitOptions, HiddenChoice, TrajectoryChoice};
 use mmenn::plants::{Recipe, SimulationRequest, simulate_system};
 use mmenn::simulate::assumed_model_spec;
 use mmenn::sysid_baselines::EvaluationTable;
@@ -31,7 +31,7 @@ pub fn run() -> mmenn::Result<EvaluationTable> {
         fit: FitOptions {
             hidden: HiddenChoice::Fixed(3),
             inits: 3,
-            refine: RefineChoice::None,
+            refine: TrajectoryChoice::None,
             x0_window: 50,
             ..FitOptions::default()
         },

@@ -12,7 +12,7 @@
 use std::path::Path;
 
 use mmenn::LoadedModel;
-use mmenn::fit::{FitOptions, HiddenChoice, RefineChoice, compute_fit};
+use mmenn::fit::{FitOptions, HiddenChoice, TrajectoryChoice, compute_fit};
 use mmenn::plants::{Recipe, SimulationRequest, simulate_system};
 use mmenn::predict::{PredictOptions, compute_predict_on};
 use mmenn::progress::NoProgress;
@@ -41,7 +41,7 @@ pub fn run() -> mmenn::Result<FitPredictExample> {
     let opts = FitOptions {
         hidden: HiddenChoice::Fixed(3),
         inits: 3,
-        refine: RefineChoice::None,
+        refine: TrajectoryChoice::None,
         x0_window: 50,
         ..FitOptions::default()
     };

@@ -51,6 +51,9 @@ pub struct EstimateOptions {
     pub w: WeightChoice,
     /// Sub-steps per sample interval (`None`: chosen from the model).
     pub substeps: Option<usize>,
+    /// The job's budget (default unlimited; the CLI's `--budget SECONDS`): MME stops with
+    /// `CoreError::BudgetExhausted`, naming the stage and how far it got, once it is spent.
+    pub budget: sysid_core::Budget,
 }
 
 /// The MME configuration a model file and options imply.
@@ -65,6 +68,7 @@ pub fn mme_config(spec: &ModelSpec, opts: &EstimateOptions) -> MmeConfig {
             NoiseVariance::Auto => NoiseSpec::Auto,
         },
         substeps: opts.substeps,
+        budget: opts.budget.clone(),
         ..MmeConfig::default()
     }
 }

@@ -1,16 +1,16 @@
 //! `mmenn fit` and `mmenn predict`: the MME/NN hybrid model (thesis ch. 4). MME gives
-//! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; by default its weights are then refined
-//! on the training trajectories (thesis §7.1; [`RefineSummary`]); the plant model
+//! `x̂(t)`, `d̂(t)`; a network learns `(x̂, u) → d̂`; by default its weights are then trained
+//! on the training trajectories (thesis §7.1; [`TrajectorySummary`]); the plant model
 //! `ẋ = f(x, u) + E·NN(x, u)` then predicts free-run from an initial state. Every step
-//! (MME, network selection, refinement, free runs, `predict`) treats the inputs between
-//! samples as the model file's `intersample` says; `model.json` keeps the model file, so
-//! `predict` follows the setting the model was fitted with.
+//! (MME, network selection, trajectory training, free runs, `predict`) treats the inputs
+//! between samples as the model file's `intersample` says; `model.json` keeps the model
+//! file, so `predict` follows the setting the model was fitted with.
 //!
 //! The hybrid is never kept when it is worse than the physics it starts from: the guard
-//! ([`GuardReport`]) runs the assumed model alone, the network before refinement and after
-//! it free on held-out data (the validation record, else the last fifth of the first
-//! training record) and keeps the best; the report says which and why, and whether
-//! refinement hurt.
+//! ([`GuardReport`]) runs the assumed model alone, the network before trajectory training
+//! and after it free on held-out data (the validation record, else the last fifth of the
+//! first training record) and keeps the best; the report says which and why, and whether
+//! the trajectory training hurt.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -35,8 +35,8 @@ pub use crate::predict::{
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
 pub use guard::{CandidateScore, GuardCandidate, GuardReport};
 pub use output::write_fit;
-use trajectory::refine_network;
-pub use trajectory::{RefineChoice, RefineSummary};
+use trajectory::train_network_on_trajectories;
+pub use trajectory::{RefineChoice, TrajectoryChoice, TrajectorySummary};
 
 mod choices;
 mod d_figures;
@@ -68,9 +68,11 @@ pub struct FitOptions {
     pub update: ModelUpdateChoice,
     /// How the network is picked from the sweep.
     pub selection: NetworkSelection,
-    /// Whether the network is then refined on trajectories (thesis §7.1).
-    pub refine: RefineChoice,
-    /// Settings of that refinement (its `substeps` is replaced by [`FitOptions::substeps`]).
+    /// Whether the network is then trained on trajectories (thesis §7.1). The field keeps
+    /// its old name until every caller has moved (`--train-on-trajectories` on the
+    /// command line).
+    pub refine: TrajectoryChoice,
+    /// Settings of that training (its `substeps` is replaced by [`FitOptions::substeps`]).
     pub trajectory: nn::TrajectoryConfig,
     /// How the networks are trained. Default [`Training::Trainlm`].
     pub training: Training,
@@ -132,7 +134,7 @@ impl Default for FitOptions {
             max_hidden: 10,
             update: ModelUpdateChoice::None,
             selection: NetworkSelection::CorrectionMse,
-            refine: RefineChoice::default(),
+            refine: TrajectoryChoice::default(),
             trajectory: nn::TrajectoryConfig::default(),
             training: Training::Trainlm,
         }
@@ -249,8 +251,9 @@ pub struct FitSummary {
     pub train: FreeRunReport,
     /// Free-run on the validation record, when given.
     pub validation: Option<FreeRunReport>,
-    /// Trajectory refinement of the network, when asked for.
-    pub refinement: Option<RefineSummary>,
+    /// Trajectory training of the network, when asked for (`refinement` in
+    /// `summary.json`, for the readers of that file).
+    pub refinement: Option<TrajectorySummary>,
     /// Which of physics alone, the network before and after refinement was kept, judged
     /// free-run on held-out data (never a test record), and whether refinement hurt.
     pub guard: GuardReport,
@@ -479,8 +482,8 @@ pub fn compute_fit(
     let before_refinement = network.clone();
     let val_pair = val_est.as_ref().zip(val.as_ref());
     let mut refinement = match opts.refine {
-        RefineChoice::None => None,
-        RefineChoice::Trajectory => Some(refine_network(
+        TrajectoryChoice::None => None,
+        TrajectoryChoice::Trajectory => Some(train_network_on_trajectories(
             &spec,
             &mut network,
             (est, data),

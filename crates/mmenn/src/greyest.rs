@@ -23,7 +23,7 @@ use crate::model_file::{ModelSpec, NoiseVariance, format_model};
 use crate::progress::{NoProgress, Progress, ProgressSink};
 
 /// Options of [`run_greyest`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct GreyestOptions {
     /// Multiple-shooting segment length in samples before the free run (`None`: free
     /// run only).
@@ -32,6 +32,9 @@ pub struct GreyestOptions {
     pub substeps: usize,
     /// Most Levenberg–Marquardt iterations per solve. Default 100.
     pub max_iterations: usize,
+    /// The job's budget (default unlimited; the CLI's `--budget SECONDS`): the estimate
+    /// stops with `CoreError::BudgetExhausted` once it is spent.
+    pub budget: sysid_core::Budget,
 }
 
 impl Default for GreyestOptions {
@@ -40,6 +43,7 @@ impl Default for GreyestOptions {
             segment: None,
             substeps: 2,
             max_iterations: 100,
+            budget: sysid_core::Budget::default(),
         }
     }
 }
@@ -230,6 +234,7 @@ pub fn compute_greyest(
             .segment
             .map_or(Shooting::FreeRun, |segment| Shooting::Multiple { segment }),
         max_iterations: opts.max_iterations,
+        budget: opts.budget.clone(),
         ..GreyboxOptions::default()
     };
     let data = GreyboxData {

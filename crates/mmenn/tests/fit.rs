@@ -239,7 +239,7 @@ fn trajectory_refinement_removes_the_bias_of_a_shrunk_correction() {
     // never seen by the fit (early stopping uses held-out training windows); the judge is
     // the noise-free truth on the test input from the true initial state.
     use mmenn::estimate::{EstimateOptions, WeightChoice};
-    use mmenn::fit::{HiddenChoice, RefineChoice};
+    use mmenn::fit::{HiddenChoice, TrajectoryChoice};
     let dir = scratch("refine-bias");
     let train = sim(
         &dir.join("train"),
@@ -254,6 +254,7 @@ fn trajectory_refinement_removes_the_bias_of_a_shrunk_correction() {
             estimate: EstimateOptions {
                 w: WeightChoice::Value(3e8),
                 substeps: None,
+                ..EstimateOptions::default()
             },
             hidden: HiddenChoice::Fixed(4),
             inits: 2,
@@ -271,8 +272,8 @@ fn trajectory_refinement_removes_the_bias_of_a_shrunk_correction() {
         let p = predict_truth(&dir.join(name), &test, &dir.join(format!("{name}-pred")));
         (s, p)
     };
-    let (plain, before) = fit(RefineChoice::None, "plain");
-    let (refined, after) = fit(RefineChoice::Trajectory, "refined");
+    let (plain, before) = fit(TrajectoryChoice::None, "plain");
+    let (refined, after) = fit(TrajectoryChoice::Trajectory, "refined");
     assert!(plain.refinement.is_none());
     let r = refined.refinement.as_ref().unwrap();
     assert!(r.report.final_train_objective() <= r.report.initial_train_objective());

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use mmenn::data_file::{read_table, write_csv};
-use mmenn::fit::{FitOptions, GuardCandidate, HiddenChoice, RefineChoice, run_fit};
+use mmenn::fit::{FitOptions, GuardCandidate, HiddenChoice, TrajectoryChoice, run_fit};
 use mmenn::model::LoadedModel;
 use mmenn::predict::{InitialChoice, PredictOptions, compute_predict};
 
@@ -71,7 +71,7 @@ fn guard_keeps_the_physics_alone_on_data_the_physics_generated() {
         &FitOptions {
             hidden: HiddenChoice::Fixed(2),
             inits: 2,
-            refine: RefineChoice::Trajectory,
+            refine: TrajectoryChoice::Trajectory,
             trajectory: mmenn::nn::TrajectoryConfig {
                 window: 100,
                 max_iterations: 3,

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use mmenn::compare::{CompareOptions, GIVEN_MODEL_ROW, run_compare};
 use mmenn::discover::{DiscoverOptions, WorkflowConfig, run_discover};
-use mmenn::fit::{FitOptions, HiddenChoice, InitialChoice, RefineChoice, run_predict};
+use mmenn::fit::{FitOptions, HiddenChoice, InitialChoice, TrajectoryChoice, run_predict};
 use mmenn::plants::{Recipe, SimulationRequest};
 use mmenn::simulate::run_simulate;
 use mmenn::{LoadedModel, MmennError, ModelKind, ModelProblem};
@@ -65,7 +65,7 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
             hidden: HiddenChoice::Fixed(1),
             max_hidden: 1,
             inits: 1,
-            refine: RefineChoice::None,
+            refine: TrajectoryChoice::None,
             x0_window: 50,
             ..FitOptions::default()
         },
@@ -349,7 +349,7 @@ fn one_fit_percent_in_predict_compare_and_discover() {
             fit: FitOptions {
                 hidden: HiddenChoice::Fixed(1),
                 inits: 1,
-                refine: RefineChoice::None,
+                refine: TrajectoryChoice::None,
                 x0_window: 50,
                 ..FitOptions::default()
             },

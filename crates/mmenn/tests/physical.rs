@@ -137,6 +137,7 @@ fn physical_file_through_estimate_predict_and_show() {
         &EstimateOptions {
             w: mmenn::estimate::WeightChoice::Value(1e3),
             substeps: None,
+            ..Default::default()
         },
         &dir.join("estimate"),
     )

@@ -327,12 +327,12 @@ fn max_samples_message_names_the_value() {
     assert!(err.to_string().contains("10,000,000"), "{err}");
 }
 
-/// The trajectory refinement of a 1,000,000-sample record used to abort allocating
+/// The trajectory training of a 1,000,000-sample record used to abort allocating
 /// 102 GB; it is refused with a typed error before allocating.
 #[test]
 fn trajectory_refinement_of_a_huge_record_is_refused_before_allocating() {
     use mmenn::nn::{
-        Architecture, HybridParts, Mlp, NnError, ShootingRecord, TrajectoryConfig,
+        Architecture, Mlp, NetCorrection, NnError, ShootingRecord, TrajectoryConfig,
         train_on_trajectories,
     };
     let lin = parse_model(Path::new("m.toml"), PENDULUM).unwrap().linear;
@@ -345,19 +345,21 @@ fn trajectory_refinement_of_a_huge_record_is_refused_before_allocating() {
     )
     .unwrap();
     let states = DMatrix::zeros(2, n);
-    let parts = HybridParts {
-        base: &lin,
-        e: lin.e(),
-        c: lin.c(),
-    };
-    let mut net = Mlp::new(&Architecture::single(3, 3, 1), 1).unwrap();
+    let net = Mlp::new(&Architecture::single(3, 3, 1), 1).unwrap();
+    let mut model = mmenn::sysid_core::CorrectedModel::new(
+        &lin,
+        NetCorrection::new(net, 2).unwrap(),
+        lin.e().clone(),
+        lin.c().clone(),
+        lin.output_names().to_vec(),
+    )
+    .unwrap();
     let records = [ShootingRecord {
         experiment: &exp,
         states: &states,
     }];
     let err = train_on_trajectories(
-        &mut net,
-        &parts,
+        &mut model,
         &records,
         &[],
         &TrajectoryConfig::default(),
@@ -477,6 +479,81 @@ fn an_unconverged_w_search_exits_non_zero() {
     assert_eq!(code, 3, "{err}");
     assert!(err.contains("did not converge"), "{err}");
     assert!(dir.join("o").join("report.md").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 20, item 5: a spent `--budget` stops `estimate` of a nonlinear (mass-matrix)
+/// model with exit status 4 and a message naming the stage that ran out and how far it
+/// got; nothing is written. A budget of 0 s is spent before the first iteration, so the
+/// test does not depend on the machine's speed.
+#[test]
+fn a_spent_budget_exits_4_naming_the_stage() {
+    let dir = scratch("budget");
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link");
+    let (data, model) = (fixture.join("est.csv"), fixture.join("model.toml"));
+    let (code, err) = mmenn(
+        &dir,
+        &[
+            "estimate",
+            "--data",
+            data.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+            "--budget",
+            "0",
+            "--out",
+            "o",
+        ],
+        &[],
+    );
+    assert_eq!(code, 4, "{err}");
+    assert!(
+        err.contains("budget of 0 s ran out during nonlinear MME iteration (0 of 50 done"),
+        "{err}"
+    );
+    assert!(!dir.join("o").exists());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Issue 19: `fit --train-on-trajectories yes|no` is the flag, and the old spellings
+/// `--refine trajectory|none` and `--refine-window` still parse (hidden aliases): with a
+/// missing model file each run gets as far as reading it (exit 1, the input error), while
+/// a value neither spelling knows is a command-line error (exit 2).
+#[test]
+fn trajectory_training_flag_and_its_old_spelling_both_parse() {
+    let dir = scratch("refine-alias");
+    let base = [
+        "fit",
+        "--data",
+        "missing.csv",
+        "--model",
+        "m.toml",
+        "--out",
+        "o",
+    ];
+    for extra in [
+        &["--train-on-trajectories", "no"][..],
+        &[
+            "--train-on-trajectories",
+            "yes",
+            "--trajectory-window",
+            "50",
+        ],
+        &["--refine", "none"],
+        &["--refine", "trajectory", "--refine-window", "50"],
+    ] {
+        let args: Vec<&str> = base.iter().chain(extra).copied().collect();
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 1, "{extra:?}: {err}");
+        assert!(err.contains("m.toml"), "{extra:?}: {err}");
+    }
+    let args: Vec<&str> = base
+        .iter()
+        .chain(&["--refine", "sometimes"])
+        .copied()
+        .collect();
+    let (code, err) = mmenn(&dir, &args, &[]);
+    assert_eq!(code, 2, "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -36,7 +36,8 @@ impl TryFrom<NetCorrectionRaw> for NetCorrection {
 thread_local! {
     /// Per-thread scratch for [`Correction::eval`], which takes `&self` and cannot carry a
     /// caller workspace; it lets integrators call the network without allocating.
-    static SCRATCH: RefCell<Workspace> = RefCell::new(Workspace::new());
+    /// Initialised as a constant, so an access checks no lazy initialisation.
+    static SCRATCH: RefCell<Workspace> = const { RefCell::new(Workspace::empty()) };
 }
 
 impl NetCorrection {
@@ -57,6 +58,12 @@ impl NetCorrection {
     /// The network.
     pub fn network(&self) -> &Mlp {
         &self.net
+    }
+
+    /// The network's flat weight vector, mutable (training in place; the architecture,
+    /// and so the split into states and inputs, cannot change through it).
+    pub fn weights_mut(&mut self) -> &mut [f64] {
+        self.net.weights_mut()
     }
 
     /// Give back the network.
@@ -106,6 +113,8 @@ impl NetCorrection {
             }
         }
         self.eval_into(x, u, d, ws)?;
+        // The forward pass sized only the activations; back-propagation needs the rest.
+        ws.prepare(self.net.architecture());
         let n = self.n_states;
         self.net.input_gradients(ws, |o, j, v| {
             if j < n {
@@ -166,10 +175,16 @@ impl NetView<'_> {
                 expected: self.net.n_outputs(),
             });
         }
-        ws.prepare(self.net.architecture());
+        ws.prepare_forward(self.net.architecture());
         let s = self.net.input_scaler();
-        for (j, v) in x.iter().chain(u).enumerate() {
-            ws.acts[j] = (v - s.centre()[j]) / s.half_range()[j];
+        let n = self.n_states;
+        let (centre, half) = (s.centre(), s.half_range());
+        let (xs, us) = ws.acts[..n + u.len()].split_at_mut(n);
+        for (((a, v), c), h) in xs.iter_mut().zip(x).zip(&centre[..n]).zip(&half[..n]) {
+            *a = (v - c) / h;
+        }
+        for (((a, v), c), h) in us.iter_mut().zip(u).zip(&centre[n..]).zip(&half[n..]) {
+            *a = (v - c) / h;
         }
         Ok(())
     }

@@ -96,7 +96,7 @@ pub enum NnError {
         n_inputs: usize,
     },
     /// The hybrid model with the initial network diverges on a shooting window, so
-    /// trajectory refinement has no finite objective to descend from.
+    /// trajectory training has no finite objective to descend from.
     #[error(
         "the hybrid model diverges on the shooting window of record {record} starting at sample {sample}"
     )]

@@ -21,6 +21,5 @@ pub use sweep::{
     sizing_sweep,
 };
 pub use trajectory::{
-    HybridParts, ShootingRecord, TrajectoryConfig, TrajectoryProgress, TrajectoryReport,
-    train_on_trajectories,
+    ShootingRecord, TrajectoryConfig, TrajectoryProgress, TrajectoryReport, train_on_trajectories,
 };

@@ -112,6 +112,23 @@ impl Workspace {
     }
 
     /// Make the buffers large enough for `arch`.
+    /// An empty workspace, as a constant (for a `thread_local!` without lazy set-up).
+    pub(crate) const fn empty() -> Self {
+        Self {
+            acts: Vec::new(),
+            delta: [Vec::new(), Vec::new()],
+        }
+    }
+
+    /// Room for the activations of a forward pass through `arch` (the back-propagation
+    /// buffers are left as they are).
+    pub(crate) fn prepare_forward(&mut self, arch: &Architecture) {
+        let total = arch.inputs + arch.hidden.iter().sum::<usize>() + arch.outputs;
+        if self.acts.len() < total {
+            self.acts.resize(total, 0.0);
+        }
+    }
+
     pub(crate) fn prepare(&mut self, arch: &Architecture) {
         let total = arch.inputs + arch.hidden.iter().sum::<usize>() + arch.outputs;
         if self.acts.len() < total {

@@ -15,15 +15,15 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use sysid_core::{
-    AcceptedStep, Control, Dynamics, Experiment, LeastSquaresProblem, LmSettings, Scaling,
-    Termination, levenberg_marquardt,
+    AcceptedStep, Control, CorrectedModel, Dynamics, Experiment, LeastSquaresProblem, LmSettings,
+    Scaling, Termination, levenberg_marquardt,
 };
 
+use crate::correction::NetCorrection;
 use crate::error::{NnError, Result};
-use crate::mlp::Mlp;
 
 mod shooting;
-use shooting::{Buffers, Linearisation, Shooter, Window};
+use shooting::{Buffers, Hybrid, Linearisation, Shooter, Window};
 
 /// Most bytes the dense least-squares matrices of [`train_on_trajectories`] may take (the
 /// Jacobian `rows × θ`, its normal matrix and a damped copy `θ × θ` twice): 2 GiB. The
@@ -125,17 +125,6 @@ impl TrajectoryConfig {
     }
 }
 
-/// The fixed parts of the hybrid model `ẋ = f(x, u) + E·NN([x; u])`, `y = C x`.
-#[derive(Debug, Clone, Copy)]
-pub struct HybridParts<'a, F> {
-    /// The assumed dynamics `f` (`n` states, `m` inputs).
-    pub base: &'a F,
-    /// `E`, `n × q` (`q` = network outputs).
-    pub e: &'a DMatrix<f64>,
-    /// `C`, `p × n` (`p` = measured output channels of the records).
-    pub c: &'a DMatrix<f64>,
-}
-
 /// One record to shoot over: its inputs and measured outputs (NaN = not observed), and
 /// the state estimate at every sample, from which each window starts. Windows are
 /// simulated with the inputs between samples as the experiment's
@@ -161,7 +150,7 @@ pub struct TrajectoryProgress {
     pub mu: f64,
 }
 
-/// What refinement did. Objectives are mean squared residuals in units of each channel's
+/// What the trajectory training did. Objectives are mean squared residuals in units of each channel's
 /// standard deviation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrajectoryReport {
@@ -206,15 +195,14 @@ impl TrajectoryReport {
     }
 }
 
-/// Check shapes of the hybrid parts, records and network against each other.
+/// Check the records' shapes against the model's (the model's own parts — network, `E`,
+/// `C` — were checked against each other when it was built).
 fn check_problem<F: Dynamics>(
-    net: &Mlp,
-    parts: &HybridParts<'_, F>,
+    model: &CorrectedModel<F, NetCorrection>,
     records: &[ShootingRecord<'_>],
 ) -> Result<()> {
-    let n = parts.base.n_states();
-    let m = parts.base.n_inputs();
-    let q = net.n_outputs();
+    let n = model.n_states();
+    let m = model.n_inputs();
     let shape = |matrix, rows: usize, cols: usize, er: usize, ec: usize| {
         if rows == er && cols == ec {
             Ok(())
@@ -228,16 +216,7 @@ fn check_problem<F: Dynamics>(
             })
         }
     };
-    if net.n_inputs() != n + m {
-        return Err(NnError::Length {
-            what: "network inputs (states + model inputs)",
-            found: net.n_inputs(),
-            expected: n + m,
-        });
-    }
-    shape("E", parts.e.nrows(), parts.e.ncols(), n, q)?;
-    let p = parts.c.nrows();
-    shape("C", p, parts.c.ncols(), p, n)?;
+    let p = model.c().nrows();
     if records.is_empty() {
         return Err(NnError::TooFewSamples {
             what: "trajectory records",
@@ -305,9 +284,13 @@ fn observed(records: &[ShootingRecord<'_>], windows: &[Window]) -> usize {
         .sum()
 }
 
-/// Refine `net` (inputs `[x; u]`, outputs the corrections) in place so that the hybrid
-/// model `ẋ = f(x, u) + E·NN([x; u])`, `y = C x` reproduces the records' measured outputs
-/// over short free-run windows (multiple shooting, Bock & Plitt 1984).
+/// Train the network of the hybrid model `ẋ = f(x, u) + E·NN([x; u])`, `y = C x` in
+/// place (its weights, through [`CorrectedModel::correction_mut`]) so that the model
+/// reproduces the records' measured outputs over short free-run windows (multiple
+/// shooting, Bock & Plitt 1984). The model's own `x0`, integrator and blow-up bound are
+/// not used: windows start from the records' states and are simulated with
+/// [`TrajectoryConfig::substeps`] RK4 steps per sample, diverging beyond
+/// [`TrajectoryConfig::blow_up`].
 ///
 /// Unknowns are the flat weight vector and the start state of every training window
 /// (initialised at the given estimates, so a biased `x̂` is not blamed on the network).
@@ -324,32 +307,32 @@ fn observed(records: &[ShootingRecord<'_>], windows: &[Window]) -> usize {
 /// their start states fitted for the current weights; the weights of the step with the
 /// lowest held-out objective are returned.
 ///
-/// Errors: invalid config, shapes that do not fit together, no records or no window with
-/// an observed sample, non-finite states or inputs, and
+/// Errors: invalid config, records whose shapes do not fit the model, no records or no
+/// window with an observed sample, non-finite states or inputs, and
 /// [`NnError::TrajectoryDiverged`] when the *initial* network already diverges on a
-/// window. On error `net` is unchanged.
+/// window. On error the model is unchanged.
 pub fn train_on_trajectories<F: Dynamics>(
-    net: &mut Mlp,
-    parts: &HybridParts<'_, F>,
+    model: &mut CorrectedModel<F, NetCorrection>,
     train_records: &[ShootingRecord<'_>],
     val_records: &[ShootingRecord<'_>],
     config: &TrajectoryConfig,
     progress: Option<&mut dyn FnMut(TrajectoryProgress)>,
 ) -> Result<TrajectoryReport> {
     config.validate()?;
-    check_problem(net, parts, train_records)?;
+    check_problem(model, train_records)?;
     if !val_records.is_empty() {
-        check_problem(net, parts, val_records)?;
+        check_problem(model, val_records)?;
     }
     let records: Vec<ShootingRecord<'_>> =
         train_records.iter().chain(val_records).copied().collect();
     let records = records.as_slice();
     let (n, m, q, p) = (
-        parts.base.n_states(),
-        parts.base.n_inputs(),
-        net.n_outputs(),
-        parts.c.nrows(),
+        model.n_states(),
+        model.n_inputs(),
+        model.correction().network().n_outputs(),
+        model.c().nrows(),
     );
+    let nw = model.correction().network().n_weights();
 
     // Windows tile each record: [0, L], [L, 2L], …; the last may be shorter.
     let mut train_w = Vec::new();
@@ -392,19 +375,19 @@ pub fn train_on_trajectories<F: Dynamics>(
     }
     let rows_train: usize = train_w.iter().map(|w| (w.end - w.start) * p).sum();
     // Memory bound before any allocation of the record's size (see MAX_TRAJECTORY_BYTES).
-    let n_theta_planned = net.n_weights() + n * train_w.len();
+    let n_theta_planned = nw + n * train_w.len();
     let bytes = 8
         * (rows_train as u128 * n_theta_planned as u128
             + 2 * (n_theta_planned as u128).pow(2)
             + 2 * rows_train as u128);
     if bytes > MAX_TRAJECTORY_BYTES {
         return Err(NnError::TooLarge {
-            what: "the trajectory refinement's Jacobian",
+            what: "the trajectory training's Jacobian",
             rows: rows_train,
             columns: n_theta_planned,
             bytes,
             limit: MAX_TRAJECTORY_BYTES,
-            hint: "refine on a shorter record, or skip the refinement (--refine none)",
+            hint: "train on a shorter record, or skip the trajectory training (--train-on-trajectories no)",
         });
     }
     let starts_of = |ws: &[Window]| -> Vec<f64> {
@@ -425,20 +408,23 @@ pub fn train_on_trajectories<F: Dynamics>(
 
     let output_scale = output_scales(train_records, p);
     let shooter = Shooter {
-        parts,
+        hybrid: &*model,
         records,
         inv_scale: output_scale.iter().map(|s| 1.0 / s).collect(),
         substeps: config.substeps,
         blow_up: config.blow_up,
     };
     let mut bufs = Buffers::new(n, m, q);
+    // The working copy that trial points are loaded into (the given model stays as it is
+    // until the end).
+    let work = shooter.model();
     let mut r = DVector::zeros(rows_train);
     let diverged = |w: &Window| NnError::TrajectoryDiverged {
         record: w.record,
         sample: w.start,
     };
     shooter
-        .residuals(net, &train_w, &x_hat, r.as_mut_slice(), &mut bufs)
+        .residuals(&work, &train_w, &x_hat, r.as_mut_slice(), &mut bufs)
         .map_err(|wi| diverged(&train_w[wi]))?;
     let objective_at_estimates = r.norm_squared() / m_train as f64;
     // Start states first fitted with the weights fixed, as for held-out windows, so the
@@ -446,7 +432,7 @@ pub fn train_on_trajectories<F: Dynamics>(
     let mut starts = x_hat.clone();
     for (i, w) in train_w.iter().enumerate() {
         let sse = shooter.fitted_window_sse(
-            net,
+            &work,
             w,
             &x_hat[i * n..(i + 1) * n],
             &x_scale,
@@ -458,10 +444,10 @@ pub fn train_on_trajectories<F: Dynamics>(
         }
     }
     shooter
-        .residuals(net, &train_w, &starts, r.as_mut_slice(), &mut bufs)
+        .residuals(&work, &train_w, &starts, r.as_mut_slice(), &mut bufs)
         .map_err(|wi| diverged(&train_w[wi]))?;
     let mut val_fitted = vec![0.0; n];
-    let mut val_objective = |net: &Mlp, bufs: &mut Buffers| -> Option<f64> {
+    let mut val_objective = |model: &Hybrid<'_, F>, bufs: &mut Buffers| -> Option<f64> {
         if val_w.is_empty() {
             return None;
         }
@@ -470,22 +456,21 @@ pub fn train_on_trajectories<F: Dynamics>(
             .enumerate()
             .map(|(i, w)| {
                 let x0 = &val_starts[i * n..(i + 1) * n];
-                shooter.fitted_window_sse(net, w, x0, &x_scale, bufs, &mut val_fitted)
+                shooter.fitted_window_sse(model, w, x0, &x_scale, bufs, &mut val_fitted)
             })
             .sum();
         Some(sse / m_val as f64)
     };
 
     // Unknowns θ = [weights; z], start states = x̂ + σ_x ⊙ z.
-    let nw = net.n_weights();
     let mut theta = vec![0.0; nw + x_hat.len()];
-    theta[..nw].copy_from_slice(net.weights());
+    theta[..nw].copy_from_slice(work.correction().network().weights());
     for (k, s) in starts.iter().enumerate() {
         theta[nw + k] = (s - x_hat[k]) / x_scale[k % n];
     }
     let mut val_history = Vec::new();
     let mut best = (f64::INFINITY, theta.clone(), 0usize);
-    if let Some(v) = val_objective(net, &mut bufs) {
+    if let Some(v) = val_objective(&work, &mut bufs) {
         if !v.is_finite() {
             return Err(diverged(&val_w[0]));
         }
@@ -500,7 +485,7 @@ pub fn train_on_trajectories<F: Dynamics>(
         dims: (n, m, q),
         rows: rows_train,
         m_train,
-        work: net.clone(),
+        work,
         starts: starts.clone(),
         bufs,
         val_objective: &mut val_objective,
@@ -525,13 +510,15 @@ pub fn train_on_trajectories<F: Dynamics>(
         val_history, best, ..
     } = problem;
     let iterations = solution.report.steps.len();
-    let best_iteration = if val_w.is_empty() {
-        net.weights_mut().copy_from_slice(&solution.theta[..nw]);
-        iterations
+    let (weights, best_iteration) = if val_w.is_empty() {
+        (&solution.theta[..nw], iterations)
     } else {
-        net.weights_mut().copy_from_slice(&best.1[..nw]);
-        best.2
+        (&best.1[..nw], best.2)
     };
+    model
+        .correction_mut()
+        .weights_mut()
+        .copy_from_slice(weights);
     let train_history = solution
         .report
         .cost_history()
@@ -553,7 +540,7 @@ pub fn train_on_trajectories<F: Dynamics>(
 
 /// The weights and training-window start states as one least-squares problem, with the
 /// held-out bookkeeping after every accepted step.
-struct TrajectoryProblem<'s, 'a, 'p, F, V> {
+struct TrajectoryProblem<'s, 'a, 'p, F: Dynamics, V> {
     shooter: &'s Shooter<'a, F>,
     windows: &'s [Window],
     x_hat: &'s [f64],
@@ -561,8 +548,8 @@ struct TrajectoryProblem<'s, 'a, 'p, F, V> {
     dims: (usize, usize, usize),
     rows: usize,
     m_train: usize,
-    /// The network at the point being evaluated.
-    work: Mlp,
+    /// The model at the point being evaluated.
+    work: Hybrid<'a, F>,
     /// Start states at the point being evaluated.
     starts: Vec<f64>,
     bufs: Buffers,
@@ -575,20 +562,23 @@ struct TrajectoryProblem<'s, 'a, 'p, F, V> {
     progress: Option<&'s mut (dyn FnMut(TrajectoryProgress) + 'p)>,
 }
 
-impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> TrajectoryProblem<'_, '_, '_, F, V> {
+impl<'a, F: Dynamics, V: FnMut(&Hybrid<'a, F>, &mut Buffers) -> Option<f64>>
+    TrajectoryProblem<'_, 'a, '_, F, V>
+{
     /// Load `theta` into the working network and start states.
     fn load(&mut self, theta: &[f64]) {
-        let nw = self.work.n_weights();
+        let w = self.work.correction_mut().weights_mut();
+        let nw = w.len();
         let n = self.dims.0;
-        self.work.weights_mut().copy_from_slice(&theta[..nw]);
+        w.copy_from_slice(&theta[..nw]);
         for (k, o) in self.starts.iter_mut().enumerate() {
             *o = self.x_hat[k] + self.x_scale[k % n] * theta[nw + k];
         }
     }
 }
 
-impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> LeastSquaresProblem
-    for TrajectoryProblem<'_, '_, '_, F, V>
+impl<'a, F: Dynamics, V: FnMut(&Hybrid<'a, F>, &mut Buffers) -> Option<f64>> LeastSquaresProblem
+    for TrajectoryProblem<'_, 'a, '_, F, V>
 {
     type Error = std::convert::Infallible;
 
@@ -614,7 +604,7 @@ impl<F: Dynamics, V: FnMut(&Mlp, &mut Buffers) -> Option<f64>> LeastSquaresProbl
         self.load(theta);
         Linearisation {
             shooter: self.shooter,
-            net: &self.work,
+            model: &self.work,
             windows: self.windows,
             starts: &self.starts,
             theta,

@@ -143,6 +143,9 @@ pub enum CoreError {
         /// Step size tried, s.
         h: f64,
     },
+    /// A job's stated budget ran out ([`crate::Budget`]).
+    #[error(transparent)]
+    BudgetExhausted(#[from] crate::budget::BudgetExhausted),
     /// The adaptive integrator hit its step budget.
     #[error("integrator exceeded {max_steps} steps before t = {t} s")]
     TooManySteps {

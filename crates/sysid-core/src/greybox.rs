@@ -66,7 +66,7 @@ pub enum Shooting {
 }
 
 /// Settings of [`estimate_parameters`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct GreyboxOptions {
     /// RK4 steps per sample interval (≥ 1). Default 2.
     pub substeps: usize,
@@ -82,6 +82,10 @@ pub struct GreyboxOptions {
     /// Weight of a continuity defect in multiple shooting, in units of `1/σ` of the
     /// measured channels (a defect of one noise σ in any state costs `w²`). Default 10.
     pub continuity_weight: f64,
+    /// The job's budget (default unlimited): every Jacobian (one per Levenberg–Marquardt
+    /// iteration) charges the RK4 steps of its simulation, and the estimate stops with
+    /// [`CoreError::BudgetExhausted`] once it is spent.
+    pub budget: crate::Budget,
 }
 
 impl Default for GreyboxOptions {
@@ -93,6 +97,7 @@ impl Default for GreyboxOptions {
             ftol: 1e-10,
             blow_up: 1e6,
             continuity_weight: 10.0,
+            budget: crate::Budget::default(),
         }
     }
 }
@@ -246,6 +251,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
         let theta0 = shooting_start(&mut problem, &z, &starts, &segments, data)?;
         problem.stage = "multiple shooting";
         problem.observer = Some(&mut *observer);
+        problem.budget = opts.budget.clone();
         let solution = levenberg_marquardt(&mut problem, &theta0, &settings)?;
         stages.push(StageReport {
             shooting: opts.shooting,
@@ -298,6 +304,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
         return Err(first_divergence(&states, data.records, opts.blow_up));
     }
     problem.observer = Some(&mut *observer);
+    problem.budget = opts.budget.clone();
     let solution = levenberg_marquardt(&mut problem, &theta0, &settings)?;
     problem.observer = None;
     let theta = solution.theta;

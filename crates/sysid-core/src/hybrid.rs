@@ -94,6 +94,41 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
         &self.correction
     }
 
+    /// The correction term, mutable (e.g. a network whose weights are being trained; its
+    /// state, input and output counts must stay those the model was built with).
+    pub fn correction_mut(&mut self) -> &mut G {
+        &mut self.correction
+    }
+
+    /// `E`, `n × q`: how the correction enters the state equations.
+    pub fn e(&self) -> &DMatrix<f64> {
+        &self.e
+    }
+
+    /// `C`, `p × n`: the outputs.
+    pub fn c(&self) -> &DMatrix<f64> {
+        &self.c
+    }
+
+    /// The same model with the assumed dynamics borrowed and the correction, `E`, `C`,
+    /// names, initial state and settings copied: a working copy whose correction can be
+    /// changed (one per thread, say) without cloning the base dynamics.
+    pub fn with_borrowed_base(&self) -> CorrectedModel<&F, G>
+    where
+        G: Clone,
+    {
+        CorrectedModel {
+            base: &self.base,
+            correction: self.correction.clone(),
+            e: self.e.clone(),
+            c: self.c.clone(),
+            output_names: self.output_names.clone(),
+            x0: self.x0.clone(),
+            integrator: self.integrator,
+            blow_up: self.blow_up,
+        }
+    }
+
     /// Free-run states over an input sequence (`m × N`), from `x0`, `n × N`, inputs held
     /// between samples.
     pub fn simulate_states(

@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub mod budget;
 pub mod correlation;
 pub mod dataset;
 pub mod dynamics;
@@ -18,6 +19,7 @@ pub mod physical;
 pub mod tangent;
 pub mod terms;
 
+pub use budget::{Budget, BudgetExhausted, BudgetLimit};
 pub use correlation::{Confidence, acf, confidence_bound, xcf};
 pub use dataset::{Channel, Dataset, Experiment, InterSample};
 pub use dynamics::{Correction, Dynamics, Horizon, Model, Prediction};

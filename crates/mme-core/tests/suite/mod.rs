@@ -11,4 +11,5 @@ mod msd;
 mod noise;
 mod nonlinear;
 mod robust;
+mod stiff;
 mod update;

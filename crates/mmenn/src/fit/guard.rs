@@ -1,6 +1,6 @@
 //! The guard of `mmenn fit`: the hybrid is never kept when it is worse than the physics
 //! it starts from. Three candidates — the assumed model alone (a network whose output is
-//! zero), the network as trained on `d̂`, and the network after trajectory refinement —
+//! zero), the network as trained on `d̂`, and the network after trajectory training —
 //! are run free on held-out data (the validation record when given, else the last fifth
 //! of the first training record; never a test record) and the one with the smallest
 //! normalised free-run error is kept, ties going to the simpler candidate.
@@ -19,9 +19,9 @@ use crate::model_file::ModelSpec;
 pub enum GuardCandidate {
     /// The assumed model alone: the network's output is held at zero.
     PhysicsAlone,
-    /// The network as trained on MME's `d̂`, before trajectory refinement.
+    /// The network as trained on MME's `d̂`, before trajectory training.
     Network,
-    /// The network after trajectory refinement.
+    /// The network after trajectory training.
     Refined,
 }
 
@@ -30,8 +30,8 @@ impl GuardCandidate {
     pub fn describe(self) -> &'static str {
         match self {
             Self::PhysicsAlone => "physics alone (no network)",
-            Self::Network => "network before trajectory refinement",
-            Self::Refined => "network after trajectory refinement",
+            Self::Network => "network before trajectory training",
+            Self::Refined => "network after trajectory training",
         }
     }
 }
@@ -57,14 +57,15 @@ pub struct CandidateScore {
 pub struct GuardReport {
     /// The held-out data the candidates were judged on, in words.
     pub held_out: String,
-    /// Every candidate's score, in the order physics alone, network, refined.
+    /// Every candidate's score, in the order physics alone, network, network trained on
+    /// trajectories.
     pub candidates: Vec<CandidateScore>,
     /// The candidate kept.
     pub chosen: GuardCandidate,
     /// Why, in words.
     pub reason: String,
-    /// Whether refinement made the held-out free run worse than the network before it
-    /// (`None` when there was no refinement or either run failed).
+    /// Whether trajectory training made the held-out free run worse than the network
+    /// before it (`None` when there was no trajectory training or either run failed).
     pub refinement_hurt: Option<bool>,
 }
 
@@ -102,7 +103,7 @@ impl GuardReport {
         ));
         if self.refinement_hurt == Some(true) {
             s.push_str(
-                "\n**Trajectory refinement made the held-out free run worse**; the network \
+                "\n**Trajectory training made the held-out free run worse**; the network \
                  before it (or the physics alone) was kept instead.\n",
             );
         }
@@ -168,7 +169,7 @@ pub(crate) fn held_out(
         window,
         description: format!(
             "the last fifth of the first training record (samples {start}..{len}; the \
-             network sweep held these pairs out, trajectory refinement did not), initial \
+             network sweep held these pairs out, trajectory training did not), initial \
              state fitted to its first {window} samples from MME's x̂ there"
         ),
     })

@@ -1,22 +1,25 @@
-//! The trajectory-refinement step of `mmenn fit` (thesis §7.1): after the network has
-//! learned MME's `d̂`, its weights are refined by multiple shooting on the training
-//! records' free-run output error ([`nn::train_on_trajectories`]), and the validation
-//! free-run is reported before and after.
+//! The trajectory-training step of `mmenn fit` (thesis §7.1): after the network has
+//! learned MME's `d̂`, its weights are trained further by multiple shooting on the training
+//! records' free-run output error ([`nn::train_on_trajectories`], the network inside the
+//! hybrid model `sysid_core::CorrectedModel`), and the validation free-run is reported
+//! before and after. ("Refine" is kept for discovery's model refinement.)
 
 use std::collections::BTreeMap;
 
-use nn::{HybridParts, Mlp, ShootingRecord, TrajectoryConfig, TrajectoryReport};
+use nn::{Mlp, ShootingRecord, TrajectoryConfig, TrajectoryReport};
 use serde::Serialize;
 use sysid_core::{Dataset, MmeEstimate};
 
 use super::{FitOptions, hybrid_loaded, judge_outputs};
-use crate::error::{MmennError, Result};
+use crate::error::Result;
 use crate::model_file::ModelSpec;
 
-/// Whether `fit` refines the network on trajectories after training it on `d̂`.
+/// Whether `fit` trains the network on trajectories after training it on `d̂`
+/// (`--train-on-trajectories yes|no`; the old spelling `--refine trajectory|none` is still
+/// read).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "snake_case")]
-pub enum RefineChoice {
+pub enum TrajectoryChoice {
     /// Keep the network trained on `d̂`.
     None,
     /// Multiple-shooting Levenberg–Marquardt on the training records' free-run output
@@ -27,36 +30,44 @@ pub enum RefineChoice {
     Trajectory,
 }
 
-impl std::str::FromStr for RefineChoice {
+impl std::str::FromStr for TrajectoryChoice {
     type Err = String;
+    /// `yes` / `no`, or the old values `trajectory` / `none`.
     fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
         match s {
-            "none" => Ok(Self::None),
-            "trajectory" => Ok(Self::Trajectory),
-            _ => Err(format!("'{s}' is neither \"none\" nor \"trajectory\"")),
+            "no" | "none" => Ok(Self::None),
+            "yes" | "trajectory" => Ok(Self::Trajectory),
+            _ => Err(format!(
+                "'{s}' is neither \"yes\" nor \"no\" (the old \"trajectory\" and \"none\" also work)"
+            )),
         }
     }
 }
 
-/// What the refinement did, and whether it helped on validation data.
+/// The old name of [`TrajectoryChoice`] ("refine" now means only discovery's model
+/// refinement); kept for callers not yet moved.
+#[doc(hidden)]
+pub type RefineChoice = TrajectoryChoice;
+
+/// What the trajectory training did, and whether it helped on validation data.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct RefineSummary {
+pub struct TrajectorySummary {
     /// The optimiser's report (objective = mean squared output error over the shooting
     /// windows, in units of each channel's standard deviation).
     pub report: TrajectoryReport,
     /// Free-run fit % per output channel on the validation record with the network
     /// trained on `d̂` only (when validation data are given).
     pub validation_fit_before: Option<BTreeMap<String, f64>>,
-    /// The same with the refined network (also in the validation report).
+    /// The same with the network trained on trajectories (also in the validation report).
     pub validation_fit_after: Option<BTreeMap<String, f64>>,
 }
 
-impl RefineSummary {
+impl TrajectorySummary {
     /// Markdown section for `report.md`.
     pub fn markdown(&self) -> String {
         let r = &self.report;
         let mut s = format!(
-            "\n## Trajectory refinement (thesis §7.1)\n\nMultiple shooting over {} training \
+            "\n## Trajectory training (thesis §7.1)\n\nMultiple shooting over {} training \
              windows ({} held out for early stopping), started from MME's x̂: {} LM steps, \
              returned step {} (stopped: {}); training objective (mean squared residual in \
              units of each channel's standard deviation) {:.4e} → {:.4e}.\n",
@@ -99,11 +110,11 @@ fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<ShootingRecord<'
         .collect()
 }
 
-/// Refine `network` on the training records, windows starting from MME's `x̂`; windows of
-/// the validation records (with MME's `x̂` of them) decide when to stop, when given. The
-/// validation free-run fit % of the `d̂`-trained network is recorded first, to say later
-/// whether refinement helped.
-pub(super) fn refine_network(
+/// Train `network` on the training records' trajectories, windows starting from MME's
+/// `x̂`; windows of the validation records (with MME's `x̂` of them) decide when to stop,
+/// when given. The validation free-run fit % of the `d̂`-trained network is recorded
+/// first, to say later whether the trajectory training helped.
+pub(super) fn train_network_on_trajectories(
     spec: &ModelSpec,
     network: &mut Mlp,
     (est, data): (&MmeEstimate, &Dataset),
@@ -111,8 +122,7 @@ pub(super) fn refine_network(
     x0: &[f64],
     opts: &FitOptions,
     progress: &dyn crate::progress::ProgressSink,
-) -> Result<RefineSummary> {
-    let lin = &spec.linear;
+) -> Result<TrajectorySummary> {
     // Judged as `fit` judges the final model: the one free-run judge on the first
     // validation record.
     let before = match val {
@@ -133,20 +143,10 @@ pub(super) fn refine_network(
         substeps: opts.substeps,
         ..opts.trajectory
     };
-    let base = spec.term_model().map_err(|problem| MmennError::Model {
-        path: "<model>".into(),
-        line: None,
-        column: None,
-        problem,
-    })?;
-    let parts = HybridParts {
-        base: &base,
-        e: lin.e(),
-        c: lin.c(),
-    };
+    let mut model = crate::hybrid::hybrid_model(spec, network.clone(), x0, opts.substeps)?;
     let train = shooting(data, est);
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
-    const TASK: &str = "trajectory refinement";
+    const TASK: &str = "trajectory training";
     let most = config.max_iterations;
     let mut on_step = |p: nn::TrajectoryProgress| {
         let note = match p.val_objective {
@@ -157,11 +157,11 @@ pub(super) fn refine_network(
             .report(&crate::progress::Progress::new(TASK, p.iteration, Some(most)).with_note(note));
     };
     progress.report(&crate::progress::Progress::new(TASK, 0, Some(most)));
-    let report =
-        nn::train_on_trajectories(network, &parts, &train, &val, &config, Some(&mut on_step));
+    let report = nn::train_on_trajectories(&mut model, &train, &val, &config, Some(&mut on_step));
     progress.finish(TASK);
     let report = report?;
-    Ok(RefineSummary {
+    network.clone_from(model.correction().network());
+    Ok(TrajectorySummary {
         report,
         validation_fit_before: before,
         validation_fit_after: None,

@@ -1,4 +1,4 @@
-//! The simulation side of trajectory refinement: shooting windows of the hybrid model
+//! The simulation side of trajectory training: shooting windows of the hybrid model
 //! (sysid-core's `CorrectedModel` with the network as its correction) simulated free-run
 //! by sysid-core's RK4 step (inputs held or interpolated between samples as each record's
 //! experiment says), their scaled residuals, the fit of a window's start state,
@@ -11,9 +11,8 @@ use sysid_core::{
     CorrectedModel, Dynamics, LeastSquaresProblem, LmSettings, Termination, levenberg_marquardt,
 };
 
-use super::{HybridParts, ShootingRecord};
-use crate::correction::NetView;
-use crate::mlp::Mlp;
+use super::ShootingRecord;
+use crate::correction::NetCorrection;
 
 /// Levenberg–Marquardt iterations when fitting a window's start state.
 const START_FIT_ITERATIONS: usize = 20;
@@ -28,7 +27,9 @@ pub(super) struct Window {
 
 /// Everything a simulation of a set of windows needs, shared read-only across threads.
 pub(super) struct Shooter<'a, F> {
-    pub(super) parts: &'a HybridParts<'a, F>,
+    /// The hybrid model being trained (its network as given: working copies with trial
+    /// weights come from [`Shooter::model`]).
+    pub(super) hybrid: &'a CorrectedModel<F, NetCorrection>,
     pub(super) records: &'a [ShootingRecord<'a>],
     pub(super) inv_scale: Vec<f64>,
     pub(super) substeps: usize,
@@ -50,24 +51,14 @@ impl Buffers {
     }
 }
 
-/// The hybrid model of one weight vector (`None` only if the parts do not fit, which
-/// `train_on_trajectories` rules out first).
-pub(super) type Hybrid<'m, F> = Option<CorrectedModel<&'m F, NetView<'m>>>;
+/// A working copy of the hybrid model `ẋ = f(x, u) + E·NN([x; u])`: the base dynamics
+/// borrowed, the network owned, so trial weights are written into it in place.
+pub(super) type Hybrid<'m, F> = CorrectedModel<&'m F, NetCorrection>;
 
-impl<F: Dynamics> Shooter<'_, F> {
-    /// The hybrid model `ẋ = f(x, u) + E·NN([x; u])` with `net` as its correction.
-    pub(super) fn model<'m>(&'m self, net: &'m Mlp) -> Hybrid<'m, F> {
-        let n = self.parts.base.n_states();
-        // Shapes are checked once in `train_on_trajectories`, so this cannot fail; a
-        // failure would read as a diverged window.
-        CorrectedModel::new(
-            self.parts.base,
-            NetView { net, n_states: n },
-            self.parts.e.clone(),
-            self.parts.c.clone(),
-            vec![String::new(); self.parts.c.nrows()],
-        )
-        .ok()
+impl<'a, F: Dynamics> Shooter<'a, F> {
+    /// A working copy of the model being trained (one per thread or problem).
+    pub(super) fn model(&self) -> Hybrid<'a, F> {
+        self.hybrid.with_borrowed_base()
     }
 
     /// Simulate window `w` of `model` from state `x0` by sysid-core's RK4 step (inputs
@@ -82,10 +73,7 @@ impl<F: Dynamics> Shooter<'_, F> {
         r: &mut [f64],
         b: &mut Buffers,
     ) -> bool {
-        let Some(model) = model else {
-            return false;
-        };
-        let c = self.parts.c;
+        let c = self.hybrid.c();
         let p = c.nrows();
         let exp = self.records[w.record].experiment;
         let h = exp.dt() / self.substeps as f64;
@@ -119,20 +107,19 @@ impl<F: Dynamics> Shooter<'_, F> {
     /// `r`. Returns the index of the first window that diverged, if any.
     pub(super) fn residuals(
         &self,
-        net: &Mlp,
+        model: &Hybrid<'_, F>,
         windows: &[Window],
         starts: &[f64],
         r: &mut [f64],
         b: &mut Buffers,
     ) -> std::result::Result<(), usize> {
         let n = b.x.len();
-        let p = self.parts.c.nrows();
-        let model = self.model(net);
+        let p = self.hybrid.c().nrows();
         let mut row = 0;
         for (wi, w) in windows.iter().enumerate() {
             let len = (w.end - w.start) * p;
             let x0 = &starts[wi * n..(wi + 1) * n];
-            if !self.window_residuals(&model, w, x0, &mut r[row..row + len], b) {
+            if !self.window_residuals(model, w, x0, &mut r[row..row + len], b) {
                 return Err(wi);
             }
             row += len;
@@ -147,7 +134,7 @@ impl<F: Dynamics> Shooter<'_, F> {
     /// fitted start is written into `fitted`. Infinite when the window diverges from `x0`.
     pub(super) fn fitted_window_sse(
         &self,
-        net: &Mlp,
+        model: &Hybrid<'_, F>,
         w: &Window,
         x0: &[f64],
         x_scale: &[f64],
@@ -156,7 +143,7 @@ impl<F: Dynamics> Shooter<'_, F> {
     ) -> f64 {
         let mut problem = StartFit {
             shooter: self,
-            model: self.model(net),
+            model,
             window: w,
             x_scale,
             bufs: b,
@@ -180,7 +167,7 @@ impl<F: Dynamics> Shooter<'_, F> {
 /// The start state of one window as a least-squares problem, the weights fixed.
 struct StartFit<'s, 'a, F> {
     shooter: &'s Shooter<'a, F>,
-    model: Hybrid<'s, F>,
+    model: &'s Hybrid<'a, F>,
     window: &'s Window,
     x_scale: &'s [f64],
     bufs: &'s mut Buffers,
@@ -190,13 +177,13 @@ impl<F: Dynamics> LeastSquaresProblem for StartFit<'_, '_, F> {
     type Error = std::convert::Infallible;
 
     fn residual_count(&self) -> usize {
-        (self.window.end - self.window.start) * self.shooter.parts.c.nrows()
+        (self.window.end - self.window.start) * self.shooter.hybrid.c().nrows()
     }
 
     fn residuals(&mut self, x0: &[f64], r: &mut [f64]) -> Result<bool, Self::Error> {
         Ok(self
             .shooter
-            .window_residuals(&self.model, self.window, x0, r, self.bufs))
+            .window_residuals(self.model, self.window, x0, r, self.bufs))
     }
 
     /// Forward differences, step `√ε·σ_j`; a diverging perturbed window gives a zero
@@ -213,7 +200,7 @@ impl<F: Dynamics> LeastSquaresProblem for StartFit<'_, '_, F> {
             xp[j] = x0[j] + h;
             let mut col = jac.column_mut(j);
             let ok = self.shooter.window_residuals(
-                &self.model,
+                self.model,
                 self.window,
                 &xp,
                 col.as_mut_slice(),
@@ -229,7 +216,8 @@ impl<F: Dynamics> LeastSquaresProblem for StartFit<'_, '_, F> {
 /// The current point of the training problem, for the Jacobian.
 pub(super) struct Linearisation<'s, 'a, F> {
     pub(super) shooter: &'s Shooter<'a, F>,
-    pub(super) net: &'s Mlp,
+    /// The model at the current weights.
+    pub(super) model: &'s Hybrid<'a, F>,
     pub(super) windows: &'s [Window],
     pub(super) starts: &'s [f64],
     pub(super) theta: &'s [f64],
@@ -240,13 +228,14 @@ pub(super) struct Linearisation<'s, 'a, F> {
 impl<F: Dynamics> Linearisation<'_, '_, F> {
     /// Column `j` of `jac` = `(r(θ + h_j e_j) − r(θ))/h_j`, `h_j = √ε·max(1, |θ_j|)`.
     /// Weight columns simulate every window; a start-state column only its own window
-    /// (the other rows are zero). Columns are computed in parallel, each with its own
-    /// network copy and buffers, so the result does not depend on the thread count. A
+    /// (the other rows are zero). Columns are computed in parallel, each worker with its
+    /// own model copy and buffers, so the result does not depend on the thread count. A
     /// perturbed simulation that diverges leaves a zero column.
     pub(super) fn jacobian(&self, r0: &[f64], jac: &mut DMatrix<f64>) {
         let (n, m, q) = self.dims;
-        let nw = self.net.n_weights();
-        let p = self.shooter.parts.c.nrows();
+        let weights = self.model.correction().network().weights();
+        let nw = weights.len();
+        let p = self.shooter.hybrid.c().nrows();
         let offsets: Vec<usize> = self
             .windows
             .iter()
@@ -262,15 +251,16 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
             .par_chunks_mut(r0.len().max(1))
             .enumerate()
             .for_each_init(
-                || (self.net.clone(), Buffers::new(n, m, q), vec![0.0; n]),
+                || (self.shooter.model(), Buffers::new(n, m, q), vec![0.0; n]),
                 |(pert, bufs, x0), (j, col)| {
                     let tj = self.theta[j];
                     let h = sqrt_eps * tj.abs().max(1.0);
                     // The step actually taken, after rounding of θ_j + h.
                     let h = (tj + h) - tj;
                     if j < nw {
-                        pert.weights_mut().copy_from_slice(self.net.weights());
-                        pert.weights_mut()[j] = tj + h;
+                        let w = pert.correction_mut().weights_mut();
+                        w.copy_from_slice(weights);
+                        w[j] = tj + h;
                         let ok = self
                             .shooter
                             .residuals(pert, self.windows, self.starts, col, bufs)
@@ -286,8 +276,7 @@ impl<F: Dynamics> Linearisation<'_, '_, F> {
                         col[..a].fill(0.0);
                         col[b..].fill(0.0);
                         let seg = &mut col[a..b];
-                        let model = self.shooter.model(self.net);
-                        let ok = self.shooter.window_residuals(&model, w, x0, seg, bufs);
+                        let ok = self.shooter.window_residuals(self.model, w, x0, seg, bufs);
                         finish_column(seg, &r0[a..b], h, ok);
                     }
                 },

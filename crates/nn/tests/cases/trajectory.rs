@@ -1,4 +1,4 @@
-//! Trajectory refinement (multiple shooting on the free-run output error): a descent
+//! Trajectory training (multiple shooting on the free-run output error): a descent
 //! method that recovers a teacher correction from its trajectories, the same bits for any
 //! thread count, typed errors, and inputs interpolated between samples for first-order-hold
 //! records.
@@ -6,12 +6,12 @@
 use crate::common::with_threads;
 use nalgebra::DMatrix;
 use nn::{
-    Architecture, HybridParts, Mlp, NetCorrection, NnError, ShootingRecord, TrajectoryConfig,
+    Architecture, Mlp, NetCorrection, NnError, ShootingRecord, TrajectoryConfig,
     train_on_trajectories,
 };
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
-use sysid_core::{CorrectedModel, Experiment, Integrator, InterSample, LinearModel};
+use sysid_core::{CoreError, CorrectedModel, Experiment, Integrator, InterSample, LinearModel};
 
 /// Assumed model: a damped oscillator `ẍ = −x − 0.2ẋ + u`, position measured, the
 /// correction entering the velocity equation.
@@ -92,6 +92,20 @@ fn student(spread: f64, seed: u64) -> Mlp {
     net
 }
 
+/// The hybrid model `ẋ = f(x, u) + E·NN([x; u])` of the assumed model with `net` as its
+/// correction.
+fn hybrid(net: Mlp) -> CorrectedModel<LinearModel, NetCorrection> {
+    let lin = assumed();
+    CorrectedModel::new(
+        lin.clone(),
+        NetCorrection::new(net, 2).unwrap(),
+        lin.e().clone(),
+        lin.c().clone(),
+        vec!["x".into()],
+    )
+    .unwrap()
+}
+
 fn config() -> TrajectoryConfig {
     TrajectoryConfig {
         window: 40,
@@ -103,23 +117,16 @@ fn config() -> TrajectoryConfig {
 #[test]
 fn refinement_is_a_descent_method_and_recovers_the_teacher() {
     let (exp, xs) = record(400);
-    let lin = assumed();
-    let parts = HybridParts {
-        base: &lin,
-        e: lin.e(),
-        c: lin.c(),
-    };
     // Start states biased by 0.05 in position and velocity: the free start states must
     // absorb this, not the network.
     let biased = xs.map(|v| v + 0.05);
     for (seed, states) in [(1u64, &xs), (2, &biased), (3, &xs)] {
-        let mut net = student(0.3, seed);
+        let mut net = hybrid(student(0.3, seed));
         let records = [ShootingRecord {
             experiment: &exp,
             states,
         }];
-        let report =
-            train_on_trajectories(&mut net, &parts, &records, &[], &config(), None).unwrap();
+        let report = train_on_trajectories(&mut net, &records, &[], &config(), None).unwrap();
         // Every accepted step lowers the objective strictly, so the history is decreasing
         // and the returned weights are no worse than the initial ones.
         for pair in report.train_history.windows(2) {
@@ -144,13 +151,7 @@ fn refinement_is_a_descent_method_and_recovers_the_teacher() {
 fn validation_records_replace_held_out_windows() {
     let (exp, xs) = record(300);
     let (vexp, vxs) = record(200);
-    let lin = assumed();
-    let parts = HybridParts {
-        base: &lin,
-        e: lin.e(),
-        c: lin.c(),
-    };
-    let mut net = student(0.2, 4);
+    let mut net = hybrid(student(0.2, 4));
     let train = [ShootingRecord {
         experiment: &exp,
         states: &xs,
@@ -159,7 +160,7 @@ fn validation_records_replace_held_out_windows() {
         experiment: &vexp,
         states: &vxs,
     }];
-    let report = train_on_trajectories(&mut net, &parts, &train, &val, &config(), None).unwrap();
+    let report = train_on_trajectories(&mut net, &train, &val, &config(), None).unwrap();
     // 300 samples → windows [0,40], …, [280,299]: 8 training windows; 200 → 5 held out.
     assert_eq!((report.train_windows, report.val_windows), (8, 5));
     let best = report.val_history[report.best_iteration];
@@ -174,15 +175,9 @@ fn validation_records_replace_held_out_windows() {
 #[test]
 fn same_bits_for_any_thread_count() {
     let (exp, xs) = record(240);
-    let lin = assumed();
-    let parts = HybridParts {
-        base: &lin,
-        e: lin.e(),
-        c: lin.c(),
-    };
     let run = |threads: usize| {
         with_threads(threads, || {
-            let mut net = student(0.3, 9);
+            let mut net = hybrid(student(0.3, 9));
             let records = [ShootingRecord {
                 experiment: &exp,
                 states: &xs,
@@ -191,9 +186,14 @@ fn same_bits_for_any_thread_count() {
                 max_iterations: 5,
                 ..config()
             };
-            let report =
-                train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None).unwrap();
-            let bits: Vec<u64> = net.weights().iter().map(|v| v.to_bits()).collect();
+            let report = train_on_trajectories(&mut net, &records, &[], &cfg, None).unwrap();
+            let bits: Vec<u64> = net
+                .correction()
+                .network()
+                .weights()
+                .iter()
+                .map(|v| v.to_bits())
+                .collect();
             (bits, report)
         })
     };
@@ -205,34 +205,36 @@ fn same_bits_for_any_thread_count() {
 #[test]
 fn bad_problems_are_typed_errors() {
     let (exp, xs) = record(100);
-    let lin = assumed();
-    let parts = HybridParts {
-        base: &lin,
-        e: lin.e(),
-        c: lin.c(),
-    };
     let records = [ShootingRecord {
         experiment: &exp,
         states: &xs,
     }];
-    let mut net = student(0.1, 1);
-    let before = net.clone();
+    let mut net = hybrid(student(0.1, 1));
+    let before = net.correction().clone();
     let cfg = TrajectoryConfig {
         window: 0,
         ..config()
     };
     assert!(matches!(
-        train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None),
+        train_on_trajectories(&mut net, &records, &[], &cfg, None),
         Err(NnError::InvalidConfig {
             field: "window",
             ..
         })
     ));
-    // A 2-input network cannot read 2 states and 1 input.
-    let mut small = Mlp::new(&Architecture::single(2, 3, 1), 0).unwrap();
+    // A 2-input network cannot read 2 states and 1 input: the hybrid model is refused
+    // when it is built, before any training.
+    let small = Mlp::new(&Architecture::single(2, 3, 1), 0).unwrap();
+    let lin = assumed();
     assert!(matches!(
-        train_on_trajectories(&mut small, &parts, &records, &[], &config(), None),
-        Err(NnError::Length { .. })
+        CorrectedModel::new(
+            lin.clone(),
+            NetCorrection::new(small, 2).unwrap(),
+            lin.e().clone(),
+            lin.c().clone(),
+            vec!["x".into()],
+        ),
+        Err(CoreError::Length { .. })
     ));
     let short = xs.columns(0, 50).into_owned();
     let bad = [ShootingRecord {
@@ -240,7 +242,7 @@ fn bad_problems_are_typed_errors() {
         states: &short,
     }];
     assert!(matches!(
-        train_on_trajectories(&mut net, &parts, &bad, &[], &config(), None),
+        train_on_trajectories(&mut net, &bad, &[], &config(), None),
         Err(NnError::Shape {
             matrix: "record states",
             ..
@@ -253,13 +255,13 @@ fn bad_problems_are_typed_errors() {
         ..config()
     };
     assert_eq!(
-        train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None).unwrap_err(),
+        train_on_trajectories(&mut net, &records, &[], &cfg, None).unwrap_err(),
         NnError::TrajectoryDiverged {
             record: 0,
             sample: 0
         }
     );
-    assert_eq!(net, before);
+    assert_eq!(net.correction(), &before);
 }
 
 /// Noise-free record of the teacher hybrid model with a band-limited input sampled coarsely
@@ -280,24 +282,18 @@ fn coarse_foh_record(n: usize, hold: InterSample) -> (Experiment, DMatrix<f64>) 
 /// (measured: 0.12 → 9.0e-15 in 9 steps).
 #[test]
 fn first_order_hold_records_are_shot_with_interpolated_inputs() {
-    let lin = assumed();
-    let parts = HybridParts {
-        base: &lin,
-        e: lin.e(),
-        c: lin.c(),
-    };
     let at_teacher = |hold: InterSample| {
         let (exp, xs) = coarse_foh_record(200, hold);
         let records = [ShootingRecord {
             experiment: &exp,
             states: &xs,
         }];
-        let mut net = teacher();
+        let mut net = hybrid(teacher());
         let cfg = TrajectoryConfig {
             max_iterations: 0,
             ..config()
         };
-        train_on_trajectories(&mut net, &parts, &records, &[], &cfg, None)
+        train_on_trajectories(&mut net, &records, &[], &cfg, None)
             .unwrap()
             .objective_at_estimates
     };
@@ -311,8 +307,8 @@ fn first_order_hold_records_are_shot_with_interpolated_inputs() {
         experiment: &exp,
         states: &xs,
     }];
-    let mut net = student(0.3, 5);
-    let report = train_on_trajectories(&mut net, &parts, &records, &[], &config(), None).unwrap();
+    let mut net = hybrid(student(0.3, 5));
+    let report = train_on_trajectories(&mut net, &records, &[], &config(), None).unwrap();
     assert!(
         report.final_train_objective() < 1e-4 * report.initial_train_objective(),
         "{:?} {:?}",

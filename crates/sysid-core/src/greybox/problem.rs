@@ -75,6 +75,10 @@ pub(super) struct Calibration<'a, 'o, D: ParametricDynamics> {
     pub observer: Option<Observer<'o>>,
     /// The stage named to the observer.
     pub stage: &'static str,
+    /// The job's budget: every Jacobian charges the RK4 steps of its simulation.
+    pub budget: crate::Budget,
+    /// Jacobians formed so far (one per solver iteration).
+    jacobians: usize,
     values: Vec<f64>,
     x: Vec<f64>,
     s: DMatrix<f64>,
@@ -123,6 +127,8 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
             rows,
             observer: None,
             stage: "free run",
+            budget: crate::Budget::default(),
+            jacobians: 0,
             values,
             x: vec![0.0; n],
             s: DMatrix::zeros(n, r),
@@ -225,6 +231,19 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
 
     /// The Jacobian at `theta` (rows as [`Self::fill_residuals`]).
     fn fill_jacobian(&mut self, theta: &[f64], jac: &mut DMatrix<f64>) -> Result<()> {
+        let steps: usize = self
+            .segments
+            .iter()
+            .map(|s| (s.end - s.start).saturating_sub(1))
+            .sum();
+        let stage = if self.stage == "free run" {
+            "grey-box free-run iteration"
+        } else {
+            "grey-box multiple-shooting iteration"
+        };
+        self.budget
+            .charge((steps * self.substeps) as u64, stage, self.jacobians, None)?;
+        self.jacobians += 1;
         let model = self.model_at(theta)?;
         let n = self.model.n_states();
         let nf = self.free.len();

@@ -430,3 +430,43 @@ fn the_shooting_jacobian_is_the_derivative_of_the_residuals() {
         }
     }
 }
+
+/// A stated budget stops the calibration with a typed error naming the stage: a
+/// work-unit budget of 0 before the first free-run iteration, one of exactly one
+/// Jacobian's RK4 steps (199 intervals × 2 sub-steps) before the second; an unlimited
+/// budget charges exactly that much per iteration.
+#[test]
+fn a_spent_budget_stops_the_calibration_with_a_typed_error() {
+    let records = [record()];
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [NOISE * NOISE / 3.0];
+    let model = integrator(f64::NEG_INFINITY, f64::INFINITY, 1.0);
+    let per_iteration = ((records[0].len() - 1) * 2) as u64;
+    let unlimited = crate::Budget::work_units(u64::MAX);
+    let opts = GreyboxOptions {
+        budget: unlimited.clone(),
+        ..GreyboxOptions::default()
+    };
+    let fit = estimate_parameters(&model, &data(&c, &records, &nv), &opts)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(unlimited.used() > 0);
+    assert_eq!(unlimited.used() % per_iteration, 0);
+    assert_eq!(fit.stages.len(), 1);
+    for (units, done) in [(0, 0), (per_iteration, 1)] {
+        let opts = GreyboxOptions {
+            budget: crate::Budget::work_units(units),
+            ..GreyboxOptions::default()
+        };
+        let e = estimate_parameters(&model, &data(&c, &records, &nv), &opts).err();
+        assert_eq!(
+            e,
+            Some(CoreError::BudgetExhausted(crate::BudgetExhausted {
+                limit: crate::BudgetLimit::WorkUnits(units),
+                stage: "grey-box free-run iteration",
+                done,
+                total: None,
+                used: units + per_iteration,
+            }))
+        );
+    }
+}

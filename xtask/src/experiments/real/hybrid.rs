@@ -15,7 +15,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use mmenn::benchmarks::{Benchmark, BenchmarkData};
 use mmenn::data_file::write_csv;
-use mmenn::fit::{FitOptions, InitialChoice, NetworkSelection, RefineChoice, run_fit};
+use mmenn::fit::{FitOptions, InitialChoice, NetworkSelection, TrajectoryChoice, run_fit};
 use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry, write_model};
 use mmenn::sysid_core::{Experiment, Integrator};
 
@@ -212,9 +212,10 @@ fn hybrid_rows_inner(
             w: eff.w.map_or(mmenn::estimate::WeightChoice::Auto, |w| {
                 mmenn::estimate::WeightChoice::Value(w)
             }),
+            ..Default::default()
         },
         selection: eff.selection,
-        refine: RefineChoice::Trajectory,
+        refine: TrajectoryChoice::Trajectory,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: eff.window,
             max_iterations: eff.steps,

@@ -240,13 +240,15 @@ pub(crate) struct FitArgs {
     /// or free-run (smallest free-run output error of the hybrid model on the training data).
     #[arg(long, default_value = "d-mse")]
     pub(crate) select: mmenn::fit::NetworkSelection,
-    /// Refine the network on trajectories after training on d̂: none or trajectory
-    /// (multiple-shooting LM on the free-run output error; thesis §7.1).
-    #[arg(long, default_value = "trajectory")]
-    pub(crate) refine: mmenn::fit::RefineChoice,
-    /// Samples per shooting window of the trajectory refinement.
-    #[arg(long, default_value_t = 100, value_parser = at_least_one)]
-    pub(crate) refine_window: usize,
+    /// Train the network on trajectories after training on d̂: yes or no
+    /// (multiple-shooting LM on the free-run output error; thesis §7.1). The old spelling
+    /// `--refine trajectory|none` still works.
+    #[arg(long, alias = "refine", default_value = "yes")]
+    pub(crate) train_on_trajectories: mmenn::fit::TrajectoryChoice,
+    /// Samples per shooting window of the trajectory training (old spelling:
+    /// `--refine-window`).
+    #[arg(long, alias = "refine-window", default_value_t = 100, value_parser = at_least_one)]
+    pub(crate) trajectory_window: usize,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
     pub(crate) w: mmenn::estimate::WeightChoice,
@@ -258,6 +260,8 @@ pub(crate) struct FitArgs {
     pub(crate) out: PathBuf,
     #[command(flatten)]
     pub(crate) prep: PrepArgs,
+    #[command(flatten)]
+    pub(crate) budget: BudgetArgs,
 }
 
 #[derive(Debug, Args)]
@@ -330,6 +334,8 @@ pub(crate) struct GreyestArgs {
     pub(crate) out: PathBuf,
     #[command(flatten)]
     pub(crate) prep: PrepArgs,
+    #[command(flatten)]
+    pub(crate) budget: BudgetArgs,
 }
 
 #[derive(Debug, Args)]
@@ -355,6 +361,8 @@ pub(crate) struct EstimateArgs {
     pub(crate) out: PathBuf,
     #[command(flatten)]
     pub(crate) prep: PrepArgs,
+    #[command(flatten)]
+    pub(crate) budget: BudgetArgs,
 }
 
 #[derive(Debug, Args)]
@@ -386,4 +394,33 @@ pub(crate) struct SimulateArgs {
     /// Output directory.
     #[arg(long, required_unless_present = "list")]
     pub(crate) out: Option<PathBuf>,
+}
+
+/// Default of `--budget`, s.
+pub(crate) const DEFAULT_BUDGET_SECONDS: f64 = 600.0;
+
+/// The job's time budget (`--budget`).
+#[derive(Debug, Args)]
+pub(crate) struct BudgetArgs {
+    /// Stop with an error naming the stage that ran out and how far it got (exit status 4)
+    /// once the estimation (MME's iterations; greyest's calibration) has run this many
+    /// seconds; `inf` for no limit.
+    #[arg(long, value_name = "SECONDS", default_value_t = DEFAULT_BUDGET_SECONDS, value_parser = budget_seconds)]
+    pub(crate) budget: f64,
+}
+
+impl BudgetArgs {
+    /// The budget, starting now (`inf` = unlimited).
+    pub(crate) fn start(&self) -> mmenn::sysid_core::Budget {
+        mmenn::sysid_core::Budget::seconds(self.budget).unwrap_or_default()
+    }
+}
+
+fn budget_seconds(text: &str) -> std::result::Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v >= 0.0 => Ok(v),
+        _ => Err(format!(
+            "'{text}' is not a number of seconds >= 0 (or inf for no limit)"
+        )),
+    }
 }

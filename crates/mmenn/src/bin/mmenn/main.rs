@@ -196,6 +196,7 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
     let opts = mmenn::estimate::EstimateOptions {
         w: args.w,
         substeps: args.substeps,
+        budget: args.budget.start(),
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "estimate", force, &inputs)?;
@@ -284,6 +285,7 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         segment: args.shooting,
         substeps: args.substeps,
         max_iterations: args.max_iterations,
+        budget: args.budget.start(),
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "greyest", force, &inputs)?;
@@ -364,6 +366,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         estimate: mmenn::estimate::EstimateOptions {
             w: args.w,
             substeps: None,
+            budget: args.budget.start(),
         },
         hidden: args.hidden,
         inits: args.inits,
@@ -371,10 +374,10 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         update: args.update_model,
         selection: args.select,
         seed: args.seed,
-        refine: args.refine,
+        refine: args.train_on_trajectories,
         training: args.training,
         trajectory: mmenn::nn::TrajectoryConfig {
-            window: args.refine_window,
+            window: args.trajectory_window,
             ..Default::default()
         },
         ..Default::default()
@@ -407,7 +410,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     }
     if let Some(r) = &s.refinement {
         println!(
-            "trajectory refinement: {} steps, objective {:.4e} -> {:.4e}",
+            "trajectory training: {} steps, objective {:.4e} -> {:.4e}",
             r.report.iterations,
             r.report.initial_train_objective(),
             r.report.final_train_objective()
@@ -694,6 +697,20 @@ fn error_chain(e: &anyhow::Error) -> String {
     msg
 }
 
+/// Whether `e` is a spent `--budget` (exit status 4), wherever it sits in the chain.
+fn budget_ran_out(e: &anyhow::Error) -> bool {
+    use mmenn::mme_core::MmeError;
+    use mmenn::sysid_core::{BudgetExhausted, CoreError};
+    e.chain().any(|c| {
+        c.is::<BudgetExhausted>()
+            || matches!(c.downcast_ref(), Some(CoreError::BudgetExhausted(_)))
+            || matches!(
+                c.downcast_ref(),
+                Some(MmeError::Core(CoreError::BudgetExhausted(_)))
+            )
+    })
+}
+
 #[allow(clippy::print_stderr)]
 fn main() -> ExitCode {
     let cli = Cli::parse();
@@ -722,6 +739,8 @@ fn main() -> ExitCode {
             }
             if e.downcast_ref::<NotConverged>().is_some() {
                 ExitCode::from(3)
+            } else if budget_ran_out(&e) {
+                ExitCode::from(4)
             } else {
                 ExitCode::FAILURE
             }
