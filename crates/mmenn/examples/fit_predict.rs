@@ -41,7 +41,7 @@ pub fn run() -> mmenn::Result<FitPredictExample> {
     let opts = FitOptions {
         hidden: HiddenChoice::Fixed(3),
         inits: 3,
-        refine: TrajectoryChoice::None,
+        train_on_trajectories: TrajectoryChoice::None,
         x0_window: 50,
         ..FitOptions::default()
     };

@@ -36,7 +36,7 @@ pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
 pub use guard::{CandidateScore, GuardCandidate, GuardReport};
 pub use output::write_fit;
 use trajectory::train_network_on_trajectories;
-pub use trajectory::{RefineChoice, TrajectoryChoice, TrajectorySummary};
+pub use trajectory::{TrajectoryChoice, TrajectorySummary};
 
 mod choices;
 mod d_figures;
@@ -68,10 +68,9 @@ pub struct FitOptions {
     pub update: ModelUpdateChoice,
     /// How the network is picked from the sweep.
     pub selection: NetworkSelection,
-    /// Whether the network is then trained on trajectories (thesis §7.1). The field keeps
-    /// its old name until every caller has moved (`--train-on-trajectories` on the
-    /// command line).
-    pub refine: TrajectoryChoice,
+    /// Whether the network is then trained on trajectories (thesis §7.1;
+    /// `--train-on-trajectories` on the command line).
+    pub train_on_trajectories: TrajectoryChoice,
     /// Settings of that training (its `substeps` is replaced by [`FitOptions::substeps`]).
     pub trajectory: nn::TrajectoryConfig,
     /// How the networks are trained. Default [`Training::Trainlm`].
@@ -134,7 +133,7 @@ impl Default for FitOptions {
             max_hidden: 10,
             update: ModelUpdateChoice::None,
             selection: NetworkSelection::CorrectionMse,
-            refine: TrajectoryChoice::default(),
+            train_on_trajectories: TrajectoryChoice::default(),
             trajectory: nn::TrajectoryConfig::default(),
             training: Training::Trainlm,
         }
@@ -481,7 +480,7 @@ pub fn compute_fit(
     let mut network = sweep.networks[chosen].clone();
     let before_refinement = network.clone();
     let val_pair = val_est.as_ref().zip(val.as_ref());
-    let mut refinement = match opts.refine {
+    let mut refinement = match opts.train_on_trajectories {
         TrajectoryChoice::None => None,
         TrajectoryChoice::Trajectory => Some(train_network_on_trajectories(
             &spec,

@@ -258,7 +258,7 @@ fn trajectory_refinement_removes_the_bias_of_a_shrunk_correction() {
             },
             hidden: HiddenChoice::Fixed(4),
             inits: 2,
-            refine,
+            train_on_trajectories: refine,
             ..FitOptions::default()
         };
         let s = run_fit(

@@ -71,7 +71,7 @@ fn guard_keeps_the_physics_alone_on_data_the_physics_generated() {
         &FitOptions {
             hidden: HiddenChoice::Fixed(2),
             inits: 2,
-            refine: TrajectoryChoice::Trajectory,
+            train_on_trajectories: TrajectoryChoice::Trajectory,
             trajectory: mmenn::nn::TrajectoryConfig {
                 window: 100,
                 max_iterations: 3,

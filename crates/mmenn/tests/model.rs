@@ -65,7 +65,7 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
             hidden: HiddenChoice::Fixed(1),
             max_hidden: 1,
             inits: 1,
-            refine: TrajectoryChoice::None,
+            train_on_trajectories: TrajectoryChoice::None,
             x0_window: 50,
             ..FitOptions::default()
         },
@@ -349,7 +349,7 @@ fn one_fit_percent_in_predict_compare_and_discover() {
             fit: FitOptions {
                 hidden: HiddenChoice::Fixed(1),
                 inits: 1,
-                refine: TrajectoryChoice::None,
+                train_on_trajectories: TrajectoryChoice::None,
                 x0_window: 50,
                 ..FitOptions::default()
             },

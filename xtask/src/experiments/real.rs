@@ -521,7 +521,7 @@ fn oe_hybrid_rows(
         seed: FIT_SEED,
         // The thesis's method: the network as trained on d̂ (the trajectory refinement
         // of `mmenn fit` is the thesis's future work, §7.1, and costs minutes here).
-        refine: mmenn::fit::RefineChoice::None,
+        train_on_trajectories: mmenn::fit::TrajectoryChoice::None,
         ..FitOptions::default()
     };
     let fit_dir = work.join("fit");

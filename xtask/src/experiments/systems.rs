@@ -329,7 +329,7 @@ fn run_case(ctx: &Ctx, case: &Case) -> Result<Outcome> {
         update: case.update,
         // The thesis's method: the network as trained on d̂ (the trajectory refinement
         // of `mmenn fit` is the thesis's future work, §7.1, and costs minutes here).
-        refine: mmenn::fit::TrajectoryChoice::None,
+        train_on_trajectories: mmenn::fit::TrajectoryChoice::None,
         ..FitOptions::default()
     };
     let spec = LoadedModel::read(&set.train.files.model)?.spec;

@@ -44,11 +44,6 @@ impl std::str::FromStr for TrajectoryChoice {
     }
 }
 
-/// The old name of [`TrajectoryChoice`] ("refine" now means only discovery's model
-/// refinement); kept for callers not yet moved.
-#[doc(hidden)]
-pub type RefineChoice = TrajectoryChoice;
-
 /// What the trajectory training did, and whether it helped on validation data.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TrajectorySummary {

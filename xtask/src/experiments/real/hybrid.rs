@@ -215,7 +215,7 @@ fn hybrid_rows_inner(
             ..Default::default()
         },
         selection: eff.selection,
-        refine: TrajectoryChoice::Trajectory,
+        train_on_trajectories: TrajectoryChoice::Trajectory,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: eff.window,
             max_iterations: eff.steps,

@@ -374,7 +374,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         update: args.update_model,
         selection: args.select,
         seed: args.seed,
-        refine: args.train_on_trajectories,
+        train_on_trajectories: args.train_on_trajectories,
         training: args.training,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.trajectory_window,
