@@ -609,6 +609,8 @@ fn run_planned<M: Mme + Sync>(
                     ci95_calibrated,
                 ),
                 ci95: ci95_calibrated,
+                unit: None,
+                reading: None,
                 named_by: if regression.is_some() {
                     "regression on d̂, kept by free-run search".into()
                 } else {
