@@ -226,8 +226,10 @@ pub struct ForceOutcome {
     pub validation_cost: Option<[f64; 2]>,
     /// The final model's calibration (start states, fit, correlations).
     pub fit: Option<GreyboxFit<PhysicalModel>>,
-    /// Notes (why a step did not run).
+    /// Notes (why a step did not run, why terms were not confirmed).
     pub notes: Vec<String>,
+    /// How the shape of each smooth Coulomb law was chosen (free-run costs).
+    pub shapes: Vec<String>,
 }
 
 /// `τ̂ = M(q̂)·(E d̂)_rates` per record: joints × samples.
@@ -585,6 +587,7 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         validation_cost: None,
         fit: None,
         notes: Vec::new(),
+        shapes: Vec::new(),
     };
     if effects.is_empty() {
         outcome
@@ -644,7 +647,7 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         final_fit,
         &x0,
         config,
-        &mut outcome.notes,
+        &mut outcome.shapes,
     );
     outcome.verdict = Verdict::Found;
     if let Some(val) = problem.validation {
@@ -683,3 +686,6 @@ fn column(expr: &Expr, states: &DMatrix<f64>, data: &sysid_core::Experiment, out
         out.push(expr.eval_parts(&x, data.input(k)));
     }
 }
+
+#[cfg(test)]
+mod tests;

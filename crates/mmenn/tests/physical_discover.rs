@@ -5,10 +5,10 @@
 
 use std::path::{Path, PathBuf};
 
-use mmenn::discovery::Verdict;
 use mmenn::discover::{DiscoverOptions, NamedEffect, run_discover};
-use mmenn::predict::InitialChoice;
+use mmenn::discovery::Verdict;
 use mmenn::greyest::{GreyestOptions, run_greyest};
+use mmenn::predict::InitialChoice;
 use mmenn::predict::run_predict;
 use mmenn::progress::NoProgress;
 
@@ -39,7 +39,11 @@ fn rigid_body_only() -> String {
     let body = &text[..text.find("[[terms]]").unwrap()];
     let kept: Vec<&str> = body
         .lines()
-        .filter(|l| !["b1 ", "b2 ", "fc1 ", "fc2 ", "vs "].iter().any(|p| l.starts_with(p)))
+        .filter(|l| {
+            !["b1 ", "b2 ", "fc1 ", "fc2 ", "vs "]
+                .iter()
+                .any(|p| l.starts_with(p))
+        })
         .collect();
     assert!(!kept.iter().any(|l| l.contains("atan")), "friction left");
     kept.join("\n") + "\n"
@@ -116,7 +120,10 @@ fn two_link_friction_is_named_per_joint_as_torques() {
             .unwrap_or_else(|| panic!("no {names:?} on {state}: {:#?}", s.effects))
     };
     for (j, (state, _)) in joints.iter().enumerate() {
-        let (b, fc) = (truth(&format!("b{}", j + 1)), truth(&format!("fc{}", j + 1)));
+        let (b, fc) = (
+            truth(&format!("b{}", j + 1)),
+            truth(&format!("fc{}", j + 1)),
+        );
         let viscous = named(state, &["viscous_damping"]);
         assert_eq!(viscous.term, *state);
         assert_eq!(viscous.unit.as_deref(), Some("(N*m)/(rad/s)"));
@@ -134,7 +141,10 @@ fn two_link_friction_is_named_per_joint_as_torques() {
             "{state}: the tanh law was kept ({coulomb:?})"
         );
         let eps = coulomb.parameters["eps"];
-        assert!((eps - truth("vs")).abs() <= 0.1 * truth("vs"), "{state} ε {eps}");
+        assert!(
+            (eps - truth("vs")).abs() <= 0.1 * truth("vs"),
+            "{state} ε {eps}"
+        );
         let ci = coulomb.ci95.expect("Coulomb interval");
         assert!(covers(ci, -fc), "{state} Coulomb {ci:?} vs −{fc}");
     }

@@ -330,6 +330,15 @@ fn report(s: &DiscoverSummary, o: &ForceOutcome) -> String {
         r.push('\n');
     };
     table("Named forces:", &s.effects, &mut r);
+    if !o.shapes.is_empty() {
+        r.push_str(
+            "Shape of each smooth Coulomb law (free-run cost on the estimation records):\n\n",
+        );
+        for n in &o.shapes {
+            r.push_str(&format!("- {n}\n"));
+        }
+        r.push('\n');
+    }
     table("Not confirmed on validation:", &s.unconfirmed, &mut r);
     if !s.passengers.is_empty() {
         r.push_str("Eliminated:\n\n");
