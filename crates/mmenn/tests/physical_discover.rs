@@ -11,6 +11,7 @@ use mmenn::greyest::{GreyestOptions, run_greyest};
 use mmenn::predict::InitialChoice;
 use mmenn::predict::run_predict;
 use mmenn::progress::NoProgress;
+use mmenn::sysid_core::Dynamics;
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link")
@@ -215,5 +216,40 @@ fn greyest_covers_the_true_rigid_body_and_friction() {
             p.value,
             p.start
         );
+    }
+}
+
+/// README's physics section shows `fixtures/two_link/rigid_body.toml` as it is, and that
+/// file is the fixture's model without its friction: same right-hand side, friction
+/// switched off in the fixture (`b = fc = 0`), at a few states.
+#[test]
+fn readme_shows_the_rigid_body_fixture() {
+    let readme = include_str!("../../../README.md");
+    let start = readme
+        .find("## Model files with physics: parameters and mass matrix")
+        .unwrap();
+    let block = &readme[start..];
+    let open = block.find("```toml\n").unwrap() + "```toml\n".len();
+    let shown = &block[open..open + block[open..].find("```").unwrap()];
+    let file = std::fs::read_to_string(fixture().join("rigid_body.toml")).unwrap();
+    assert_eq!(shown, file);
+    let rigid = mmenn::LoadedModel::parse(Path::new("rigid_body.toml"), &file).unwrap();
+    let frictionless = std::fs::read_to_string(fixture().join("model.toml"))
+        .unwrap()
+        .replace("value = 0.004,", "value = 0.0,")
+        .replace("value = 0.002,", "value = 0.0,")
+        .replace("value = 0.012,", "value = 0.0,")
+        .replace("value = 0.008,", "value = 0.0,");
+    let full = mmenn::LoadedModel::parse(Path::new("model.toml"), &frictionless).unwrap();
+    for x in [[0.3, -0.2, 1.0, -2.0], [0.1, 1.0, -0.5, 0.7]] {
+        let (mut a, mut b) = ([0.0; 4], [0.0; 4]);
+        rigid.dynamics.rhs(0.0, &x, &[0.1, -0.05], &mut a);
+        full.dynamics.rhs(0.0, &x, &[0.1, -0.05], &mut b);
+        for i in 0..4 {
+            assert!(
+                (a[i] - b[i]).abs() <= 1e-12 * (1.0 + b[i].abs()),
+                "{a:?} {b:?}"
+            );
+        }
     }
 }
