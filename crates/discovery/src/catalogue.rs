@@ -84,6 +84,10 @@ pub enum Effect {
     CoulombFriction,
     /// `tanh(v/ε)`: the integrable form of [`Effect::CoulombFriction`].
     CoulombFrictionSmooth,
+    /// `(2/π)·atan(v/ε)`: a smooth Coulomb law with a slower approach to `±1` (a
+    /// `1 − 2ε/(π|v|)` tail), the form many drives and simulators use; not a regression
+    /// candidate (force-space discovery tries it as the shape of a named Coulomb term).
+    CoulombFrictionAtan,
     /// `sign(v)*exp(-(v/v_s)^2)`.
     StribeckFriction,
     /// `tanh(v/ε)*exp(-(v/v_s)^2)`: the integrable form of [`Effect::StribeckFriction`].
@@ -131,7 +135,7 @@ const LEVEL: &[Role] = &[Role::Level];
 impl Effect {
     /// Every effect, in catalogue order (regression candidates first in this order, which
     /// also breaks ties between exactly equivalent candidates).
-    pub const ALL: [Effect; 19] = [
+    pub const ALL: [Effect; 20] = [
         Effect::ConstantBias,
         Effect::ViscousDamping,
         Effect::LinearStiffness,
@@ -141,6 +145,7 @@ impl Effect {
         Effect::QuadraticDrag,
         Effect::CoulombFriction,
         Effect::CoulombFrictionSmooth,
+        Effect::CoulombFrictionAtan,
         Effect::StribeckFriction,
         Effect::StribeckFrictionSmooth,
         Effect::AmplitudeDependentDamping,
@@ -165,6 +170,7 @@ impl Effect {
             Effect::QuadraticDrag => "quadratic_drag",
             Effect::CoulombFriction => "coulomb_friction",
             Effect::CoulombFrictionSmooth => "coulomb_friction_smooth",
+            Effect::CoulombFrictionAtan => "coulomb_friction_atan",
             Effect::StribeckFriction => "stribeck_friction",
             Effect::StribeckFrictionSmooth => "stribeck_friction_smooth",
             Effect::AmplitudeDependentDamping => "amplitude_dependent_damping",
@@ -195,6 +201,7 @@ impl Effect {
             Effect::QuadraticDrag => "quadratic drag",
             Effect::CoulombFriction => "Coulomb friction",
             Effect::CoulombFrictionSmooth => "Coulomb friction (smoothed)",
+            Effect::CoulombFrictionAtan => "Coulomb friction (smoothed by atan)",
             Effect::StribeckFriction => "Stribeck friction",
             Effect::StribeckFrictionSmooth => "Stribeck friction (smoothed)",
             Effect::AmplitudeDependentDamping => "amplitude-dependent damping",
@@ -216,6 +223,7 @@ impl Effect {
             | Effect::QuadraticDrag
             | Effect::CoulombFriction
             | Effect::CoulombFrictionSmooth
+            | Effect::CoulombFrictionAtan
             | Effect::StribeckFriction
             | Effect::StribeckFrictionSmooth => &[Slot::State(VELOCITY)],
             Effect::LinearStiffness => &[Slot::State(&[Role::Position, Role::Angle])],
@@ -234,7 +242,7 @@ impl Effect {
     /// Names of the numeric parameters written into the term, in template order.
     pub fn parameters(self) -> &'static [&'static str] {
         match self {
-            Effect::CoulombFrictionSmooth => &["eps"],
+            Effect::CoulombFrictionSmooth | Effect::CoulombFrictionAtan => &["eps"],
             Effect::StribeckFriction => &["v_s"],
             Effect::StribeckFrictionSmooth => &["v_s", "eps"],
             Effect::InputSaturation => &["limit"],
@@ -272,7 +280,9 @@ impl Effect {
     pub fn is_candidate(self) -> bool {
         !matches!(
             self,
-            Effect::CoulombFrictionSmooth | Effect::StribeckFrictionSmooth
+            Effect::CoulombFrictionSmooth
+                | Effect::CoulombFrictionAtan
+                | Effect::StribeckFrictionSmooth
         )
     }
 
@@ -297,6 +307,7 @@ impl Effect {
             Effect::QuadraticDrag => format!("{a}*abs({a})"),
             Effect::CoulombFriction => format!("sign({a})"),
             Effect::CoulombFrictionSmooth => format!("tanh({a}/{})", p(0)),
+            Effect::CoulombFrictionAtan => format!("2/pi*atan({a}/{})", p(0)),
             Effect::StribeckFriction => format!("sign({a})*exp(-({a}/{})^2)", p(0)),
             Effect::StribeckFrictionSmooth => {
                 format!("tanh({a}/{})*exp(-({a}/{})^2)", p(1), p(0))
@@ -339,6 +350,7 @@ impl Effect {
             Effect::ConstantBias
             | Effect::CoulombFriction
             | Effect::CoulombFrictionSmooth
+            | Effect::CoulombFrictionAtan
             | Effect::StribeckFriction
             | Effect::StribeckFrictionSmooth
             | Effect::GravityNonlinearity => Some("1".into()),
@@ -374,12 +386,16 @@ impl Effect {
             Effect::CubicStiffness => "softening cubic spring",
             Effect::QuadraticDrag if negative => "quadratic drag opposing motion",
             Effect::QuadraticDrag => "negative quadratic drag (pushes with the motion)",
-            Effect::CoulombFriction | Effect::CoulombFrictionSmooth if negative => {
+            Effect::CoulombFriction
+            | Effect::CoulombFrictionSmooth
+            | Effect::CoulombFrictionAtan
+                if negative =>
+            {
                 "dry (Coulomb) friction opposing motion"
             }
-            Effect::CoulombFriction | Effect::CoulombFrictionSmooth => {
-                "a constant push along the motion (not friction)"
-            }
+            Effect::CoulombFriction
+            | Effect::CoulombFrictionSmooth
+            | Effect::CoulombFrictionAtan => "a constant push along the motion (not friction)",
             Effect::StribeckFriction | Effect::StribeckFrictionSmooth if negative => {
                 "extra breakaway friction near rest (Stribeck)"
             }

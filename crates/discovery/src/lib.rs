@@ -5,6 +5,7 @@ mod candidates;
 mod catalogue;
 pub mod error;
 mod floor;
+pub mod force;
 mod gauge;
 mod json;
 mod judge;

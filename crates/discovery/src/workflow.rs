@@ -17,7 +17,7 @@ use sysid_core::{Channel, Dataset, Experiment, MmeEstimate, TermModel};
 
 use crate::error::DiscoveryError;
 use crate::floor::NoiseFloor;
-use crate::judge::{BootstrapJudgement, JudgeConfig, Protocol};
+use crate::judge::BootstrapJudgement;
 use crate::localise::{FreeRun, LocaliseConfig, localise};
 use crate::propose::{DiscoveryConfig, FoundEffect, Verdict, propose};
 use crate::refine::{Holdout, RefineCandidate, RefineConfig, Refinement, Search};
@@ -29,9 +29,16 @@ use crate::{
 };
 use holdout::{holdout_initial_states, recalibrate_on, split_records};
 
+mod context;
 mod holdout;
+mod plan;
 mod report;
 mod steps;
+
+pub use context::claim_bound;
+use context::{JudgeContext, noise_level_bound};
+use plan::Plan;
+pub use plan::{FINAL_STEPS, Observer, STEPS_PER_ROUND, Silent};
 
 pub use report::{Ambiguity, AssumedEntry, NamedEffect, Round};
 pub use steps::d_rms;
@@ -46,23 +53,6 @@ use steps::{
 /// coloured residual, but not for a missing effect. With `R` given, it also ends the
 /// rounds: a round that leaves the cost above it is not proven by MME.
 pub const CONFIRM_COST: f64 = 2.0;
-
-/// The free-run cost on `measured` judged values below which named effects are claimed
-/// when the bootstrap judge cannot run. With `R` given, a right model must reach the
-/// noise level itself: `J ≤ 1 + 3√(2/M)` (`M·J` is χ²_M, standard deviation `√(2M)`).
-/// With `R` estimated, [`CONFIRM_COST`].
-pub fn claim_bound(noise_given: bool, measured: usize) -> f64 {
-    if noise_given {
-        noise_level_bound(measured)
-    } else {
-        CONFIRM_COST
-    }
-}
-
-/// `1 + 3√(2/M)`: the largest free-run cost of a right model on `M` values (3σ).
-fn noise_level_bound(measured: usize) -> f64 {
-    1.0 + 3.0 * (2.0 / measured.max(1) as f64).sqrt()
-}
 
 /// MME as the workflow needs it, implemented by the caller (the facade, with mme-core).
 pub trait Mme {
@@ -91,81 +81,6 @@ pub trait Mme {
         noise: &[f64],
         start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate, Self::Error>;
-}
-
-/// Where the workflow is, for a progress display: `stage` names the step, `round` counts
-/// from 1 (0 before the first round).
-pub trait Observer: Sync {
-    /// A step begins.
-    fn stage(&self, round: usize, stage: &str);
-
-    /// `done` of `total` steps are finished; called right after each [`Observer::stage`]
-    /// and once at the end with `done == total`. `total` is the plan of [`run`]: the
-    /// first MME run, [`STEPS_PER_ROUND`] per round up to `max_rounds`, and
-    /// [`FINAL_STEPS`] after the rounds. It shrinks to what remains when the rounds stop
-    /// early or a step is not needed, and grows by one for an ambiguity test; `done`
-    /// never decreases and never exceeds `total`.
-    fn steps(&self, _done: usize, _total: usize) {}
-}
-
-/// Steps of one full round in the plan [`Observer::steps`] counts: the noise floor, the
-/// proposal, the free-run search and the proof.
-pub const STEPS_PER_ROUND: usize = 4;
-/// Steps after the rounds in that plan: the verdict's bootstrap judge, pruning passengers
-/// and the flexible stand-in.
-pub const FINAL_STEPS: usize = 3;
-
-/// Counts the workflow's steps against its plan for [`Observer::steps`].
-struct Plan<'a> {
-    observer: &'a dyn Observer,
-    /// Steps begun.
-    begun: std::cell::Cell<usize>,
-    /// Steps planned.
-    total: std::cell::Cell<usize>,
-}
-
-impl<'a> Plan<'a> {
-    fn new(observer: &'a dyn Observer, max_rounds: usize) -> Self {
-        Self {
-            observer,
-            begun: std::cell::Cell::new(0),
-            total: std::cell::Cell::new(1 + STEPS_PER_ROUND * max_rounds + FINAL_STEPS),
-        }
-    }
-
-    /// A planned step begins: the steps before it are finished.
-    fn stage(&self, round: usize, stage: &str) {
-        let done = self.begun.get();
-        self.begun.set(done + 1);
-        self.total.set(self.total.get().max(done + 1));
-        self.observer.stage(round, stage);
-        self.observer.steps(done, self.total.get());
-    }
-
-    /// A step outside the plan will run.
-    fn add(&self) {
-        self.total.set(self.total.get() + 1);
-    }
-
-    /// After the rounds: what remains is the final steps.
-    fn rounds_over(&self) {
-        self.total.set(self.begun.get() + FINAL_STEPS);
-    }
-
-    /// The run is over: every step begun is finished.
-    fn finish(&self) {
-        let done = self.begun.get();
-        self.total.set(done);
-        self.observer.steps(done, done);
-    }
-}
-
-/// An observer that ignores everything.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Silent;
-
-impl Observer for Silent {
-    fn stage(&self, _round: usize, _stage: &str) {}
 }
 
 /// Settings of [`run`].
@@ -267,44 +182,6 @@ pub struct Outcome {
     pub stand_in: Option<StandIn>,
     /// Why the stand-in did not decide, when it ran and failed.
     pub stand_in_note: Option<String>,
-}
-
-/// What judges a round's model: the records and initial-state guesses of its free-run
-/// search, the model as calibrated on the calibration records only (before any
-/// recalibration on the whole records), the indices of the terms the round calibrated,
-/// and the noise variance of the judged cost.
-#[derive(Debug, Clone)]
-struct JudgeContext {
-    model: TermModel,
-    new_terms: Vec<usize>,
-    cal: Dataset,
-    cal_x0: Vec<Vec<f64>>,
-    hold: Option<(Dataset, Vec<Vec<f64>>)>,
-    noise_variance: Vec<f64>,
-}
-
-impl JudgeContext {
-    /// Its judging protocol, with the free-run search's calibration settings.
-    fn protocol<'a>(&'a self, calibration: &'a CalibrationConfig) -> Protocol<'a> {
-        Protocol {
-            cal: &self.cal,
-            cal_x0: &self.cal_x0,
-            hold: self.hold.as_ref().map(|(d, x)| (d, x.as_slice())),
-            noise_variance: &self.noise_variance,
-            calibration,
-        }
-    }
-
-    /// Judge its model by the protocol against the protocol's bootstrap reference.
-    fn judge(&self, seed: u64) -> crate::Result<BootstrapJudgement> {
-        let calibration = RefineConfig::default().calibration;
-        let protocol = self.protocol(&calibration);
-        let config = JudgeConfig {
-            seed,
-            ..JudgeConfig::default()
-        };
-        crate::judge(&self.model, &self.new_terms, &protocol, &config)
-    }
 }
 
 /// Run the discovery workflow on `data` (estimation records) with the assumed `model`
@@ -609,6 +486,8 @@ fn run_planned<M: Mme + Sync>(
                     ci95_calibrated,
                 ),
                 ci95: ci95_calibrated,
+                unit: None,
+                reading: None,
                 named_by: if regression.is_some() {
                     "regression on d̂, kept by free-run search".into()
                 } else {

@@ -24,6 +24,7 @@ pub use discovery::workflow::{
     Ambiguity, AssumedEntry, CONFIRM_COST, NamedEffect, Round, WorkflowConfig,
 };
 
+mod force;
 mod report;
 
 /// Options of [`run_discover`].
@@ -318,11 +319,21 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
 /// every sample scored — the numbers `predict` and `compare` give for the same model);
 /// fit % and RMSE per output, and the simulated outputs.
 fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap, DMatrix<f64>)> {
+    free_run_gap_of(model, model.linear(), data, window)
+}
+
+/// [`free_run_gap`] for any model, its outputs those of `linear`.
+fn free_run_gap_of<D: sysid_core::Dynamics>(
+    model: &D,
+    linear: &sysid_core::LinearModel,
+    data: &Dataset,
+    window: usize,
+) -> Result<(Gap, DMatrix<f64>)> {
     let exp = &data.experiments()[0];
     let judged = sysid_core::judge_free_run(
         model,
         exp,
-        &sysid_core::judge::Observation::outputs(model.linear()),
+        &sysid_core::judge::Observation::outputs(linear),
         &sysid_core::judge::InitialRule::Fit {
             window: Some(window),
         },
@@ -373,6 +384,10 @@ pub fn run_discover_with_progress(
     // records come back tagged with its `intersample`).
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &original)?;
     ensure_dir(out)?;
+    if original.mechanics.is_some() {
+        // A mass matrix: missing effects are generalized forces per joint.
+        return force::run_force_discover(&original, &data, val.as_ref(), opts, out, progress);
+    }
     let base_model = original.term_model().map_err(|problem| MmennError::Model {
         path: model_path.to_path_buf(),
         line: None,
@@ -493,35 +508,59 @@ pub fn run_discover_with_progress(
         mme_termination: outcome.first_estimate.report.termination,
         rounds: outcome.rounds,
     };
-    let estimation_run = report::GapRun {
-        data: &data,
-        gap: &summary.gap,
-        before: y_before,
-        after: y_after,
+    let val_outputs = match (&val, validation_runs) {
+        (Some(v), Some((_, before, after))) => Some((v, before, after)),
+        _ => None,
     };
-    let validation_run = match (&val, &validation_runs, &summary.validation_gap) {
-        (Some(v), Some((_, before, after)), Some(gap)) => Some(report::GapRun {
-            data: v,
+    let text = report(&summary);
+    write_outputs(
+        &summary,
+        &spec,
+        (&data, y_before, y_after),
+        val_outputs,
+        &text,
+        out,
+    )?;
+    Ok(summary)
+}
+
+/// Free-run outputs of one record set: the records, the assumed and the discovered
+/// model's simulated outputs (`p × N`).
+type GapOutputs<'a> = (&'a Dataset, DMatrix<f64>, DMatrix<f64>);
+
+/// The figures, `discovery.json` and `report.md` (the report's `text` followed by the
+/// figures) of a run.
+fn write_outputs(
+    summary: &DiscoverSummary,
+    spec: &ModelSpec,
+    estimation: GapOutputs<'_>,
+    validation: Option<GapOutputs<'_>>,
+    text: &str,
+    out: &Path,
+) -> Result<()> {
+    let (data, before, after) = estimation;
+    let estimation_run = report::GapRun {
+        data,
+        gap: &summary.gap,
+        before,
+        after,
+    };
+    let validation_run = match (validation, &summary.validation_gap) {
+        (Some((data, before, after)), Some(gap)) => Some(report::GapRun {
+            data,
             gap,
-            before: before.clone(),
-            after: after.clone(),
+            before,
+            after,
         }),
         _ => None,
     };
-    let files = figures(
-        &summary,
-        &spec,
-        &estimation_run,
-        validation_run.as_ref(),
-        out,
-    )?;
+    let files = figures(summary, spec, &estimation_run, validation_run.as_ref(), out)?;
     write_atomic(
         &out.join("discovery.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
+        serde_json::to_string_pretty(summary)?.as_bytes(),
     )?;
-    let markdown = report(&summary) + &crate::html::figures_section(&files);
-    crate::html::write_report(out, &markdown)?;
-    Ok(summary)
+    let markdown = text.to_string() + &crate::html::figures_section(&files);
+    crate::html::write_report(out, &markdown)
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@ mod model;
 mod monitor;
 mod never_panics;
 mod physical;
+mod physical_discover;
 mod real_data;
 mod reliability;
 mod simulate;

@@ -458,6 +458,28 @@ impl PhysicalModel {
         self.mechanics.is_some()
     }
 
+    /// State indices of the mechanics part's coordinates `q` and of their rates `q̇`, in
+    /// coordinate order (`None` without a mechanics part).
+    pub fn mechanics_states(&self) -> Option<(&[usize], &[usize])> {
+        self.mechanics
+            .as_ref()
+            .map(|m| (m.q.as_slice(), m.v.as_slice()))
+    }
+
+    /// The mass matrix `M(q)` at state `x` and inputs `u`, row-major into `m[..n·n]` for
+    /// `n` coordinates; returns `n`. `None` (nothing written) without a mechanics part or
+    /// when `m` holds fewer than `n·n` entries. Maps an acceleration into the generalized
+    /// force that causes it: `Q = M(q)·q̈`.
+    pub fn mass_matrix(&self, x: &[f64], u: &[f64], m: &mut [f64]) -> Option<usize> {
+        let mech = self.mechanics.as_ref()?;
+        let n = mech.q.len();
+        let out = m.get_mut(..n * n)?;
+        for (slot, e) in out.iter_mut().zip(&mech.mass) {
+            *slot = e.eval3(x, u, &self.values);
+        }
+        Some(n)
+    }
+
     /// The model as a [`TermModel`] with the parameter values substituted, when it has no
     /// mechanics part (`None` otherwise: `M⁻¹` is not a sum of named terms).
     pub fn term_model(&self) -> Option<Result<TermModel, crate::TermError>> {

@@ -42,6 +42,14 @@ pub struct NamedEffect {
     /// For a linear term (a bare state or input): the assumed model's entry it adds to.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adjusts: Option<AssumedEntry>,
+    /// Unit of the coefficient, when known (force-space discovery: the joint's
+    /// generalized force over the term's unit).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
+    /// The reading of the coefficient's sign (force-space discovery: as a force on the
+    /// joint, negative on its own rate = opposing the motion).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reading: Option<String>,
 }
 
 impl NamedEffect {

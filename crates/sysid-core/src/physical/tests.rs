@@ -162,6 +162,29 @@ fn mass_matrix_form_matches_cramers_rule() {
     }
 }
 
+/// `mass_matrix` gives the hand-written `M(q)` (row-major) and the coordinate states;
+/// too short a buffer and a model without mechanics give `None`.
+#[test]
+fn mass_matrix_is_the_written_one() {
+    let model = double_pendulum();
+    let [m1, l1, m2, l2, ..] = values();
+    assert_eq!(model.mechanics_states(), Some((&[0, 1][..], &[2, 3][..])));
+    for (x, u) in points(20) {
+        let mut m = [f64::NAN; 4];
+        assert_eq!(model.mass_matrix(&x, &[u], &mut m), Some(2));
+        let k = m2 * l1 * l2 / 2.0 * (x[0] - x[1]).cos();
+        let want = [m1 * l1 * l1 / 3.0 + m2 * l1 * l1, k, k, m2 * l2 * l2 / 3.0];
+        for (got, want) in m.iter().zip(want) {
+            assert!((got - want).abs() <= 1e-15, "{x:?}: {m:?}");
+        }
+    }
+    assert_eq!(model.mass_matrix(&[0.0; 4], &[0.0], &mut [0.0; 3]), None);
+    let plain = PhysicalModel::new(linear(&["x"], &[], &["x"]), Vec::new(), &[], None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(plain.mass_matrix(&[0.0], &[], &mut [0.0; 4]), None);
+    assert_eq!(plain.mechanics_states(), None);
+}
+
 /// Central difference of `f` along one coordinate, step `h = ε^(1/3)·max(1, |z|)`:
 /// truncation `h²|f'''|/6` and round-off `ε|f|/h` are both ~1e-10·|f| here.
 fn central(f: impl Fn(f64) -> [f64; 4], z: f64) -> [f64; 4] {
