@@ -188,8 +188,8 @@ pub enum ModelProblem {
     /// named terms (`M⁻¹` is not a sum of terms).
     #[error(
         "{what} needs a state-space model with named terms; this model has a [mechanics] \
-         part (mass-matrix form), which estimate, predict and show accept (fit, compare and \
-         discover do not yet)"
+         part (mass-matrix form), which estimate, predict, greyest, discover and show accept \
+         (fit and compare do not yet)"
     )]
     Mechanical {
         /// The step that needs the state-space form.
