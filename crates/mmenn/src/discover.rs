@@ -214,6 +214,11 @@ pub struct DiscoverSummary {
     /// or `converged` makes `mmenn discover` exit with status 3: `d̂`, and everything
     /// proposed from it, rest on a `W` the covariance constraint did not fix.
     pub mme_termination: Option<sysid_core::Termination>,
+    /// Whether the effects were named as generalized forces of a mass-matrix model
+    /// (`discovery::force`: intervals and the validation cost decide; no bootstrap judge
+    /// and no stand-in).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub generalized_forces: bool,
 }
 
 /// MME for the workflow: mme-core with the model file's settings (`W`, noise variance,
@@ -506,6 +511,7 @@ pub fn run_discover_with_progress(
         validation_gap,
         model: "model.discovered.toml".into(),
         mme_termination: outcome.first_estimate.report.termination,
+        generalized_forces: false,
         rounds: outcome.rounds,
     };
     let val_outputs = match (&val, validation_runs) {

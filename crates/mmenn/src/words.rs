@@ -73,6 +73,27 @@ pub fn named_values(values: &BTreeMap<String, f64>) -> String {
         .join(", ")
 }
 
+/// A discover run's verdict with what it means for the way it was decided: a
+/// force-space run (mass-matrix model) is not judged against the noise level, so its
+/// words say what did decide it.
+pub fn discover_verdict(s: &crate::discover::DiscoverSummary) -> &'static str {
+    if !s.generalized_forces {
+        return verdict(s.verdict);
+    }
+    match s.verdict {
+        discovery::Verdict::Found => {
+            "found (named joint forces, each with a 95 % interval that excludes zero, which \
+             lowered the validation free-run cost when validation records were given; not \
+             judged against the noise level)"
+        }
+        discovery::Verdict::None => {
+            "none (no catalogue force of a joint's own rate explains a share of its force \
+             correction; not judged against the noise level)"
+        }
+        discovery::Verdict::Unexplained => verdict(s.verdict),
+    }
+}
+
 /// A discovery verdict as `discovery.json` spells it, with what it means.
 pub fn verdict(v: discovery::Verdict) -> &'static str {
     match v {

@@ -231,6 +231,35 @@ fn two_link_model_reproduces_independent_records() {
     }
 }
 
+/// `fit` and `compare` need the state-space form with named terms (the hybrid is
+/// `f + E·NN`); on a mass-matrix model they stop before doing any work, with the error
+/// naming the step and the file, instead of after MME or minutes of baselines. The
+/// output folder is not created.
+#[test]
+fn fit_and_compare_refuse_a_mass_matrix_model_up_front() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link");
+    let model_path = root.join("model.toml");
+    let data = [root.join("est.csv")];
+    let out = scratch("refuse-fit");
+    let e = mmenn::fit::run_fit(&data, &model_path, &[], &Default::default(), &out)
+        .expect_err("fit on a [mechanics] model");
+    let text = e.to_string();
+    assert!(
+        text.contains("fit needs a state-space model") && text.contains("model.toml"),
+        "{text}"
+    );
+    assert!(!out.exists());
+    let out = scratch("refuse-compare");
+    let e = mmenn::compare::run_compare(&data, &model_path, &[], &Default::default(), &out)
+        .expect_err("compare on a [mechanics] model");
+    let text = e.to_string();
+    assert!(
+        text.contains("compare needs a state-space model") && text.contains("model.toml"),
+        "{text}"
+    );
+    assert!(!out.exists());
+}
+
 /// `predict` on a record with a jittered time column (the two-link `val.csv` re-logged at
 /// times 2 ms·(k + ε_k), |ε_k| ≤ 0.25, columns renamed as a logger would): without
 /// `--resample` the CLI fails naming the row and the flag to use; with

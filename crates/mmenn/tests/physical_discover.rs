@@ -96,6 +96,18 @@ fn two_link_friction_is_named_per_joint_as_torques() {
     )
     .unwrap();
     assert_eq!(s.verdict, Verdict::Found, "{s:#?}");
+    // Decided by intervals and the validation cost, not by a noise-level judge: the
+    // words say so, and never claim the noise level.
+    assert!(s.generalized_forces && s.judgement.is_none());
+    let words = mmenn::words::discover_verdict(&s);
+    assert!(
+        words.contains("not judged against the noise level"),
+        "{words}"
+    );
+    assert!(
+        !words.contains("bring the model to the noise level"),
+        "{words}"
+    );
     let joints = [("omega1", "theta1"), ("omega2", "theta2")];
     for e in &s.effects {
         let (own, _) = joints

@@ -237,6 +237,7 @@ pub(super) fn run_force_discover(
         model: "model.discovered.toml".into(),
         rounds: Vec::new(),
         mme_termination: first.report.termination,
+        generalized_forces: true,
     };
     let val_outputs = match (val, validation_runs) {
         (Some(v), Some((_, b, a))) => Some((v, b, a)),
@@ -294,7 +295,7 @@ fn report(s: &DiscoverSummary, o: &ForceOutcome) -> String {
         "# Discovery (generalized forces)\n\nVerdict: **{}**.\n\nThe model has a mass \
          matrix, so MME's acceleration correction was mapped to joint forces, `τ̂ = M(q̂)·d̂`, \
          and each joint was explained by catalogue forces of its own rate only.\n\n",
-        crate::words::verdict(s.verdict)
+        crate::words::discover_verdict(s)
     );
     for w in &s.warnings {
         r.push_str(&format!("**Note.** {w}\n\n"));

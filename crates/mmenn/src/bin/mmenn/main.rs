@@ -549,7 +549,7 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
         progress,
     )?;
     staged.commit()?;
-    println!("verdict: {}", mmenn::words::verdict(s.verdict));
+    println!("verdict: {}", mmenn::words::discover_verdict(&s));
     for w in &s.warnings {
         println!("  warning: {w}");
     }
