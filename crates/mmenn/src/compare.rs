@@ -431,14 +431,7 @@ pub fn compute_compare_with_progress(
 ) -> Result<CompareOutcome> {
     // MME/NN needs the state-space form with named terms: say so before the baselines
     // run (minutes on a long record), not after.
-    if loaded.spec.mechanics.is_some() {
-        return Err(MmennError::Model {
-            path: loaded.path.clone(),
-            line: None,
-            column: None,
-            problem: crate::error::ModelProblem::Mechanical { what: "compare" },
-        });
-    }
+    loaded.spec.refuse_mechanics("compare", &loaded.path)?;
     let spec = loaded.spec.clone();
     let lin = spec.linear.clone();
     let data = &data.clone().with_intersample(spec.intersample);

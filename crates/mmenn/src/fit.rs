@@ -294,14 +294,7 @@ pub fn run_fit_with_progress(
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<FitSummary> {
     let spec = LoadedModel::read(model_path)?.spec;
-    if spec.mechanics.is_some() {
-        return Err(MmennError::Model {
-            path: model_path.to_path_buf(),
-            line: None,
-            column: None,
-            problem: crate::error::ModelProblem::Mechanical { what: "fit" },
-        });
-    }
+    spec.refuse_mechanics("fit", model_path)?;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     let outcome = compute_fit(&data, &spec, val.as_ref(), opts, progress)?;
@@ -376,14 +369,7 @@ pub fn compute_fit(
 ) -> Result<FitOutcome> {
     // The hybrid `f + E·NN` needs the state-space form with named terms: say so before
     // MME runs, not after.
-    if spec.mechanics.is_some() {
-        return Err(MmennError::Model {
-            path: "<model>".into(),
-            line: None,
-            column: None,
-            problem: crate::error::ModelProblem::Mechanical { what: "fit" },
-        });
-    }
+    spec.refuse_mechanics("fit", Path::new("<model>"))?;
     let mut spec = spec.clone();
     let data = &data.clone().with_intersample(spec.intersample);
     let val = val.map(|v| v.clone().with_intersample(spec.intersample));

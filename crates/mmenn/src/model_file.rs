@@ -58,6 +58,21 @@ impl ModelSpec {
         Ok(TermModel::from_specs(self.linear.clone(), specs)?)
     }
 
+    /// `Err` naming the step `what` and the file `path` when the model has a
+    /// `[mechanics]` part: steps built on `f + E·NN` over named terms (`fit`, `compare`)
+    /// cannot take the mass-matrix form, and say so before doing any work.
+    pub fn refuse_mechanics(&self, what: &'static str, path: &Path) -> Result<()> {
+        match self.mechanics {
+            Some(_) => Err(MmennError::Model {
+                path: path.to_path_buf(),
+                line: None,
+                column: None,
+                problem: ModelProblem::Mechanical { what },
+            }),
+            None => Ok(()),
+        }
+    }
+
     /// Whether the file uses `[parameters]` or `[mechanics]` (then its dynamics is a
     /// [`PhysicalModel`], which also gives `∂f/∂p`).
     pub fn is_physical(&self) -> bool {
