@@ -32,7 +32,7 @@ use crate::model_file::{ModelSpec, format_model};
 pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
-pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkSelection, Training};
+pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkSelection, Training};
 pub use guard::{CandidateScore, GuardCandidate, GuardReport};
 pub use output::write_fit;
 use trajectory::train_network_on_trajectories;
@@ -75,6 +75,9 @@ pub struct FitOptions {
     pub trajectory: nn::TrajectoryConfig,
     /// How the networks are trained. Default [`Training::Trainlm`].
     pub training: Training,
+    /// One network or the average of the equally good ones. Default
+    /// [`NetworkEnsemble::Single`].
+    pub ensemble: NetworkEnsemble,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
@@ -136,6 +139,7 @@ impl Default for FitOptions {
             train_on_trajectories: TrajectoryChoice::default(),
             trajectory: nn::TrajectoryConfig::default(),
             training: Training::Trainlm,
+            ensemble: NetworkEnsemble::Single,
         }
     }
 }
@@ -221,7 +225,7 @@ fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
 /// What `mmenn fit` reports.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FitSummary {
-    /// Hidden units of the chosen network.
+    /// Hidden units of the chosen network (of the merged one, for an ensemble).
     pub hidden: usize,
     /// The chosen sweep row.
     pub chosen: SweepRow,
@@ -229,6 +233,8 @@ pub struct FitSummary {
     pub selection: NetworkSelection,
     /// How the networks were trained.
     pub training: Training,
+    /// Sweep rows averaged into the network (`ensemble: band`; empty for one network).
+    pub ensemble_rows: Vec<usize>,
     /// Free-run sum of squared output errors on the training record of the chosen network
     /// (when chosen by free-run error).
     pub free_run_sse: Option<f64>,
@@ -481,7 +487,15 @@ pub fn compute_fit(
             (i, Some(sse))
         }
     };
-    let mut network = sweep.networks[chosen].clone();
+    let (mut network, ensemble_rows) = match opts.ensemble {
+        NetworkEnsemble::Single => (sweep.networks[chosen].clone(), Vec::new()),
+        NetworkEnsemble::Band => {
+            let rows = nn::band_members(&sweep.rows, &sweep_config.selection);
+            let members: Vec<Mlp> = rows.iter().map(|&i| sweep.networks[i].clone()).collect();
+            (nn::ensemble::average(&members)?, rows)
+        }
+    };
+    let hidden_units = network.hidden().first().copied().unwrap_or(0);
     let before_refinement = network.clone();
     let val_pair = val_est.as_ref().zip(val.as_ref());
     let mut refinement = match opts.train_on_trajectories {
@@ -537,10 +551,11 @@ pub fn compute_fit(
         .map(|(i, n)| (n.clone(), est.w[(i, i)]))
         .collect();
     let summary = FitSummary {
-        hidden: sweep.rows[chosen].hidden,
+        hidden: hidden_units,
         chosen: sweep.rows[chosen].clone(),
         selection: opts.selection,
         training: opts.training,
+        ensemble_rows,
         free_run_sse,
         training_pairs: x_train.ncols(),
         test_source,

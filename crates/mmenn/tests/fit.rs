@@ -383,3 +383,55 @@ fn band_limited_input_is_fitted_and_predicted_with_the_first_order_hold() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `ensemble: band` averages every sweep network inside the sizing rule's band into one
+/// network: its width is the members' total, the rows it lists are exactly the band of
+/// the sweep it ran (validation data given), and the averaged model predicts the clean
+/// pendulum's test input (R² ≥ 0.999, the bound of the single-network test).
+#[test]
+fn band_ensemble_is_one_network_of_the_equally_good_ones() {
+    let dir = scratch("pend-band");
+    let train = sim(
+        &dir.join("train"),
+        "pendulum",
+        Recipe::Train,
+        Some(0.0),
+        None,
+    );
+    let test = sim(&dir.join("test"), "pendulum", Recipe::Test, Some(0.0), None);
+    let s = run_fit(
+        std::slice::from_ref(&train.data),
+        &train.model,
+        std::slice::from_ref(&test.data),
+        &FitOptions {
+            ensemble: mmenn::fit::NetworkEnsemble::Band,
+            ..quick(ModelUpdateChoice::None)
+        },
+        &dir.join("fit"),
+    )
+    .unwrap();
+    // The band, recomputed from sweep.csv by hand: test MSE within 10 % of the best.
+    let sweep = mmenn::data_file::read_table(&dir.join("fit/sweep.csv")).unwrap();
+    let col = |name: &str| sweep.columns[sweep.column_index(name).unwrap()].clone();
+    let (hidden, test_mse) = (col("hidden"), col("test_mse"));
+    let best = test_mse.iter().copied().fold(f64::INFINITY, f64::min);
+    let band: Vec<usize> = (0..test_mse.len())
+        .filter(|&i| test_mse[i] <= best * 1.1)
+        .collect();
+    assert_eq!(s.ensemble_rows, band);
+    // On this record two restarts land inside the band (rows 7 and 11 on 2026-11-26), so
+    // the merge is exercised.
+    assert!(band.len() >= 2, "band {band:?}");
+    let width = band.iter().map(|&i| hidden[i] as usize).sum::<usize>();
+    assert_eq!(s.hidden, width);
+    let file: mmenn::fit::HybridFile =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("fit/model.json")).unwrap())
+            .unwrap();
+    assert_eq!(file.network.hidden(), &[width]);
+    let p = predict_truth(&dir.join("fit"), &test, &dir.join("pred"));
+    for state in ["theta", "omega"] {
+        let r2 = p.free_run.channels[state].r2;
+        assert!(r2 >= 0.999, "{state}: free-run R² {r2} on the test input");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -81,6 +81,16 @@ pub enum NnError {
         /// What is required.
         reason: &'static str,
     },
+    /// Networks that cannot be combined (averaged) with the first one.
+    #[error("{what} {index} has {reason} than the first")]
+    Incompatible {
+        /// What was combined.
+        what: &'static str,
+        /// Index of the offending network, 0-based.
+        index: usize,
+        /// How it differs.
+        reason: &'static str,
+    },
     /// Every run of a sizing sweep ended with a non-finite test MSE.
     #[error("none of the {runs} sweep runs has a finite test MSE")]
     NoFiniteRun {

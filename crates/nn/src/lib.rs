@@ -2,6 +2,7 @@
 
 pub mod config;
 pub mod correction;
+pub mod ensemble;
 pub mod error;
 pub mod jacobian;
 pub mod lm;
@@ -17,8 +18,8 @@ pub use lm::{EpochInfo, StopReason, TrainReport, split_indices, train_lm};
 pub use mlp::{Architecture, Mlp, Workspace};
 pub use scaling::{CONSTANT_CHANNEL_RTOL, Scaler};
 pub use sweep::{
-    SizingRule, SweepConfig, SweepProgress, SweepResult, SweepRow, derive_seed, select,
-    sizing_sweep,
+    SizingRule, SweepConfig, SweepProgress, SweepResult, SweepRow, band_members, derive_seed,
+    select, sizing_sweep,
 };
 pub use trajectory::{
     ShootingRecord, TrajectoryConfig, TrajectoryProgress, TrajectoryReport, train_on_trajectories,

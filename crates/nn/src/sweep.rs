@@ -277,17 +277,35 @@ pub fn sizing_sweep(
     })
 }
 
-/// Apply the [`SizingRule`] to a sweep table; `None` if no row has a finite test MSE.
-pub fn select(rows: &[SweepRow], rule: &SizingRule) -> Option<usize> {
+/// The rows inside the [`SizingRule`]'s band (finite test MSE at most
+/// `best·(1 + rel) + abs`), with their indices.
+fn in_band<'a>(
+    rows: &'a [SweepRow],
+    rule: &SizingRule,
+) -> impl Iterator<Item = (usize, &'a SweepRow)> {
     let best = rows
         .iter()
         .map(|r| r.test_mse)
         .filter(|m| m.is_finite())
-        .reduce(f64::min)?;
-    let limit = best * (1.0 + rule.rel_tolerance) + rule.abs_tolerance;
+        .reduce(f64::min);
+    let limit = best.map_or(f64::NEG_INFINITY, |b| {
+        b * (1.0 + rule.rel_tolerance) + rule.abs_tolerance
+    });
     rows.iter()
         .enumerate()
-        .filter(|(_, r)| r.test_mse.is_finite() && r.test_mse <= limit)
+        .filter(move |(_, r)| r.test_mse.is_finite() && r.test_mse <= limit)
+}
+
+/// Indices of the sweep rows the [`SizingRule`] counts as equally good (inside its band),
+/// in table order: the members [`crate::ensemble::average`] merges. Empty if no row has a
+/// finite test MSE.
+pub fn band_members(rows: &[SweepRow], rule: &SizingRule) -> Vec<usize> {
+    in_band(rows, rule).map(|(i, _)| i).collect()
+}
+
+/// Apply the [`SizingRule`] to a sweep table; `None` if no row has a finite test MSE.
+pub fn select(rows: &[SweepRow], rule: &SizingRule) -> Option<usize> {
+    in_band(rows, rule)
         .min_by(|(_, a), (_, b)| {
             a.hidden
                 .cmp(&b.hidden)
@@ -312,6 +330,23 @@ mod tests {
             epochs: 0,
             termination: StopReason::MaxEpochs,
         }
+    }
+
+    #[test]
+    fn band_members_by_hand() {
+        let rows = vec![
+            row(1, 0, 1.2),
+            row(2, 0, 1.05),
+            row(2, 1, f64::NAN),
+            row(3, 0, 1.0),
+            row(3, 1, 1.1),
+        ];
+        let rule = SizingRule {
+            rel_tolerance: 0.1,
+            abs_tolerance: 0.0,
+        };
+        assert_eq!(band_members(&rows, &rule), vec![1, 3, 4]);
+        assert!(band_members(&[row(1, 0, f64::NAN)], &rule).is_empty());
     }
 
     #[test]

@@ -96,3 +96,28 @@ pub enum ModelUpdateChoice {
     /// Regression update of the corrected rows of A and B, then MME again.
     Regression,
 }
+
+impl std::str::FromStr for NetworkEnsemble {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "single" => Ok(Self::Single),
+            "band" => Ok(Self::Band),
+            _ => Err(format!("'{s}' is neither \"single\" nor \"band\"")),
+        }
+    }
+}
+
+/// Whether `fit` keeps one network of the sweep or averages the equally good ones.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NetworkEnsemble {
+    /// The one network [`NetworkSelection`] picks (the thesis procedure; the default).
+    #[default]
+    Single,
+    /// The mean of every sweep network inside the sizing rule's band of the best test MSE
+    /// of `d̂` (`nn::ensemble`): bagging over initialisations and sizes, merged exactly into
+    /// one wider network, so `model.json` still holds one network. It lowers the variance
+    /// a single restart carries on short records.
+    Band,
+}

@@ -240,6 +240,10 @@ pub(crate) struct FitArgs {
     /// or free-run (smallest free-run output error of the hybrid model on the training data).
     #[arg(long, default_value = "d-mse")]
     pub(crate) select: mmenn::fit::NetworkSelection,
+    /// Keep one network (single) or average every sweep network within the sizing rule's
+    /// band of the best test MSE into one wider network (band).
+    #[arg(long, default_value = "single")]
+    pub(crate) ensemble: mmenn::fit::NetworkEnsemble,
     /// Train the network on trajectories after training on d̂: yes or no
     /// (multiple-shooting LM on the free-run output error; thesis §7.1). The old spelling
     /// `--refine trajectory|none` still works.

@@ -373,6 +373,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         max_hidden: args.max_hidden,
         update: args.update_model,
         selection: args.select,
+        ensemble: args.ensemble,
         seed: args.seed,
         train_on_trajectories: args.train_on_trajectories,
         training: args.training,
