@@ -141,8 +141,15 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              position offset that the open-loop model cannot remove; the same training run \
              started from a state fitted to its first 20 samples (the test protocol) gives \
              5.21 mm instead of 2.43 mm from the calibrated state, so part of it is the \
-             20-sample state itself. Training error does not rank the structures on the \
-             test record (the asymmetric-friction row)"
+             20-sample state itself. The pulse force is not in the data either: the test \
+             record's pulses_N column is a 0/5 square wave (switching every 0.5 s from \
+             0.343 s, 50 % duty), and adding it to the calibrated grey box as a 5-N force on \
+             the load, with either sign, raises the test RMSE from 6.46 mm to 148 and 131 mm \
+             (an independent scipy LSODA run of the same equation at rtol 1e-8 from the \
+             measured start, not the 20-sample state), so the column cannot be read as the \
+             force on the load (a trigger level, probably), and no model under the protocol (input vir only) is told the pulses. \
+             Training error does not rank the structures on the test record (the \
+             asymmetric-friction row)"
         }
     }
 }
