@@ -118,12 +118,27 @@ impl SampleStep {
         inputs: &DMatrix<f64>,
         k: usize,
     ) -> DVector<f64> {
-        let held = &self.ad * x + &self.bd * inputs.column(k);
-        match &self.ramp {
-            Some(g2) if k + 1 < inputs.ncols() => {
-                held + g2 * (inputs.column(k + 1) - inputs.column(k))
-            }
-            _ => held,
+        let mut out = DVector::zeros(x.len());
+        self.advance_into(x, inputs, k, &mut out);
+        out
+    }
+
+    /// [`SampleStep::advance`] into `out` (length `n`, not aliasing `x`), without
+    /// allocating: the free-run and sensitivity loops call it once per sample.
+    pub(crate) fn advance_into(
+        &self,
+        x: &DVector<f64>,
+        inputs: &DMatrix<f64>,
+        k: usize,
+        out: &mut DVector<f64>,
+    ) {
+        out.gemv(1.0, &self.ad, x, 0.0);
+        out.gemv(1.0, &self.bd, &inputs.column(k), 1.0);
+        if let Some(g2) = &self.ramp
+            && k + 1 < inputs.ncols()
+        {
+            out.gemv(1.0, g2, &inputs.column(k + 1), 1.0);
+            out.gemv(-1.0, g2, &inputs.column(k), 1.0);
         }
     }
 }

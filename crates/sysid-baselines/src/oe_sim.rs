@@ -139,38 +139,42 @@ impl OeProblem<'_> {
                 }
             }
             if let Some(jac) = jac.as_mut() {
+                // Buffers of this experiment, allocated once; the per-sample loops below
+                // only multiply into them.
+                let inputs = exp.inputs();
                 let mut col_buf = DMatrix::zeros(c.nrows(), exp.len());
+                let mut s = DVector::zeros(n);
+                let mut s_next = DVector::zeros(n);
+                let mut sens = DMatrix::zeros(n, exp.len());
                 // Free entries of A and B.
                 for (j, der) in ders.iter().enumerate() {
                     let (d_ad, d_bd) = (&der.d_ad, &der.d_bd);
-                    let mut s = DVector::zeros(n);
-                    let mut sens = DMatrix::zeros(n, exp.len());
+                    s.fill(0.0);
+                    sens.column_mut(0).fill(0.0);
                     for k in 1..exp.len() {
-                        let u = DVector::from_column_slice(exp.input(k - 1));
-                        let x = states.column(k - 1);
-                        s = ad * &s + d_ad * x + d_bd * u;
+                        s_next.gemv(1.0, ad, &s, 0.0);
+                        s_next.gemv(1.0, d_ad, &states.column(k - 1), 1.0);
+                        s_next.gemv(1.0, d_bd, &inputs.column(k - 1), 1.0);
                         if let Some(d_ramp) = &der.d_ramp {
-                            let inputs = exp.inputs();
-                            s += d_ramp * (inputs.column(k) - inputs.column(k - 1));
+                            s_next.gemv(1.0, d_ramp, &inputs.column(k), 1.0);
+                            s_next.gemv(-1.0, d_ramp, &inputs.column(k - 1), 1.0);
                         }
+                        std::mem::swap(&mut s, &mut s_next);
                         sens.set_column(k, &s);
                     }
-                    col_buf.copy_from(&(c * sens));
+                    col_buf.gemm(1.0, c, &sens, 0.0);
                     write_column(jac, first_row, j, &col_buf, exp);
                 }
-                // Initial state of this experiment: ∂x_k/∂x0 = Ad^k.
+                // Initial state of this experiment: ∂x_k/∂x0 = Ad^k, one state's column
+                // of C·Ad^k at a time (n passes over the record, no per-sample matrices).
                 if matches!(self.x0, X0Layout::Estimated) {
-                    let mut phi = DMatrix::<f64>::identity(n, n);
-                    let mut blocks: Vec<DMatrix<f64>> = Vec::with_capacity(exp.len());
-                    for _ in 0..exp.len() {
-                        blocks.push(c * &phi);
-                        phi = ad * phi;
-                    }
                     for i in 0..n {
+                        s.fill(0.0);
+                        s[i] = 1.0;
                         for k in 0..exp.len() {
-                            for o in 0..c.nrows() {
-                                col_buf[(o, k)] = blocks[k][(o, i)];
-                            }
+                            col_buf.column_mut(k).gemv(1.0, c, &s, 0.0);
+                            s_next.gemv(1.0, ad, &s, 0.0);
+                            std::mem::swap(&mut s, &mut s_next);
                         }
                         write_column(jac, first_row, self.free.len() + e * n + i, &col_buf, exp);
                     }
@@ -218,9 +222,11 @@ pub(crate) fn simulate_states(
         return Some(out);
     }
     let mut x = DVector::from_column_slice(x0);
+    let mut next = DVector::zeros(n);
     out.set_column(0, &x);
     for k in 1..len {
-        x = step.advance(&x, inputs, k - 1);
+        step.advance_into(&x, inputs, k - 1, &mut next);
+        std::mem::swap(&mut x, &mut next);
         if x.iter()
             .any(|v| !v.is_finite() || v.abs() > DEFAULT_BLOW_UP)
         {
