@@ -610,7 +610,8 @@ pub enum SilverboxExtra {
     DisplacementDamping,
     /// `−c₂·v·|v|`: quadratic drag (discovery's `quadratic_drag`), damping that grows with
     /// the speed. Beside the y²·y' damping and the input stage it lowers the training
-    /// free-run RMSE from 0.2565 to 0.2392 mV (explore_silverbox on 7a8efb5).
+    /// free-run RMSE from 0.2565 to 0.2392 mV (explore_silverbox on 7a8efb5, input stage
+    /// τ = 0.2 ms).
     QuadraticDrag,
     /// `−k5·y⁵`: a quintic spring (the nonlinear feedback beyond cubic at large amplitude;
     /// explored, not a candidate: the same training RMSE as without it, 0.2565 mV).
@@ -620,13 +621,25 @@ pub enum SilverboxExtra {
     /// calibrated paths from `u` and from `w` into both the oscillator's acceleration and the
     /// measured voltage: the input reaches the output through a zero (a relative degree
     /// below two: direct coupling of the input into the measured voltage, and a drive
-    /// with a lead term `≈ −τ·u'`). Integrated with 4 RK4 sub-steps (`h/τ` ≈ 2, inside
-    /// the stability bound 2.8).
+    /// with a lead term `≈ −τ·u'`). Integrated with `⌈h/(2.1·τ)⌉` RK4 sub-steps (a
+    /// sub-step of at most 2.1 τ, inside RK4's stability bound of 2.8 on the stage's
+    /// pole; 8 at τ = 0.1 ms).
     Feedthrough(f64),
     /// A further state monomial of degree ≤ 3 in `(y, v)` (explored, not a candidate).
     #[cfg_attr(not(test), allow(dead_code))]
     Monomial(&'static str),
 }
+
+/// Silverbox's sample interval, s (10 MHz / 16 384 = 610.35 Hz; the data README).
+const SILVERBOX_DT: f64 = 16_384.0 / 1e7;
+
+/// The held time constant of the Silverbox input stage ([`SilverboxExtra::Feedthrough`]),
+/// s: the largest of 0.4, 0.2, 0.1 and 0.05 ms whose training free-run RMSE is within 1 %
+/// of the grid's best (explore_silverbox with quadratic drag on dde3da8: 0.2812, 0.2392,
+/// 0.2311 and 0.2299 mV; 0.1 ms gives the same 0.2311 mV with 8 or 16 sub-steps). The
+/// smaller the constant, the closer the stage comes to a derivative feedthrough of the
+/// input, and the more sub-steps it costs.
+pub const SILVERBOX_STAGE_TAU: f64 = 1e-4;
 
 /// [`silverbox_spec`] with extra terms (started at zero, calibrated with the others).
 pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Result<GreySpec> {
@@ -697,7 +710,10 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
         free,
         intersample: InterSample::Foh,
         integrator: Integrator::Rk4 {
-            substeps: if lag.is_some() { 4 } else { 2 },
+            substeps: match lag {
+                Some(tau) => (SILVERBOX_DT / (2.1 * tau)).ceil() as usize,
+                None => 2,
+            },
         },
         x0_guess: if lag.is_some() {
             |e| {

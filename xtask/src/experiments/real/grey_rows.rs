@@ -43,11 +43,12 @@ pub(super) fn grey_candidates(
         }
         Benchmark::Silverbox => {
             let (k, c, b) = oscillator_guess(&data.estimation.experiments()[0])?;
+            use grey::SILVERBOX_STAGE_TAU;
             use grey::SilverboxExtra::{
                 DisplacementDamping, Feedthrough, QuadraticDrag, QuadraticSpring,
             };
             let mut v = vec![(
-                "cubic + quadratic spring, y²·y' damping, quadratic drag, input stage τ = 0.2 ms"
+                "cubic + quadratic spring, y²·y' damping, quadratic drag, input stage τ = 0.1 ms"
                     .to_string(),
                 grey::silverbox_model(
                     k,
@@ -57,18 +58,22 @@ pub(super) fn grey_candidates(
                         QuadraticSpring,
                         DisplacementDamping,
                         QuadraticDrag,
-                        Feedthrough(2e-4),
+                        Feedthrough(SILVERBOX_STAGE_TAU),
                     ],
                 )?,
             )];
             if mode == Mode::Full {
                 v.push((
-                    "cubic + quadratic spring, y²·y' damping, input stage τ = 0.2 ms".into(),
+                    "cubic + quadratic spring, y²·y' damping, input stage τ = 0.1 ms".into(),
                     grey::silverbox_model(
                         k,
                         c,
                         b,
-                        &[QuadraticSpring, DisplacementDamping, Feedthrough(2e-4)],
+                        &[
+                            QuadraticSpring,
+                            DisplacementDamping,
+                            Feedthrough(SILVERBOX_STAGE_TAU),
+                        ],
                     )?,
                 ));
                 v.push(("cubic spring".into(), grey::silverbox_spec(k, c, b)?));

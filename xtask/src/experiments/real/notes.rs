@@ -112,20 +112,23 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
         }
         Benchmark::Silverbox => {
             "test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
-             free-run error (0.2392 mV); on test_arrow_full the grey box's error is 0.231 mV up \
+             free-run error (0.2311 mV); on test_arrow_full the grey box's error is 0.227 mV up \
              to sample 29 049, where the output first exceeds the largest training amplitude \
-             (0.216 V), and 0.410 mV after it: the last 28 % of the record carries 55 % of the \
-             squared error (samples with |y| in 0.1–0.2 V: 0.49 mV, 0.2–0.25 V: 1.06 mV, \
-             above 0.25 V: 1.71 mV; below 0.1 V: 0.26 mV; explore_silverbox with quadratic \
-             drag on 7a8efb5). The polynomial spring and damping fitted on the training \
+             (0.216 V), and 0.398 mV after it: the last 28 % of the record carries 55 % of the \
+             squared error (samples with |y| in 0.1–0.2 V: 0.49 mV, 0.2–0.25 V: 1.07 mV, \
+             above 0.25 V: 1.72 mV; below 0.1 V: 0.26 mV; explore_silverbox with the 0.1-ms \
+             input stage on dde3da8). The polynomial spring and damping fitted on the training \
              amplitudes do not hold at the arrow's largest ones, and the network, trained on \
-             the same amplitudes, does not change that. Quadratic drag (v·|v|) is what moved \
-             the arrow most: without it (training 0.2565 mV) test_arrow_full was 0.378 mV. \
-             With it, a further quintic spring, cubic damping (v³) or an odd quadratic spring \
-             (y·|y|) lowers the training RMSE by at most 0.0016 mV and moves test_arrow_full \
-             to 0.288–0.322 mV (explore_silverbox on 7a8efb5), so the training record does \
-             not pick the extrapolation among them; without the quadratic spring the arrow is \
-             worse (0.369 mV, training 0.2959 mV)"
+             the same amplitudes, changes that little (0.286 → 0.283 mV). Quadratic drag \
+             (v·|v|) moved the arrow most: without it (training 0.2565 mV, 0.2-ms stage) \
+             test_arrow_full was 0.378 mV, with it 0.293 mV; the input stage's time constant \
+             then went from 0.2 to 0.1 ms by its training RMSE (0.2392 → 0.2311 mV; \
+             grey::SILVERBOX_STAGE_TAU), giving 0.286 mV. With the 0.2-ms stage, a further \
+             quintic spring, cubic damping (v³) or an odd quadratic spring (y·|y|) lowered the \
+             training RMSE by at most 0.0016 mV and moved test_arrow_full to 0.288–0.322 mV \
+             (explore_silverbox on 7a8efb5), so the training record does not pick the \
+             extrapolation among them; without the quadratic spring the arrow is worse \
+             (0.369 mV, training 0.2959 mV)"
         }
         Benchmark::Emps => {
             "the published 2.64 mm was not measured on the test record: dynoNet's script scores \
