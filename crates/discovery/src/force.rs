@@ -605,6 +605,18 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         let fit = match calibrate(problem, &mut effects, &x0, config) {
             Ok(f) => f,
             Err(err) => {
+                // A spent budget stops the job (the CLI's exit status 4); any other
+                // failure of the calibration is this run's finding.
+                if let Err(spent) = config.calibration.budget.charge(
+                    0,
+                    "force-space discovery: free-run calibration of the proposed forces",
+                    0,
+                    None,
+                ) {
+                    return Err(E::from(DiscoveryError::Core(
+                        sysid_core::CoreError::BudgetExhausted(spent),
+                    )));
+                }
                 outcome.verdict = Verdict::Unexplained;
                 outcome.notes.push(format!(
                     "the free-run calibration of the proposed forces failed: {}",

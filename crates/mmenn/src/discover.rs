@@ -231,6 +231,21 @@ struct MmeCore<'a> {
     first_noise: std::sync::Mutex<Option<mme_core::NoiseReport>>,
 }
 
+impl MmeCore<'_> {
+    /// Every MME run of the workflow (one or more per round) first checks the job's
+    /// budget: a linear MME charges nothing itself, so a spent budget stops the workflow
+    /// here, between its steps.
+    fn check_budget(&self) -> Result<()> {
+        self.options
+            .budget
+            .charge(0, "discover (MME of the workflow's next step)", 0, None)
+            .map_err(|e| MmennError::Core {
+                context: "discover",
+                source: sysid_core::CoreError::BudgetExhausted(e),
+            })
+    }
+}
+
 impl workflow::Mme for MmeCore<'_> {
     type Error = MmennError;
 
@@ -240,6 +255,7 @@ impl workflow::Mme for MmeCore<'_> {
         data: &Dataset,
         start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate> {
+        self.check_budget()?;
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
             config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
@@ -261,6 +277,7 @@ impl workflow::Mme for MmeCore<'_> {
         noise: &[f64],
         start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate> {
+        self.check_budget()?;
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
             config.start = mme_core::StartTrajectory::Given(x0s.to_vec());

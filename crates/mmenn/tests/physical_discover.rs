@@ -265,3 +265,39 @@ fn readme_shows_the_rigid_body_fixture() {
         }
     }
 }
+
+/// `discover --budget SECONDS` stops like `estimate`, `fit` and `greyest` do: a spent
+/// budget is exit status 4 with a message naming the budget and the stage that ran out;
+/// no output folder is left behind. A budget of 0 s runs out at the first charge (MME
+/// with the assumed model), on the mass-matrix path (rigid-body model) and on the
+/// state-space path (a mass-spring-damper case of the discovery suite) alike.
+#[test]
+fn cli_discover_stops_at_its_budget_with_status_4() {
+    use std::process::Command;
+    let dir = scratch("budget");
+    let msd = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/discovery_suite/cases/msd_coulomb");
+    let runs = [
+        (fixture().join("rigid_body.toml"), fixture().join("est.csv")),
+        (msd.join("model.toml"), msd.join("est.csv")),
+    ];
+    for (i, (model, data)) in runs.iter().enumerate() {
+        let out = dir.join(format!("out{i}"));
+        let run = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+            .args(["--quiet", "discover", "--data"])
+            .arg(data)
+            .arg("--model")
+            .arg(model)
+            .args(["--budget", "0", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(4), "{}: {err}", model.display());
+        assert!(
+            err.contains("the budget of 0 s ran out during") && err.contains("MME"),
+            "{err}"
+        );
+        assert!(!out.exists(), "{}", out.display());
+    }
+}

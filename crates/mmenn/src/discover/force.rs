@@ -282,6 +282,11 @@ fn search(
     let config = ForceConfig {
         x0_window: opts.workflow.x0_window,
         trim_fraction: opts.workflow.trim_fraction,
+        // One account for the whole job: MME above and every calibration draw on it.
+        calibration: sysid_core::GreyboxOptions {
+            budget: opts.estimate.budget.clone(),
+            ..ForceConfig::default().calibration
+        },
         ..ForceConfig::default()
     };
     let outcome = discovery::force::run_forces(&problem, &config)?;

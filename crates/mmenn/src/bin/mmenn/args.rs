@@ -167,6 +167,8 @@ pub(crate) struct DiscoverArgs {
     pub(crate) out: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) prep: PrepArgs,
+    #[command(flatten)]
+    pub(crate) budget: BudgetArgs,
 }
 
 #[derive(Debug, Subcommand)]
@@ -403,8 +405,8 @@ pub(crate) const DEFAULT_BUDGET_SECONDS: f64 = 600.0;
 #[derive(Debug, Args)]
 pub(crate) struct BudgetArgs {
     /// Stop with an error naming the stage that ran out and how far it got (exit status 4)
-    /// once the estimation (MME's iterations; greyest's calibration) has run this many
-    /// seconds; `inf` for no limit.
+    /// once the estimation (MME's iterations; greyest's and discover's free-run
+    /// calibrations) has run this many seconds; `inf` for no limit.
     #[arg(long, value_name = "SECONDS", default_value_t = DEFAULT_BUDGET_SECONDS, value_parser = budget_seconds)]
     pub(crate) budget: f64,
 }

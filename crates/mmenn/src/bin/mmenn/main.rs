@@ -534,6 +534,10 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
             stand_in_draws: a.stand_in_draws,
             ..Default::default()
         },
+        estimate: mmenn::estimate::EstimateOptions {
+            budget: a.budget.start(),
+            ..Default::default()
+        },
         ..Default::default()
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([model]).collect();
