@@ -441,8 +441,14 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     };
     let data = prepared(std::slice::from_ref(&args.data), &args.prep, staged.path())?;
     let s = mmenn::progress::stage(progress, "prediction", || {
-        mmenn::predict::run_predict_with(&args.model, &data[0], &opts, staged.path())
-            .map_err(anyhow::Error::from)
+        mmenn::predict::run_predict_substeps(
+            &args.model,
+            &data[0],
+            &opts,
+            args.substeps,
+            staged.path(),
+        )
+        .map_err(anyhow::Error::from)
     })?;
     staged.commit()?;
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
