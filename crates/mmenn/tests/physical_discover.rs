@@ -229,6 +229,16 @@ fn greyest_covers_the_true_rigid_body_and_friction() {
             p.start
         );
     }
+    // Issue 20, item 6: the estimated start state's angles are the measured first angles
+    // (the record starts at [0.2001845, −0.1000922] rad) to within 1e-3 rad.
+    let x0 = &o.summary.records[0].x0;
+    for (name, y0) in [("theta1", 0.2001844928), ("theta2", -0.1000922464)] {
+        assert!(
+            (x0[name] - y0).abs() <= 1e-3,
+            "{name}(0) = {} vs {y0}",
+            x0[name]
+        );
+    }
 }
 
 /// README's physics section shows `fixtures/two_link/rigid_body.toml` as it is, and that
