@@ -311,3 +311,81 @@ fn cli_discover_stops_at_its_budget_with_status_4() {
         assert!(!out.exists(), "{}", out.display());
     }
 }
+
+/// Issue 20, item 3: the force path's Offset and Stribeck candidates on data containing
+/// them (`offset_stribeck_*.csv`: the base arm and friction plus a constant torque
+/// `tau0 = +0.02` N·m on joint 1 and Stribeck breakaway friction on joint 2,
+/// `(fs2 − fc2)·exp(−(ω2/0.3)²)·(2/π)·atan(ω2/vs)`, `fs2 = 0.014` N·m;
+/// `offset_stribeck_truth.json`). `discover` on `rigid_body.toml` must name the offset on
+/// joint 1 (`constant_bias` on `omega1`, positive, 95 % interval covering 0.02 N·m) and
+/// keep every named force on its own joint.
+///
+/// Measured (release, ~19 s, load ~2.5): offset 1.9988e-2 [1.9921e-2, 2.0055e-2] N·m;
+/// joint 1 also viscous −4.087e-3 and `(2/π)·atan(ω1/0.0351)` × −1.1696e-2, joint 2
+/// viscous −2.012e-3 and `tanh(ω2/0.0355)` × −7.867e-3; validation free-run cost
+/// 5.6e10 → 51.6 (× the noise level), fit 99.84 % on both validation angles. The
+/// Stribeck term is **not** named: see [`two_link_stribeck_is_named_on_joint_2`].
+#[test]
+fn two_link_offset_is_named_on_joint_1() {
+    let dir = scratch("offset");
+    let s = run_discover(
+        &[fixture().join("offset_stribeck_est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("offset_stribeck_val.csv")],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap();
+    assert_eq!(s.verdict, Verdict::Found, "{s:#?}");
+    for e in &s.effects {
+        let other = if e.state == "omega1" { "2" } else { "1" };
+        assert!(
+            !e.term.contains(&format!("omega{other}"))
+                && !e.term.contains(&format!("theta{other}")),
+            "cross-joint term {} on {}",
+            e.term,
+            e.state
+        );
+    }
+    let offset = s
+        .effects
+        .iter()
+        .find(|e| e.name == "constant_bias")
+        .unwrap_or_else(|| panic!("no offset named: {:#?}", s.effects));
+    assert_eq!(offset.state, "omega1");
+    let ci = offset.ci95.unwrap();
+    assert!(covers(ci, 0.02), "offset {} {ci:?}", offset.coefficient);
+    assert_eq!(offset.unit.as_deref(), Some("N*m"));
+}
+
+/// What item 3 asks and the force path does not do yet (ignored: it fails). The
+/// Stribeck hump on joint 2 (0.006 N·m at rest, gone above |ω2| ≈ 0.3 rad/s, where the
+/// joint spends 6.5 % of the record) removes 0.06 % of `Σ τ̂₂²` after viscous and Coulomb
+/// terms (computed on the generator's true ω2), 30× below `ForceConfig::min_share`
+/// (2 %), so it is never proposed; and the catalogue's smooth Stribeck is
+/// `tanh(v/ε)·exp(−(v/v_s)²)` with `v_s = 0.1·RMS(v)` = 0.417 rad/s held fixed, while the
+/// generator's is `(2/π)·atan(v/vs)·exp(−(v/0.3)²)`, whose low-speed difference from a
+/// tanh Coulomb law is of the hump's size — so even when proposed its coefficient would
+/// not estimate `−(fs2 − fc2)`. Needs: a share rule that sees low-speed forces (e.g. the
+/// share within the low-speed samples, or a free-run test of each remaining candidate),
+/// an atan form of the Stribeck law and a calibrated `v_s`.
+#[test]
+#[ignore = "the force path does not propose the Stribeck term on this record (see doc)"]
+fn two_link_stribeck_is_named_on_joint_2() {
+    let dir = scratch("stribeck");
+    let s = run_discover(
+        &[fixture().join("offset_stribeck_est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("offset_stribeck_val.csv")],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap();
+    let stribeck = s
+        .effects
+        .iter()
+        .find(|e| e.name.starts_with("stribeck"))
+        .unwrap_or_else(|| panic!("no Stribeck term named: {:#?}", s.effects));
+    assert_eq!(stribeck.state, "omega2");
+    assert!(covers(stribeck.ci95.unwrap(), -(0.014 - 0.008)));
+}
