@@ -524,7 +524,12 @@ pub fn validation_cost(
     };
     let (mut sum, mut count) = (0.0, 0usize);
     for exp in data.experiments() {
-        let judged = judge_free_run(model, exp, &obs, &rule, &JudgeOptions::default())?;
+        // RK4 steps for a stiff model (a steep friction law), 4 otherwise.
+        let judge = JudgeOptions {
+            integrator: sysid_core::auto_rk4(model, exp, &obs.matrix, 4, 1e12)?,
+            ..JudgeOptions::default()
+        };
+        let judged = judge_free_run(model, exp, &obs, &rule, &judge)?;
         for (name, r) in obs.names.iter().zip(noise_variance) {
             if let Some(m) = judged.channels.get(name) {
                 sum += m.rmse * m.rmse / r * m.samples as f64;

@@ -341,25 +341,35 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
 /// every sample scored — the numbers `predict` and `compare` give for the same model);
 /// fit % and RMSE per output, and the simulated outputs.
 fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap, DMatrix<f64>)> {
-    free_run_gap_of(model, model.linear(), data, window)
+    free_run_gap_of(model, model.linear(), data, window, false)
 }
 
-/// [`free_run_gap`] for any model, its outputs those of `linear`.
+/// [`free_run_gap`] for any model, its outputs those of `linear`; with `stiff_aware`
+/// (the mass-matrix path) the RK4 steps come from `sysid_core::auto_rk4` (4 unless the
+/// model is stiff along the record), otherwise 4.
 fn free_run_gap_of<D: sysid_core::Dynamics>(
     model: &D,
     linear: &sysid_core::LinearModel,
     data: &Dataset,
     window: usize,
+    stiff_aware: bool,
 ) -> Result<(Gap, DMatrix<f64>)> {
     let exp = &data.experiments()[0];
+    let obs = sysid_core::judge::Observation::outputs(linear);
+    let mut judge = sysid_core::judge::JudgeOptions::default();
+    if stiff_aware {
+        // RK4 steps for a stiff model (a steep friction law), 4 otherwise.
+        judge.integrator = sysid_core::auto_rk4(model, exp, &obs.matrix, 4, 1e12)
+            .map_err(core("choosing the RK4 steps of the free run"))?;
+    }
     let judged = sysid_core::judge_free_run(
         model,
         exp,
-        &sysid_core::judge::Observation::outputs(linear),
+        &obs,
         &sysid_core::judge::InitialRule::Fit {
             window: Some(window),
         },
-        &sysid_core::judge::JudgeOptions::default(),
+        &judge,
     )
     .map_err(core("judging the free run"))?;
     let mut gap = Gap::default();

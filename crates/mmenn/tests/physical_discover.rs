@@ -389,3 +389,36 @@ fn two_link_stribeck_is_named_on_joint_2() {
     assert_eq!(stribeck.state, "omega2");
     assert!(covers(stribeck.ci95.unwrap(), -(0.014 - 0.008)));
 }
+
+/// A budget that runs out in the force-space calibration (after MME) stops `discover`
+/// with the typed error naming that stage — not an "unexplained" verdict, which is what a
+/// failed calibration used to become. Work units make it deterministic: 1e5 sub-steps
+/// cover MME on the rigid-body model but not the calibration of the proposed forces.
+/// (The CLI maps this error to exit status 4 like every other spent budget.)
+#[test]
+fn discover_budget_running_out_in_the_calibration_is_an_error() {
+    use mmenn::discovery::DiscoveryError;
+    use mmenn::sysid_core::{Budget, CoreError};
+    let dir = scratch("budget-calibration");
+    let mut opts = DiscoverOptions::default();
+    opts.estimate.budget = Budget::work_units(100_000);
+    let e = run_discover(
+        &[fixture().join("est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("val.csv")],
+        &opts,
+        &dir.join("out"),
+    )
+    .expect_err("the budget must run out");
+    let text = e.to_string();
+    match &e {
+        mmenn::MmennError::Discovery(DiscoveryError::Core(CoreError::BudgetExhausted(b))) => {
+            assert!(b.stage.contains("force-space discovery"), "{text}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(
+        text.contains("ran out during force-space discovery"),
+        "{text}"
+    );
+}

@@ -48,5 +48,5 @@ pub use physical::{
     Estimation, MAX_DOF, MechanicsSpec, Parameter, ParametricDynamics, PhysicalError,
     PhysicalModel, PhysicalTerm,
 };
-pub use stiff::{StiffProbe, Substeps, measured_start, probe_substeps, resolve_substeps};
+pub use stiff::{StiffProbe, Substeps, auto_rk4, measured_start, probe_substeps, resolve_substeps};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};

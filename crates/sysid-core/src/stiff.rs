@@ -230,6 +230,23 @@ pub fn probe_substeps<D: Dynamics + ?Sized>(
     Ok(probe)
 }
 
+/// Classical RK4 with `Auto { min }` steps resolved on `exp` from its measured start
+/// ([`measured_start`] through `matrix`, the record's output map): the integrator of a
+/// free run whose initial state is fitted later (the one judge's initial-state fit).
+pub fn auto_rk4<D: Dynamics + ?Sized>(
+    f: &D,
+    exp: &Experiment,
+    matrix: &DMatrix<f64>,
+    min: usize,
+    blow_up: f64,
+) -> Result<crate::integrate::Integrator> {
+    let x0 = measured_start(matrix, exp.output(0));
+    let probe = probe_substeps(f, exp, &x0, min, blow_up)?;
+    Ok(crate::integrate::Integrator::Rk4 {
+        substeps: probe.substeps,
+    })
+}
+
 /// A start for a probe run when no initial state is known: the minimum-norm `x` with
 /// `matrix·x = y0` over the channels measured at the first sample (NaN rows left out),
 /// so measured states start at their measured values and the rest at zero.

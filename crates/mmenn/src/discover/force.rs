@@ -165,12 +165,12 @@ pub(super) fn run_force_discover(
     let discovered = physical(&spec)?;
     let window = opts.workflow.x0_window;
     let lin = &original.linear;
-    let (before, y_before) = free_run_gap_of(&assumed, lin, data, window)?;
-    let (after, y_after) = free_run_gap_of(&discovered, lin, data, window)?;
+    let (before, y_before) = free_run_gap_of(&assumed, lin, data, window, true)?;
+    let (after, y_after) = free_run_gap_of(&discovered, lin, data, window, true)?;
     let validation_runs = match val {
         Some(v) => {
-            let (b, yb) = free_run_gap_of(&assumed, lin, v, window)?;
-            let (a, ya) = free_run_gap_of(&discovered, lin, v, window)?;
+            let (b, yb) = free_run_gap_of(&assumed, lin, v, window, true)?;
+            let (a, ya) = free_run_gap_of(&discovered, lin, v, window, true)?;
             Some((
                 GapPair {
                     before: b,

@@ -718,6 +718,12 @@ fn budget_ran_out(e: &anyhow::Error) -> bool {
                 c.downcast_ref(),
                 Some(MmeError::Core(CoreError::BudgetExhausted(_)))
             )
+            || matches!(
+                c.downcast_ref(),
+                Some(mmenn::discovery::DiscoveryError::Core(
+                    CoreError::BudgetExhausted(_)
+                ))
+            )
     })
 }
 
