@@ -314,7 +314,12 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
             .iter()
             .map(|(k, v)| format!("{k} {v:.2} %"))
             .collect();
-        println!("  free-run fit on {}: {}", r.file, fits.join(", "));
+        println!(
+            "  free-run fit on {}: {} ({} RK4 steps per sample)",
+            r.file,
+            fits.join(", "),
+            r.substeps
+        );
     }
     for st in &s.stages {
         println!(
@@ -428,6 +433,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     check_mme_converged("fit", s.mme_termination, &args.out)
 }
 
+#[allow(clippy::print_stdout)]
 fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     let x0 = match args.x0 {
         Some(v) => mmenn::fit::InitialChoice::Given(v),
@@ -452,6 +458,9 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     })?;
     staged.commit()?;
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
+    if let Some(steps) = s.substeps {
+        println!("  free run: classical RK4, {steps} steps per sample interval");
+    }
     if let Some(k) = &s.k_step {
         print_free_run(
             &format!("prediction ({})", s.model_kind),
