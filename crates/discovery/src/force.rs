@@ -524,7 +524,12 @@ pub fn validation_cost(
     };
     let (mut sum, mut count) = (0.0, 0usize);
     for exp in data.experiments() {
-        let judged = judge_free_run(model, exp, &obs, &rule, &JudgeOptions::default())?;
+        // RK4 steps for a stiff model (a steep friction law), 4 otherwise.
+        let judge = JudgeOptions {
+            integrator: sysid_core::auto_rk4(model, exp, &obs.matrix, 4, 1e12)?,
+            ..JudgeOptions::default()
+        };
+        let judged = judge_free_run(model, exp, &obs, &rule, &judge)?;
         for (name, r) in obs.names.iter().zip(noise_variance) {
             if let Some(m) = judged.channels.get(name) {
                 sum += m.rmse * m.rmse / r * m.samples as f64;
@@ -605,6 +610,18 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         let fit = match calibrate(problem, &mut effects, &x0, config) {
             Ok(f) => f,
             Err(err) => {
+                // A spent budget stops the job (the CLI's exit status 4); any other
+                // failure of the calibration is this run's finding.
+                if let Err(spent) = config.calibration.budget.charge(
+                    0,
+                    "force-space discovery: free-run calibration of the proposed forces",
+                    0,
+                    None,
+                ) {
+                    return Err(E::from(DiscoveryError::Core(
+                        sysid_core::CoreError::BudgetExhausted(spent),
+                    )));
+                }
                 outcome.verdict = Verdict::Unexplained;
                 outcome.notes.push(format!(
                     "the free-run calibration of the proposed forces failed: {}",

@@ -4,6 +4,7 @@
 
 use nalgebra::DMatrix;
 pub use sysid_core::ramp_gain;
+use sysid_core::stiff::spectral_radius;
 use sysid_core::{InterSample, LinearModel};
 
 use crate::error::{MmeError, Result};
@@ -21,10 +22,6 @@ pub const MAX_SUBSTEPS: usize = 1000;
 /// Most bytes the sub-step grid of one experiment may need (estimated by
 /// [`sweep_bytes`]): 4 GiB. Checked before anything of that size is allocated.
 pub const MAX_SWEEP_BYTES: u128 = 4 << 30;
-
-/// Iterations the Schur decomposition of [`default_substeps`] may take before it gives up
-/// and the choice falls back to a norm bound on the spectral radius.
-const SCHUR_MAX_ITERATIONS: usize = 10_000;
 
 /// Estimated bytes of the per-sub-step storage of a sweep with `n` states and `q`
 /// corrections over `steps` sub-steps, in `f64`s: for a linear model the pieces `d_j` and
@@ -64,35 +61,6 @@ pub(crate) fn check_grid(
     Ok(())
 }
 
-/// Spectral radius of `a`: the largest eigenvalue modulus from a Schur decomposition
-/// limited to [`SCHUR_MAX_ITERATIONS`]; when that does not converge, the bound
-/// `max row sum of |a|` (≥ the spectral radius). `None` when `a` is empty or has a
-/// non-finite entry (the decomposition is never attempted then: nalgebra's iteration
-/// does not end on NaN).
-fn spectral_radius(a: &DMatrix<f64>) -> Option<f64> {
-    if a.nrows() == 0 || a.nrows() != a.ncols() || a.iter().any(|v| !v.is_finite()) {
-        return None;
-    }
-    let schur = nalgebra::linalg::Schur::try_new(a.clone(), f64::EPSILON, SCHUR_MAX_ITERATIONS);
-    let rate = match schur {
-        Some(s) => s
-            .complex_eigenvalues()
-            .iter()
-            .map(|z| z.norm())
-            .fold(0.0, f64::max),
-        None => f64::NAN,
-    };
-    if rate.is_finite() {
-        Some(rate)
-    } else {
-        let bound = a
-            .row_iter()
-            .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
-            .fold(0.0, f64::max);
-        bound.is_finite().then_some(bound)
-    }
-}
-
 /// Default sub-steps for a model `ẋ = A x + …` sampled every `dt`: the smallest `s ≥ 1`
 /// with `dt/s ≤ SUBSTEP_FRACTION · τ_min`, where `τ_min = 1/max|λ(A)|` is the fastest
 /// time constant (or inverse natural frequency) of `A`, capped at
@@ -118,10 +86,9 @@ pub fn default_substeps(a: &DMatrix<f64>, dt: f64) -> usize {
     }
 }
 
-/// Largest `|h·λ|` a sub-step may span on a fast relaxation mode of a stiff model (real
-/// negative `λ`): classical RK4 is stable on the negative real axis up to 2.785, so 2.0
-/// keeps a margin while the mode is damped (its RK4 factor at `hλ = −2` is 1/3).
-pub const STIFF_STEP: f64 = 2.0;
+/// Largest `|h·λ|` a sub-step may span on a fast relaxation mode of a stiff model:
+/// sysid-core's rule for free runs (`sysid_core::stiff`), the same bound here.
+pub use sysid_core::stiff::STIFF_STEP;
 
 /// Default sub-steps for the nonlinear estimator, from the model's Jacobian `a` at the
 /// start: [`default_substeps`], unless that rule asks for more than
@@ -144,9 +111,11 @@ pub fn nonlinear_substeps(a: &DMatrix<f64>, dt: f64) -> usize {
     if wanted(rate, SUBSTEP_FRACTION) <= MAX_DEFAULT_SUBSTEPS as f64 {
         return base;
     }
-    let Some(schur) =
-        nalgebra::linalg::Schur::try_new(a.clone(), f64::EPSILON, SCHUR_MAX_ITERATIONS)
-    else {
+    let Some(schur) = nalgebra::linalg::Schur::try_new(
+        a.clone(),
+        f64::EPSILON,
+        sysid_core::stiff::SCHUR_MAX_ITERATIONS,
+    ) else {
         return base;
     };
     let (mut slow, mut fast) = (0.0_f64, 0.0_f64);

@@ -231,6 +231,21 @@ struct MmeCore<'a> {
     first_noise: std::sync::Mutex<Option<mme_core::NoiseReport>>,
 }
 
+impl MmeCore<'_> {
+    /// Every MME run of the workflow (one or more per round) first checks the job's
+    /// budget: a linear MME charges nothing itself, so a spent budget stops the workflow
+    /// here, between its steps.
+    fn check_budget(&self) -> Result<()> {
+        self.options
+            .budget
+            .charge(0, "discover (MME of the workflow's next step)", 0, None)
+            .map_err(|e| MmennError::Core {
+                context: "discover",
+                source: sysid_core::CoreError::BudgetExhausted(e),
+            })
+    }
+}
+
 impl workflow::Mme for MmeCore<'_> {
     type Error = MmennError;
 
@@ -240,6 +255,7 @@ impl workflow::Mme for MmeCore<'_> {
         data: &Dataset,
         start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate> {
+        self.check_budget()?;
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
             config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
@@ -261,6 +277,7 @@ impl workflow::Mme for MmeCore<'_> {
         noise: &[f64],
         start: Option<&[Vec<f64>]>,
     ) -> Result<MmeEstimate> {
+        self.check_budget()?;
         let mut config = mme_config(self.spec, self.options);
         if let Some(x0s) = start {
             config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
@@ -324,25 +341,35 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
 /// every sample scored — the numbers `predict` and `compare` give for the same model);
 /// fit % and RMSE per output, and the simulated outputs.
 fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap, DMatrix<f64>)> {
-    free_run_gap_of(model, model.linear(), data, window)
+    free_run_gap_of(model, model.linear(), data, window, false)
 }
 
-/// [`free_run_gap`] for any model, its outputs those of `linear`.
+/// [`free_run_gap`] for any model, its outputs those of `linear`; with `stiff_aware`
+/// (the mass-matrix path) the RK4 steps come from `sysid_core::auto_rk4` (4 unless the
+/// model is stiff along the record), otherwise 4.
 fn free_run_gap_of<D: sysid_core::Dynamics>(
     model: &D,
     linear: &sysid_core::LinearModel,
     data: &Dataset,
     window: usize,
+    stiff_aware: bool,
 ) -> Result<(Gap, DMatrix<f64>)> {
     let exp = &data.experiments()[0];
+    let obs = sysid_core::judge::Observation::outputs(linear);
+    let mut judge = sysid_core::judge::JudgeOptions::default();
+    if stiff_aware {
+        // RK4 steps for a stiff model (a steep friction law), 4 otherwise.
+        judge.integrator = sysid_core::auto_rk4(model, exp, &obs.matrix, 4, 1e12)
+            .map_err(core("choosing the RK4 steps of the free run"))?;
+    }
     let judged = sysid_core::judge_free_run(
         model,
         exp,
-        &sysid_core::judge::Observation::outputs(linear),
+        &obs,
         &sysid_core::judge::InitialRule::Fit {
             window: Some(window),
         },
-        &sysid_core::judge::JudgeOptions::default(),
+        &judge,
     )
     .map_err(core("judging the free run"))?;
     let mut gap = Gap::default();

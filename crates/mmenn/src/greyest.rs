@@ -28,8 +28,10 @@ pub struct GreyestOptions {
     /// Multiple-shooting segment length in samples before the free run (`None`: free
     /// run only).
     pub segment: Option<usize>,
-    /// RK4 steps per sample interval. Default 2.
-    pub substeps: usize,
+    /// RK4 steps per sample interval: `Auto { min: 2 }` (the default, the CLI's
+    /// `--substeps auto`) takes two, or as many as a stiff model needs along each record
+    /// (`sysid_core::stiff`); `Fixed(n)` exactly `n`.
+    pub substeps: sysid_core::Substeps,
     /// Most Levenberg–Marquardt iterations per solve. Default 100.
     pub max_iterations: usize,
     /// The job's budget (default unlimited; the CLI's `--budget SECONDS`): the estimate
@@ -41,7 +43,7 @@ impl Default for GreyestOptions {
     fn default() -> Self {
         Self {
             segment: None,
-            substeps: 2,
+            substeps: sysid_core::Substeps::Auto { min: 2 },
             max_iterations: 100,
             budget: sysid_core::Budget::default(),
         }
@@ -80,6 +82,9 @@ pub struct RecordSummary {
     pub x0_sigma: BTreeMap<String, Option<f64>>,
     /// Free-run fit % per output.
     pub fit_percent: BTreeMap<String, f64>,
+    /// RK4 steps per sample interval of its final free run (more than the minimum where
+    /// the model is stiff along this record).
+    pub substeps: usize,
 }
 
 /// One solve in `greyest.json`.
@@ -315,6 +320,7 @@ pub fn compute_greyest(
                 .cloned()
                 .zip(fit.fit_percent[r].iter().copied())
                 .collect(),
+            substeps: fit.substeps[r],
         })
         .collect();
     let stages = fit
@@ -487,9 +493,10 @@ pub fn report(outcome: &GreyestOutcome) -> String {
             .map(|(k, v)| format!("{k} {v:.2} %"))
             .collect();
         md.push_str(&format!(
-            "- `{}` ({} samples): {}; x0 = {}\n",
+            "- `{}` ({} samples, {} RK4 steps per sample): {}; x0 = {}\n",
             r.file,
             r.samples,
+            r.substeps,
             fits.join(", "),
             r.x0.iter()
                 .map(|(k, v)| format!("{k} {}", number(*v)))

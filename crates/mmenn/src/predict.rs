@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::Serialize;
-use sysid_core::{ChannelMetrics, Dataset, Experiment};
+use sysid_core::{ChannelMetrics, Dataset, Experiment, Substeps};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::{Table, read_table, table_to_experiment, write_csv};
@@ -62,6 +62,10 @@ pub struct PredictSummary {
     pub free_run: FreeRunReport,
     /// The samples the free-run metrics score.
     pub scored: ScoredWindow,
+    /// RK4 steps per sample interval of the free run (`None`: a hybrid model's own
+    /// integrator).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub substeps: Option<usize>,
     /// k-step-ahead prediction, when asked for (its own rule and scored window).
     pub k_step: Option<Judgement>,
     /// Files written.
@@ -92,11 +96,33 @@ pub fn run_predict_with(
     opts: &PredictOptions,
     out: &Path,
 ) -> Result<PredictSummary> {
+    run_predict_substeps(model_path, data_path, opts, None, out)
+}
+
+/// [`run_predict_with`] with the free run's RK4 steps per sample interval stated (the
+/// CLI's `--substeps`; `None`: [`default_substeps`]).
+pub fn run_predict_substeps(
+    model_path: &Path,
+    data_path: &Path,
+    opts: &PredictOptions,
+    substeps: Option<Substeps>,
+    out: &Path,
+) -> Result<PredictSummary> {
     let model = LoadedModel::read(model_path)?;
     let table = read_table(data_path)?;
-    let outcome = compute_predict(&model, &table, opts)?;
+    let substeps = substeps.unwrap_or_else(|| default_substeps(&model));
+    let outcome = compute_predict_with(&model, &table, opts, substeps)?;
     write_predict(&outcome, out)?;
     Ok(outcome.summary)
+}
+
+/// A model's free-run steps when none are stated: `Auto` with at least the model's own
+/// RK4 count (4 for a model file), so a model that is not stiff keeps it.
+pub fn default_substeps(model: &LoadedModel) -> Substeps {
+    match model.integrator {
+        sysid_core::Integrator::Rk4 { substeps } => Substeps::Auto { min: substeps },
+        sysid_core::Integrator::DormandPrince(_) => Substeps::Auto { min: 4 },
+    }
 }
 
 /// Everything `mmenn predict` computes, as values ([`write_predict`] writes it).
@@ -135,9 +161,20 @@ pub fn compute_predict(
     data: &Table,
     opts: &PredictOptions,
 ) -> Result<PredictOutcome> {
+    compute_predict_with(model, data, opts, default_substeps(model))
+}
+
+/// [`compute_predict`] with the free run's RK4 steps per sample interval stated (a model
+/// file's; a hybrid model keeps its own integrator).
+pub fn compute_predict_with(
+    model: &LoadedModel,
+    data: &Table,
+    opts: &PredictOptions,
+    substeps: Substeps,
+) -> Result<PredictOutcome> {
     let obs = model.present(|n| data.column_index(n).is_some());
     let exp = table_to_experiment(data, model.spec.linear.input_names(), &obs.names)?;
-    compute_predict_record(model, &exp, obs, opts)
+    compute_predict_record_with(model, &exp, obs, opts, substeps)
 }
 
 /// [`compute_predict`] on the first record of a dataset in memory: judged on every state
@@ -186,6 +223,19 @@ pub fn compute_predict_record(
     obs: Observation,
     opts: &PredictOptions,
 ) -> Result<PredictOutcome> {
+    compute_predict_record_with(model, record, obs, opts, default_substeps(model))
+}
+
+/// [`compute_predict_record`] with the free run's RK4 steps per sample interval stated:
+/// `Auto` probes the record for a stiff model (`sysid_core::stiff`), `Fixed` is taken as
+/// given; a hybrid model keeps its own integrator either way.
+pub fn compute_predict_record_with(
+    model: &LoadedModel,
+    record: &Experiment,
+    obs: Observation,
+    opts: &PredictOptions,
+    substeps: Substeps,
+) -> Result<PredictOutcome> {
     let lin = &model.spec.linear;
     let exp = record.clone().with_intersample(model.intersample());
     let rule = match &opts.x0 {
@@ -194,7 +244,20 @@ pub fn compute_predict_record(
             window: opts.x0_window,
         },
     };
-    let free = judge_free_run(model, &exp, &obs, &rule)?;
+    let requested = substeps;
+    let (mut model, mut substeps) = with_substeps(model, &exp, &obs, &rule, requested)?;
+    let mut free = judge_free_run(&model, &exp, &obs, &rule)?;
+    // The judged start may need more steps than the probe's (a stiff model, a start far
+    // from the measured one): probe it and judge again.
+    if let (Some(s), Substeps::Auto { min }) = (substeps, requested) {
+        let again = probe_count(&model, &exp, &free.x0, min)?;
+        if again > s {
+            model.integrator = sysid_core::Integrator::Rk4 { substeps: again };
+            free = judge_free_run(&model, &exp, &obs, &rule)?;
+            substeps = Some(again);
+        }
+    }
+    let model = &model;
     let k_step = match opts.horizon {
         Some(k) => Some(judge_k_step(model, &exp, &obs, k, &free)?),
         None => None,
@@ -227,6 +290,7 @@ pub fn compute_predict_record(
         model_kind: model.kind,
         free_run: FreeRunReport::of(&free),
         scored: free.scored,
+        substeps,
         k_step,
         files,
     };
@@ -238,6 +302,48 @@ pub fn compute_predict_record(
         columns,
         model_kind: model.kind,
     })
+}
+
+/// The model with the RK4 count `substeps` asks for on `exp` (a model file's; a hybrid
+/// model keeps its own integrator, count `None`): `Auto` probes a free run from the given
+/// start, or from the measured channels' first values.
+fn with_substeps(
+    model: &LoadedModel,
+    exp: &Experiment,
+    obs: &Observation,
+    rule: &InitialRule,
+    substeps: Substeps,
+) -> Result<(LoadedModel, Option<usize>)> {
+    let mut model = model.clone();
+    if model.kind == ModelKind::Hybrid {
+        return Ok((model, None));
+    }
+    let count = match substeps.validate().map_err(core("--substeps"))? {
+        Substeps::Fixed(s) => s,
+        Substeps::Auto { min } => {
+            let x0 = match rule {
+                InitialRule::Given(x) => x.clone(),
+                _ => sysid_core::measured_start(&obs.matrix, exp.output(0)),
+            };
+            probe_count(&model, exp, &x0, min)?
+        }
+    };
+    model.integrator = sysid_core::Integrator::Rk4 { substeps: count };
+    Ok((model, Some(count)))
+}
+
+/// [`sysid_core::probe_substeps`] of `model` on `exp` from `x0`.
+fn probe_count(model: &LoadedModel, exp: &Experiment, x0: &[f64], min: usize) -> Result<usize> {
+    if x0.len() != model.spec.linear.n_states() {
+        return Ok(min);
+    }
+    sysid_core::probe_substeps(&model.dynamics, exp, x0, min, 1e12)
+        .map(|p| p.substeps)
+        .map_err(core("choosing the RK4 sub-steps of the free run"))
+}
+
+fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> crate::error::MmennError {
+    move |source| crate::error::MmennError::Core { context, source }
 }
 
 /// Write what [`compute_predict`] computed into `out`: `prediction.csv`, a figure per
@@ -316,6 +422,11 @@ fn report(s: &PredictSummary) -> String {
         crate::words::numbers(&s.free_run.x0),
         s.free_run.x0_source
     ));
+    if let Some(steps) = s.substeps {
+        r.push_str(&format!(
+            "Classical RK4, {steps} steps per sample interval.\n\n"
+        ));
+    }
     if s.free_run.channels.is_empty() {
         r.push_str("The record has no column of a state or model output to compare with.\n");
     } else {

@@ -229,6 +229,16 @@ fn greyest_covers_the_true_rigid_body_and_friction() {
             p.start
         );
     }
+    // Issue 20, item 6: the estimated start state's angles are the measured first angles
+    // (the record starts at [0.2001845, −0.1000922] rad) to within 1e-3 rad.
+    let x0 = &o.summary.records[0].x0;
+    for (name, y0) in [("theta1", 0.2001844928), ("theta2", -0.1000922464)] {
+        assert!(
+            (x0[name] - y0).abs() <= 1e-3,
+            "{name}(0) = {} vs {y0}",
+            x0[name]
+        );
+    }
 }
 
 /// README's physics section shows `fixtures/two_link/rigid_body.toml` as it is, and that
@@ -264,4 +274,151 @@ fn readme_shows_the_rigid_body_fixture() {
             );
         }
     }
+}
+
+/// `discover --budget SECONDS` stops like `estimate`, `fit` and `greyest` do: a spent
+/// budget is exit status 4 with a message naming the budget and the stage that ran out;
+/// no output folder is left behind. A budget of 0 s runs out at the first charge (MME
+/// with the assumed model), on the mass-matrix path (rigid-body model) and on the
+/// state-space path (a mass-spring-damper case of the discovery suite) alike.
+#[test]
+fn cli_discover_stops_at_its_budget_with_status_4() {
+    use std::process::Command;
+    let dir = scratch("budget");
+    let msd = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/discovery_suite/cases/msd_coulomb");
+    let runs = [
+        (fixture().join("rigid_body.toml"), fixture().join("est.csv")),
+        (msd.join("model.toml"), msd.join("est.csv")),
+    ];
+    for (i, (model, data)) in runs.iter().enumerate() {
+        let out = dir.join(format!("out{i}"));
+        let run = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+            .args(["--quiet", "discover", "--data"])
+            .arg(data)
+            .arg("--model")
+            .arg(model)
+            .args(["--budget", "0", "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(4), "{}: {err}", model.display());
+        assert!(
+            err.contains("the budget of 0 s ran out during") && err.contains("MME"),
+            "{err}"
+        );
+        assert!(!out.exists(), "{}", out.display());
+    }
+}
+
+/// Issue 20, item 3: the force path's Offset and Stribeck candidates on data containing
+/// them (`offset_stribeck_*.csv`: the base arm and friction plus a constant torque
+/// `tau0 = +0.02` N·m on joint 1 and Stribeck breakaway friction on joint 2,
+/// `(fs2 − fc2)·exp(−(ω2/0.3)²)·(2/π)·atan(ω2/vs)`, `fs2 = 0.014` N·m;
+/// `offset_stribeck_truth.json`). `discover` on `rigid_body.toml` must name the offset on
+/// joint 1 (`constant_bias` on `omega1`, positive, 95 % interval covering 0.02 N·m) and
+/// keep every named force on its own joint.
+///
+/// Measured (release, ~19 s, load ~2.5): offset 1.9988e-2 [1.9921e-2, 2.0055e-2] N·m;
+/// joint 1 also viscous −4.087e-3 and `(2/π)·atan(ω1/0.0351)` × −1.1696e-2, joint 2
+/// viscous −2.012e-3 and `tanh(ω2/0.0355)` × −7.867e-3; validation free-run cost
+/// 5.6e10 → 51.6 (× the noise level), fit 99.84 % on both validation angles. The
+/// Stribeck term is **not** named: see [`two_link_stribeck_is_named_on_joint_2`].
+#[test]
+fn two_link_offset_is_named_on_joint_1() {
+    let dir = scratch("offset");
+    let s = run_discover(
+        &[fixture().join("offset_stribeck_est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("offset_stribeck_val.csv")],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap();
+    assert_eq!(s.verdict, Verdict::Found, "{s:#?}");
+    for e in &s.effects {
+        let other = if e.state == "omega1" { "2" } else { "1" };
+        assert!(
+            !e.term.contains(&format!("omega{other}"))
+                && !e.term.contains(&format!("theta{other}")),
+            "cross-joint term {} on {}",
+            e.term,
+            e.state
+        );
+    }
+    let offset = s
+        .effects
+        .iter()
+        .find(|e| e.name == "constant_bias")
+        .unwrap_or_else(|| panic!("no offset named: {:#?}", s.effects));
+    assert_eq!(offset.state, "omega1");
+    let ci = offset.ci95.unwrap();
+    assert!(covers(ci, 0.02), "offset {} {ci:?}", offset.coefficient);
+    assert_eq!(offset.unit.as_deref(), Some("N*m"));
+}
+
+/// What item 3 asks and the force path does not do yet (ignored: it fails). The
+/// Stribeck hump on joint 2 (0.006 N·m at rest, gone above |ω2| ≈ 0.3 rad/s, where the
+/// joint spends 6.5 % of the record) removes 0.06 % of `Σ τ̂₂²` after viscous and Coulomb
+/// terms (computed on the generator's true ω2), 30× below `ForceConfig::min_share`
+/// (2 %), so it is never proposed; and the catalogue's smooth Stribeck is
+/// `tanh(v/ε)·exp(−(v/v_s)²)` with `v_s = 0.1·RMS(v)` = 0.417 rad/s held fixed, while the
+/// generator's is `(2/π)·atan(v/vs)·exp(−(v/0.3)²)`, whose low-speed difference from a
+/// tanh Coulomb law is of the hump's size — so even when proposed its coefficient would
+/// not estimate `−(fs2 − fc2)`. Needs: a share rule that sees low-speed forces (e.g. the
+/// share within the low-speed samples, or a free-run test of each remaining candidate),
+/// an atan form of the Stribeck law and a calibrated `v_s`.
+#[test]
+#[ignore = "the force path does not propose the Stribeck term on this record (see doc)"]
+fn two_link_stribeck_is_named_on_joint_2() {
+    let dir = scratch("stribeck");
+    let s = run_discover(
+        &[fixture().join("offset_stribeck_est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("offset_stribeck_val.csv")],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap();
+    let stribeck = s
+        .effects
+        .iter()
+        .find(|e| e.name.starts_with("stribeck"))
+        .unwrap_or_else(|| panic!("no Stribeck term named: {:#?}", s.effects));
+    assert_eq!(stribeck.state, "omega2");
+    assert!(covers(stribeck.ci95.unwrap(), -(0.014 - 0.008)));
+}
+
+/// A budget that runs out in the force-space calibration (after MME) stops `discover`
+/// with the typed error naming that stage — not an "unexplained" verdict, which is what a
+/// failed calibration used to become. Work units make it deterministic: 1e5 sub-steps
+/// cover MME on the rigid-body model but not the calibration of the proposed forces.
+/// (The CLI maps this error to exit status 4 like every other spent budget.)
+#[test]
+fn discover_budget_running_out_in_the_calibration_is_an_error() {
+    use mmenn::discovery::DiscoveryError;
+    use mmenn::sysid_core::{Budget, CoreError};
+    let dir = scratch("budget-calibration");
+    let mut opts = DiscoverOptions::default();
+    opts.estimate.budget = Budget::work_units(100_000);
+    let e = run_discover(
+        &[fixture().join("est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("val.csv")],
+        &opts,
+        &dir.join("out"),
+    )
+    .expect_err("the budget must run out");
+    let text = e.to_string();
+    match &e {
+        mmenn::MmennError::Discovery(DiscoveryError::Core(CoreError::BudgetExhausted(b))) => {
+            assert!(b.stage.contains("force-space discovery"), "{text}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(
+        text.contains("ran out during force-space discovery"),
+        "{text}"
+    );
 }

@@ -44,6 +44,7 @@ use crate::error::{CoreError, Result};
 use crate::least_squares::{LmReport, LmSettings, levenberg_marquardt};
 use crate::metrics::channel_metrics;
 use crate::physical::{Estimation, ParametricDynamics};
+use crate::stiff::{Substeps, resolve_substeps};
 
 mod problem;
 mod transform;
@@ -68,8 +69,10 @@ pub enum Shooting {
 /// Settings of [`estimate_parameters`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct GreyboxOptions {
-    /// RK4 steps per sample interval (≥ 1). Default 2.
-    pub substeps: usize,
+    /// RK4 steps per sample interval. Default `Auto { min: 2 }`: two, or as many as a
+    /// stiff model needs along each record ([`crate::stiff`]; probed at the start values
+    /// and again at the estimate, whose free run is solved again when it needs more).
+    pub substeps: Substeps,
     /// Free run or multiple shooting first. Default free run.
     pub shooting: Shooting,
     /// Most Levenberg–Marquardt iterations per solve. Default 100.
@@ -91,7 +94,7 @@ pub struct GreyboxOptions {
 impl Default for GreyboxOptions {
     fn default() -> Self {
         Self {
-            substeps: 2,
+            substeps: Substeps::Auto { min: 2 },
             shooting: Shooting::FreeRun,
             max_iterations: 100,
             ftol: 1e-10,
@@ -157,6 +160,8 @@ pub struct StageReport {
     pub estimated: usize,
     /// The solver's report (cost `‖r‖²` of the weighted residuals).
     pub report: LmReport,
+    /// RK4 steps per sample interval of each record in this solve.
+    pub substeps: Vec<usize>,
 }
 
 /// The estimate: the model with the estimated values, per-parameter estimates with σ,
@@ -184,6 +189,8 @@ pub struct GreyboxFit<D> {
     pub fit_percent: Vec<Vec<f64>>,
     /// Free-run state trajectories per record (`n × N`).
     pub states: Vec<DMatrix<f64>>,
+    /// RK4 steps per sample interval of each record in the final free run.
+    pub substeps: Vec<usize>,
 }
 
 impl<D> GreyboxFit<D> {
@@ -232,6 +239,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     let mut stages = Vec::new();
     let mut z = z0;
     let mut starts = x0;
+    let mut counts = record_substeps(model, data.records, &starts, opts)?;
 
     if let Shooting::Multiple { segment } = opts.shooting {
         let segments = shooting_segments(data.records, segment);
@@ -245,7 +253,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
             transforms.clone(),
             segments.clone(),
             opts.continuity_weight * mean_weight,
-            opts.substeps,
+            counts.clone(),
             opts.blow_up,
         );
         let theta0 = shooting_start(&mut problem, &z, &starts, &segments, data)?;
@@ -258,6 +266,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
             residuals: problem.rows,
             estimated: problem.dimension(),
             report: solution.report,
+            substeps: counts.clone(),
         });
         if stages[0].report.termination != crate::Termination::Diverged {
             let nf = free.len();
@@ -290,7 +299,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
         transforms.clone(),
         segments,
         0.0,
-        opts.substeps,
+        counts.clone(),
         opts.blow_up,
     );
     let mut theta0 = z.clone();
@@ -305,17 +314,36 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     }
     problem.observer = Some(&mut *observer);
     problem.budget = opts.budget.clone();
-    let solution = levenberg_marquardt(&mut problem, &theta0, &settings)?;
-    problem.observer = None;
-    let theta = solution.theta;
     let rows = problem.rows;
     let dim = problem.dimension();
-    stages.push(StageReport {
-        shooting: Shooting::FreeRun,
-        residuals: rows,
-        estimated: dim,
-        report: solution.report,
-    });
+    let mut theta = theta0;
+    for round in 0.. {
+        let solution = levenberg_marquardt(&mut problem, &theta, &settings)?;
+        theta = solution.theta;
+        stages.push(StageReport {
+            shooting: Shooting::FreeRun,
+            residuals: rows,
+            estimated: dim,
+            report: solution.report,
+            substeps: counts.clone(),
+        });
+        // The estimate may be stiffer than the start (a larger friction level): probe it,
+        // and solve again from it with the larger counts (at most twice).
+        if round == 2 || !matches!(opts.substeps, Substeps::Auto { .. }) {
+            break;
+        }
+        let at = problem.model_at(&theta)?;
+        let x0s: Vec<Vec<f64>> = (0..data.records.len())
+            .map(|r| theta[free.len() + r * n..free.len() + (r + 1) * n].to_vec())
+            .collect();
+        let needed = record_substeps(&at, data.records, &x0s, opts)?;
+        if needed.iter().zip(&counts).all(|(a, b)| a <= b) {
+            break;
+        }
+        counts = counts.iter().zip(&needed).map(|(a, b)| *a.max(b)).collect();
+        problem.substeps = counts.clone();
+    }
+    problem.observer = None;
 
     // Uncertainty along the physical parameters.
     let nf = free.len();
@@ -395,7 +423,22 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
         rank: (rank, keep.len()),
         fit_percent,
         states,
+        substeps: counts,
     })
+}
+
+/// Each record's RK4 sub-steps for `model` from `starts` (`opts.substeps`, [`crate::stiff`]).
+fn record_substeps<D: ParametricDynamics>(
+    model: &D,
+    records: &[Experiment],
+    starts: &[Vec<f64>],
+    opts: &GreyboxOptions,
+) -> Result<Vec<usize>> {
+    records
+        .iter()
+        .zip(starts)
+        .map(|(exp, x0)| resolve_substeps(model, exp, x0, opts.substeps, opts.blow_up))
+        .collect()
 }
 
 /// The free parameters' indices, their transforms and starting `z`. Errors: none free, a
@@ -486,13 +529,7 @@ fn validate<D: ParametricDynamics>(
             });
         }
     }
-    if opts.substeps == 0 {
-        return Err(CoreError::InvalidArgument {
-            name: "substeps",
-            value: 0.0,
-            reason: "must be at least 1",
-        });
-    }
+    opts.substeps.validate()?;
     if let Shooting::Multiple { segment } = opts.shooting
         && segment < 2
     {

@@ -16,6 +16,7 @@ pub mod least_squares;
 pub mod linear;
 pub mod metrics;
 pub mod physical;
+pub mod stiff;
 pub mod tangent;
 pub mod terms;
 
@@ -47,4 +48,5 @@ pub use physical::{
     Estimation, MAX_DOF, MechanicsSpec, Parameter, ParametricDynamics, PhysicalError,
     PhysicalModel, PhysicalTerm,
 };
+pub use stiff::{StiffProbe, Substeps, auto_rk4, measured_start, probe_substeps, resolve_substeps};
 pub use terms::{Term, TermError, TermModel, TermSpec, term_variables};

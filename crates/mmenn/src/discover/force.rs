@@ -165,12 +165,12 @@ pub(super) fn run_force_discover(
     let discovered = physical(&spec)?;
     let window = opts.workflow.x0_window;
     let lin = &original.linear;
-    let (before, y_before) = free_run_gap_of(&assumed, lin, data, window)?;
-    let (after, y_after) = free_run_gap_of(&discovered, lin, data, window)?;
+    let (before, y_before) = free_run_gap_of(&assumed, lin, data, window, true)?;
+    let (after, y_after) = free_run_gap_of(&discovered, lin, data, window, true)?;
     let validation_runs = match val {
         Some(v) => {
-            let (b, yb) = free_run_gap_of(&assumed, lin, v, window)?;
-            let (a, ya) = free_run_gap_of(&discovered, lin, v, window)?;
+            let (b, yb) = free_run_gap_of(&assumed, lin, v, window, true)?;
+            let (a, ya) = free_run_gap_of(&discovered, lin, v, window, true)?;
             Some((
                 GapPair {
                     before: b,
@@ -282,6 +282,11 @@ fn search(
     let config = ForceConfig {
         x0_window: opts.workflow.x0_window,
         trim_fraction: opts.workflow.trim_fraction,
+        // One account for the whole job: MME above and every calibration draw on it.
+        calibration: sysid_core::GreyboxOptions {
+            budget: opts.estimate.budget.clone(),
+            ..ForceConfig::default().calibration
+        },
         ..ForceConfig::default()
     };
     let outcome = discovery::force::run_forces(&problem, &config)?;

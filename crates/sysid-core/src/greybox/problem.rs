@@ -66,7 +66,8 @@ pub(super) struct Calibration<'a, 'o, D: ParametricDynamics> {
     pub segments: Vec<Segment>,
     /// Weight of a continuity defect (per unit of state).
     pub continuity: f64,
-    pub substeps: usize,
+    /// RK4 steps per sample interval, per record.
+    pub substeps: Vec<usize>,
     pub blow_up: f64,
     /// Jacobian columns along the physical parameters rather than the transformed ones
     /// (for the covariance).
@@ -96,7 +97,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
         transforms: Vec<Transform>,
         segments: Vec<Segment>,
         continuity: f64,
-        substeps: usize,
+        substeps: Vec<usize>,
         blow_up: f64,
     ) -> Self {
         let n = model.n_states();
@@ -160,21 +161,23 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
             })
     }
 
-    /// One RK4 interval `k − 1 → k` of `exp` (with tangents when `tangents` is given).
-    /// False when the state leaves the blow-up bound.
+    /// One RK4 interval `k − 1 → k` of record `record` (with tangents when `tangents` is
+    /// given), in that record's sub-steps. False when the state leaves the blow-up bound.
     fn interval(
         &mut self,
         model: &D,
-        exp: &Experiment,
+        record: usize,
         k: usize,
         tangents: Option<&FreeColumns<'_, D>>,
     ) -> bool {
-        let h = exp.dt() / self.substeps as f64;
+        let exp = &self.records[record];
+        let substeps = self.substeps[record];
+        let h = exp.dt() / substeps as f64;
         let (ua, ub) = (exp.input(k - 1), exp.input(k));
         let hold = exp.intersample();
-        for j in 0..self.substeps {
+        for j in 0..substeps {
             let t = exp.time(k - 1) + j as f64 * h;
-            let input = hold.step_input(ua, ub, j, self.substeps);
+            let input = hold.step_input(ua, ub, j, substeps);
             match tangents {
                 Some(src) => {
                     self.rk
@@ -204,7 +207,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
             let at = self.start_of(si);
             self.x.copy_from_slice(&theta[at..at + n]);
             for k in seg.start..seg.end {
-                if k > seg.start && !self.interval(&model, exp, k, None) {
+                if k > seg.start && !self.interval(&model, seg.record, k, None) {
                     return Ok(false);
                 }
                 for (i, &y) in exp.output(k).iter().enumerate() {
@@ -216,7 +219,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
                 }
             }
             if seg.linked {
-                if !self.interval(&model, exp, seg.end, None) {
+                if !self.interval(&model, seg.record, seg.end, None) {
                     return Ok(false);
                 }
                 let next = at + n;
@@ -234,7 +237,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
         let steps: usize = self
             .segments
             .iter()
-            .map(|s| (s.end - s.start).saturating_sub(1))
+            .map(|s| (s.end - s.start).saturating_sub(1) * self.substeps[s.record])
             .sum();
         let stage = if self.stage == "free run" {
             "grey-box free-run iteration"
@@ -242,7 +245,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
             "grey-box multiple-shooting iteration"
         };
         self.budget
-            .charge((steps * self.substeps) as u64, stage, self.jacobians, None)?;
+            .charge(steps as u64, stage, self.jacobians, None)?;
         self.jacobians += 1;
         let model = self.model_at(theta)?;
         let n = self.model.n_states();
@@ -276,7 +279,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
                 self.s[(l, nf + l)] = 1.0;
             }
             for k in seg.start..seg.end {
-                if k > seg.start && !self.interval(&model, exp, k, Some(&src)) {
+                if k > seg.start && !self.interval(&model, seg.record, k, Some(&src)) {
                     failed = Some(exp.time(k));
                     break 'segments;
                 }
@@ -295,7 +298,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
                 }
             }
             if seg.linked {
-                if !self.interval(&model, exp, seg.end, Some(&src)) {
+                if !self.interval(&model, seg.record, seg.end, Some(&src)) {
                     failed = Some(exp.time(seg.end));
                     break 'segments;
                 }
@@ -343,13 +346,11 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
         let model = self.model_at(probe)?;
         let n = self.model.n_states();
         let nf = self.free.len();
-        let records = self.records;
-        let exp = &records[record];
         self.x.copy_from_slice(&probe[nf..nf + n]);
         let mut xs = DMatrix::from_element(n, end - start, f64::NAN);
         xs.column_mut(0).copy_from_slice(&self.x);
         for k in start + 1..end {
-            if !self.interval(&model, exp, k, None) {
+            if !self.interval(&model, record, k, None) {
                 break;
             }
             xs.column_mut(k - start).copy_from_slice(&self.x);
@@ -372,7 +373,7 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
             let mut xs = DMatrix::from_element(n, exp.len(), f64::NAN);
             xs.column_mut(seg.start).copy_from_slice(&self.x);
             for k in seg.start + 1..seg.end {
-                if !self.interval(&model, exp, k, None) {
+                if !self.interval(&model, seg.record, k, None) {
                     break;
                 }
                 xs.column_mut(k).copy_from_slice(&self.x);

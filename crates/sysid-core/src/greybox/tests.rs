@@ -397,7 +397,7 @@ fn the_shooting_jacobian_is_the_derivative_of_the_residuals() {
         transforms,
         segments,
         3.0,
-        2,
+        vec![2],
         1e6,
     );
     let mut theta = z;

@@ -66,6 +66,31 @@ fn substeps(text: &str) -> std::result::Result<usize, String> {
     }
 }
 
+/// Free-run RK4 sub-steps: `auto` (at least `AUTO_MIN`, more where the model is stiff)
+/// or a fixed number, 1 to `MAX_SUBSTEPS`.
+fn free_run_substeps_from(
+    text: &str,
+    auto_min: usize,
+) -> std::result::Result<mmenn::sysid_core::Substeps, String> {
+    if text.trim().eq_ignore_ascii_case("auto") {
+        Ok(mmenn::sysid_core::Substeps::Auto { min: auto_min })
+    } else {
+        substeps(text)
+            .map(mmenn::sysid_core::Substeps::Fixed)
+            .map_err(|e| format!("{e} (or auto)"))
+    }
+}
+
+/// `greyest --substeps`: `auto` means at least 2.
+fn free_run_substeps(text: &str) -> std::result::Result<mmenn::sysid_core::Substeps, String> {
+    free_run_substeps_from(text, 2)
+}
+
+/// `predict --substeps`: `auto` means at least 4 (a model file's free-run default).
+fn predict_substeps(text: &str) -> std::result::Result<mmenn::sysid_core::Substeps, String> {
+    free_run_substeps_from(text, 4)
+}
+
 /// A fraction in [0, 1).
 fn fraction(text: &str) -> std::result::Result<f64, String> {
     match text.trim().parse::<f64>() {
@@ -167,6 +192,8 @@ pub(crate) struct DiscoverArgs {
     pub(crate) out: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) prep: PrepArgs,
+    #[command(flatten)]
+    pub(crate) budget: BudgetArgs,
 }
 
 #[derive(Debug, Subcommand)]
@@ -293,6 +320,11 @@ pub(crate) struct PredictArgs {
     /// Also predict k steps ahead (beside the free run, labelled).
     #[arg(long, value_parser = at_least_one)]
     pub(crate) horizon: Option<usize>,
+    /// RK4 steps per sample interval of a model file's free run: `auto` (the default:
+    /// four, or as many as a stiff model needs for stability along the record) or a
+    /// number, 1 to 1000. A hybrid model (model.json) keeps the steps it was trained with.
+    #[arg(long, value_parser = predict_substeps)]
+    pub(crate) substeps: Option<mmenn::sysid_core::Substeps>,
     /// Output directory.
     #[arg(long)]
     pub(crate) out: PathBuf,
@@ -327,9 +359,11 @@ pub(crate) struct GreyestArgs {
     /// its own start state (for long or lightly damped records). Default: free run only.
     #[arg(long, value_name = "SAMPLES", value_parser = at_least_two)]
     pub(crate) shooting: Option<usize>,
-    /// RK4 steps per sample interval, 1 to 1000.
-    #[arg(long, default_value_t = 2, value_parser = substeps)]
-    pub(crate) substeps: usize,
+    /// RK4 steps per sample interval: `auto` (two, or as many as a stiff model needs
+    /// for stability along each record, e.g. a steep friction law near rest) or a number,
+    /// 1 to 1000, taken as given.
+    #[arg(long, default_value = "auto", value_parser = free_run_substeps)]
+    pub(crate) substeps: mmenn::sysid_core::Substeps,
     /// Most Levenberg–Marquardt iterations per solve.
     #[arg(long, default_value_t = 100, value_parser = at_least_one)]
     pub(crate) max_iterations: usize,
@@ -407,8 +441,8 @@ pub(crate) const DEFAULT_BUDGET_SECONDS: f64 = 600.0;
 #[derive(Debug, Args)]
 pub(crate) struct BudgetArgs {
     /// Stop with an error naming the stage that ran out and how far it got (exit status 4)
-    /// once the estimation (MME's iterations; greyest's calibration) has run this many
-    /// seconds; `inf` for no limit.
+    /// once the estimation (MME's iterations; greyest's and discover's free-run
+    /// calibrations) has run this many seconds; `inf` for no limit.
     #[arg(long, value_name = "SECONDS", default_value_t = DEFAULT_BUDGET_SECONDS, value_parser = budget_seconds)]
     pub(crate) budget: f64,
 }

@@ -314,7 +314,12 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
             .iter()
             .map(|(k, v)| format!("{k} {v:.2} %"))
             .collect();
-        println!("  free-run fit on {}: {}", r.file, fits.join(", "));
+        println!(
+            "  free-run fit on {}: {} ({} RK4 steps per sample)",
+            r.file,
+            fits.join(", "),
+            r.substeps
+        );
     }
     for st in &s.stages {
         println!(
@@ -429,6 +434,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     check_mme_converged("fit", s.mme_termination, &args.out)
 }
 
+#[allow(clippy::print_stdout)]
 fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     let x0 = match args.x0 {
         Some(v) => mmenn::fit::InitialChoice::Given(v),
@@ -442,11 +448,20 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     };
     let data = prepared(std::slice::from_ref(&args.data), &args.prep, staged.path())?;
     let s = mmenn::progress::stage(progress, "prediction", || {
-        mmenn::predict::run_predict_with(&args.model, &data[0], &opts, staged.path())
-            .map_err(anyhow::Error::from)
+        mmenn::predict::run_predict_substeps(
+            &args.model,
+            &data[0],
+            &opts,
+            args.substeps,
+            staged.path(),
+        )
+        .map_err(anyhow::Error::from)
     })?;
     staged.commit()?;
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
+    if let Some(steps) = s.substeps {
+        println!("  free run: classical RK4, {steps} steps per sample interval");
+    }
     if let Some(k) = &s.k_step {
         print_free_run(
             &format!("prediction ({})", s.model_kind),
@@ -533,6 +548,10 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
             seed: a.seed,
             holdout_fraction: a.holdout_fraction,
             stand_in_draws: a.stand_in_draws,
+            ..Default::default()
+        },
+        estimate: mmenn::estimate::EstimateOptions {
+            budget: a.budget.start(),
             ..Default::default()
         },
         ..Default::default()
@@ -708,6 +727,12 @@ fn budget_ran_out(e: &anyhow::Error) -> bool {
             || matches!(
                 c.downcast_ref(),
                 Some(MmeError::Core(CoreError::BudgetExhausted(_)))
+            )
+            || matches!(
+                c.downcast_ref(),
+                Some(mmenn::discovery::DiscoveryError::Core(
+                    CoreError::BudgetExhausted(_)
+                ))
             )
     })
 }
