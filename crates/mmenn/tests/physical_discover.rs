@@ -312,6 +312,19 @@ fn cli_discover_stops_at_its_budget_with_status_4() {
     }
 }
 
+/// `discover` with the rigid-body model on the offset + Stribeck records (estimation and
+/// validation), default options, results under `dir/out`.
+fn discover_offset_stribeck(dir: &Path) -> mmenn::discover::DiscoverSummary {
+    run_discover(
+        &[fixture().join("offset_stribeck_est.csv")],
+        &fixture().join("rigid_body.toml"),
+        &[fixture().join("offset_stribeck_val.csv")],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap()
+}
+
 /// Issue 20, item 3: the force path's Offset and Stribeck candidates on data containing
 /// them (`offset_stribeck_*.csv`: the base arm and friction plus a constant torque
 /// `tau0 = +0.02` N·m on joint 1 and Stribeck breakaway friction on joint 2,
@@ -328,14 +341,7 @@ fn cli_discover_stops_at_its_budget_with_status_4() {
 #[test]
 fn two_link_offset_is_named_on_joint_1() {
     let dir = scratch("offset");
-    let s = run_discover(
-        &[fixture().join("offset_stribeck_est.csv")],
-        &fixture().join("rigid_body.toml"),
-        &[fixture().join("offset_stribeck_val.csv")],
-        &DiscoverOptions::default(),
-        &dir.join("out"),
-    )
-    .unwrap();
+    let s = discover_offset_stribeck(&dir);
     assert_eq!(s.verdict, Verdict::Found, "{s:#?}");
     for e in &s.effects {
         let other = if e.state == "omega1" { "2" } else { "1" };
@@ -373,14 +379,7 @@ fn two_link_offset_is_named_on_joint_1() {
 #[ignore = "the force path does not propose the Stribeck term on this record (see doc)"]
 fn two_link_stribeck_is_named_on_joint_2() {
     let dir = scratch("stribeck");
-    let s = run_discover(
-        &[fixture().join("offset_stribeck_est.csv")],
-        &fixture().join("rigid_body.toml"),
-        &[fixture().join("offset_stribeck_val.csv")],
-        &DiscoverOptions::default(),
-        &dir.join("out"),
-    )
-    .unwrap();
+    let s = discover_offset_stribeck(&dir);
     let stribeck = s
         .effects
         .iter()
