@@ -3,15 +3,15 @@
 //! [`band_members`](crate::sweep::band_members)).
 //!
 //! Averaging equally good restarts is bagging over initialisations: each restart lands in
-//! its own local minimum, and their mean has a lower variance than any one of them while
-//! its bias is the members' mean bias. The merged network is exact, not an approximation:
+//! its own local minimum; the mean's variance is at most the members' average variance,
+//! and its bias is the members' mean bias. The merged network is exact, not an approximation:
 //! the members' hidden units sit side by side (layer by layer, block-diagonal between
 //! hidden layers, so no unit sees another member's units), and the linear output layer
 //! takes each member's output weights divided by the member count, biases averaged. With
 //! one set of input and output scalers (the sweep fits them to the training data, so every
 //! member shares them) the mean of the scaled outputs is the scaled mean, so the merged
-//! network is one ordinary `Mlp`: `model.json`, `predict`, the trajectory training and the
-//! monitoring features take it as they take any other.
+//! network is one ordinary `Mlp`: `model.json`, `predict` and the trajectory training take
+//! it as they take any other.
 
 use crate::error::{NnError, Result};
 use crate::mlp::{Architecture, Mlp};
