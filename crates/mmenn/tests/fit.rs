@@ -66,9 +66,13 @@ fn predict_truth(
     .unwrap()
 }
 
-#[test]
-fn clean_single_pendulum_predicts_the_test_input() {
-    let dir = scratch("pend-clean");
+/// The noise-free pendulum's training and test recipes, simulated under `dir`.
+fn clean_pendulum(
+    dir: &Path,
+) -> (
+    mmenn::simulate::SimulateOutput,
+    mmenn::simulate::SimulateOutput,
+) {
     let train = sim(
         &dir.join("train"),
         "pendulum",
@@ -77,6 +81,13 @@ fn clean_single_pendulum_predicts_the_test_input() {
         None,
     );
     let test = sim(&dir.join("test"), "pendulum", Recipe::Test, Some(0.0), None);
+    (train, test)
+}
+
+#[test]
+fn clean_single_pendulum_predicts_the_test_input() {
+    let dir = scratch("pend-clean");
+    let (train, test) = clean_pendulum(&dir);
     // The thesis bound holds with `trainlm` and with the accelerated training too.
     for training in [Training::Trainlm, Training::Accelerated] {
         let fit_dir = dir.join(format!("fit-{training:?}"));
@@ -241,14 +252,7 @@ fn trajectory_refinement_removes_the_bias_of_a_shrunk_correction() {
     use mmenn::estimate::{EstimateOptions, WeightChoice};
     use mmenn::fit::{HiddenChoice, TrajectoryChoice};
     let dir = scratch("refine-bias");
-    let train = sim(
-        &dir.join("train"),
-        "pendulum",
-        Recipe::Train,
-        Some(0.0),
-        None,
-    );
-    let test = sim(&dir.join("test"), "pendulum", Recipe::Test, Some(0.0), None);
+    let (train, test) = clean_pendulum(&dir);
     let fit = |refine, name: &str| {
         let opts = FitOptions {
             estimate: EstimateOptions {
@@ -391,14 +395,7 @@ fn band_limited_input_is_fitted_and_predicted_with_the_first_order_hold() {
 #[test]
 fn band_ensemble_is_one_network_of_the_equally_good_ones() {
     let dir = scratch("pend-band");
-    let train = sim(
-        &dir.join("train"),
-        "pendulum",
-        Recipe::Train,
-        Some(0.0),
-        None,
-    );
-    let test = sim(&dir.join("test"), "pendulum", Recipe::Test, Some(0.0), None);
+    let (train, test) = clean_pendulum(&dir);
     let s = run_fit(
         std::slice::from_ref(&train.data),
         &train.model,
