@@ -261,3 +261,70 @@ fn held_out(label: &str, spec: &GreySpec) {
         Err(e) => println!("{label}: failed {e:#}"),
     }
 }
+
+/// The Schroeder multisine record of the Silverbox distribution (outside the loader's
+/// split; docs/decisions/silverbox-schroeder-rule.md).
+fn schroeder() -> Experiment {
+    let text =
+        std::fs::read_to_string("/work/shared/data/silverbox/schroeder80mV.csv").unwrap();
+    let (mut u, mut y) = (Vec::new(), Vec::new());
+    for line in text.lines().skip(1) {
+        let f: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
+        u.push(f[2]);
+        y.push(f[3]);
+    }
+    let n = u.len();
+    Experiment::new(
+        0.0,
+        SILVERBOX_DT,
+        DMatrix::from_row_slice(1, n, &u),
+        DMatrix::from_row_slice(1, n, &y),
+    )
+    .unwrap()
+}
+
+/// The candidates of docs/decisions/silverbox-schroeder-rule.md, calibrated on the
+/// training record and scored on the Schroeder record only (no test record is run).
+#[test]
+#[ignore]
+fn explore_silverbox_schroeder() {
+    use SilverboxExtra::*;
+    let d = data(Benchmark::Silverbox);
+    let est = &d.estimation.experiments()[0];
+    let sch = schroeder();
+    let ysch: Vec<f64> = sch.outputs().row(0).iter().copied().collect();
+    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    let stage = Feedthrough(SILVERBOX_STAGE_TAU);
+    let all: Vec<(&str, Vec<SilverboxExtra>)> = vec![
+        ("C0", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, stage]),
+        ("C1", vec![QuadraticSpring, DisplacementDamping, stage]),
+        ("C2", vec![QuadraticSpring, QuadraticDrag, stage]),
+        ("C3", vec![DisplacementDamping, QuadraticDrag, stage]),
+        ("C4", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, QuinticSpring, stage]),
+    ];
+    let only = std::env::var("SB_ONLY").unwrap_or_default();
+    for (label, extra) in all {
+        if !only.is_empty() && !only.split(',').any(|o| o == label) {
+            continue;
+        }
+        let spec = silverbox_model(k, c, b, &extra).unwrap();
+        let clock = std::time::Instant::now();
+        let fit = fit_grey(&spec, est, &[("schroeder".into(), sch.clone())], 50).unwrap();
+        let s = match &fit.tests[0].sim {
+            Ok(sim) => format!("{:.4} mV", 1e3 * rmse_after(&ysch, sim, 50)),
+            Err(m) => format!("diverged {m}"),
+        };
+        println!(
+            "{label}: train {:.4} mV | schroeder {s} ({:.0} s)",
+            1e3 * fit.train_rmse,
+            clock.elapsed().as_secs_f64()
+        );
+        let terms: Vec<String> = fit
+            .model
+            .terms()
+            .iter()
+            .map(|t| format!("{} {:+.4e}", t.effect, t.coefficient))
+            .collect();
+        println!("    {}", terms.join(", "));
+    }
+}
