@@ -392,6 +392,12 @@ pub struct TanksOptions {
     pub area2: bool,
     /// The same for the upper tank: `(h1 − 5)·u` and `(h1 − 5)·√h1`.
     pub area1: bool,
+    /// Whether the pump's flow has a calibrated term quadratic in its drive (`k4b·u²`: a
+    /// pump whose flow is not linear in its voltage).
+    pub pump_quadratic: bool,
+    /// Held time constant (s) of a first-order lag between the pump's voltage and its flow
+    /// (`w' = (u − w)/τ`, every pump term driven by `w`), or `None`.
+    pub pump_lag: Option<f64>,
 }
 
 /// The structure [`tanks_spec`] builds: `k2` free, both overflows at a held rate of 1/s,
@@ -413,6 +419,8 @@ impl Default for TanksOptions {
             linear_outflow1: false,
             area2: false,
             area1: false,
+            pump_quadratic: false,
+            pump_lag: None,
         }
     }
 }
@@ -465,11 +473,23 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     if o.sensor.is_some() {
         names.push("s");
     }
+    let out = names.len() - 1;
+    if o.pump_lag.is_some() {
+        names.push("w");
+    }
     let n = names.len();
-    let out = n - 1;
     let mut c = DMatrix::zeros(1, n);
     c[(0, out)] = 1.0;
     let mut a = DMatrix::zeros(n, n);
+    let mut b = DMatrix::zeros(n, 1);
+    let drive = match o.pump_lag {
+        Some(tau) => {
+            a[(n - 1, n - 1)] = -1.0 / tau;
+            b[(n - 1, 0)] = 1.0 / tau;
+            "w"
+        }
+        None => "u",
+    };
     let mut terms: Vec<(&str, &str, String, f64)> = Vec::new();
     // Levels are never negative: the outflow laws act on the positive part of a level,
     // so a transient below empty (an initial-state fit, a correction pushing the level
@@ -478,7 +498,7 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     let spill = excess_term("h1", o.h1_top, o.smooth);
     let top2 = excess_term("h2", o.h2_top, o.smooth);
     terms.push(("h1", "outflow", upper.clone(), -rate));
-    terms.push(("h1", "pump", "u".into(), rate * 5f64.sqrt() / 2.8));
+    terms.push(("h1", "pump", drive.into(), rate * 5f64.sqrt() / 2.8));
     let c_over = o.overflow_rate.unwrap_or(0.2);
     terms.push(("h1", "overflow", spill.clone(), -c_over));
     terms.push(("h2", "inflow", upper, rate));
@@ -537,10 +557,14 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
         free.push(terms.len());
         terms.push(("h1", "pump_offset", "1".into(), 0.0));
     }
+    if o.pump_quadratic {
+        free.push(terms.len());
+        terms.push(("h1", "pump_quadratic", format!("{drive}^2"), 0.0));
+    }
     free.sort_unstable();
     let linear = LinearModel::with_names(
         a,
-        DMatrix::zeros(n, 1),
+        b,
         c,
         DMatrix::from_fn(n, 1, |i, _| if i == 1 { 1.0 } else { 0.0 }),
         ModelNames {
@@ -560,16 +584,18 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
             coefficient: *c,
         }),
     )?;
-    let x0_guess: fn(&Experiment) -> Vec<f64> = if o.sensor.is_some() {
-        |e| {
+    // Levels start at the first reading; a pump lag starts at the first input.
+    let x0_guess: fn(&Experiment) -> Vec<f64> = match (o.sensor.is_some(), o.pump_lag.is_some()) {
+        (true, false) => |e| vec![e.outputs()[(0, 0)]; 3],
+        (false, false) => |e| vec![e.outputs()[(0, 0)]; 2],
+        (true, true) => |e| {
             let y0 = e.outputs()[(0, 0)];
-            vec![y0, y0, y0]
-        }
-    } else {
-        |e| {
+            vec![y0, y0, y0, e.inputs()[(0, 0)]]
+        },
+        (false, true) => |e| {
             let y0 = e.outputs()[(0, 0)];
-            vec![y0, y0]
-        }
+            vec![y0, y0, e.inputs()[(0, 0)]]
+        },
     };
     Ok(GreySpec {
         model,

@@ -1,6 +1,7 @@
 //! Exploration harness (ignored; reads /work/shared/data; prints training and test
 //! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
 //! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 area1 area2 trainx0
+//! pumpq lag
 //! holdout (calibrate on the first 80 %, score the last 20 %) sub hz
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
 //! rates); `GREY_EMPS` keys eps asym g fv fc off sub full; `GREY_SB` keys q dd vv
@@ -210,6 +211,8 @@ fn explore_tanks() {
                 "sub" => substeps = v as usize,
                 "hz" => hz = v as usize,
                 "trainx0" => trainx0 = v != 0.0,
+                "pumpq" => o.pump_quadratic = v != 0.0,
+                "lag" => o.pump_lag = Some(v),
                 _ => panic!("unknown key {k}"),
             }
         }
