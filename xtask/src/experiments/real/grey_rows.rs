@@ -27,6 +27,15 @@ pub(super) fn grey_candidates(
                 "+ linear term in the lower outflow".into(),
                 grey::tanks_spec(base.h1_top, base.h2_top, base.rate)?,
             ));
+            // docs/decisions/tanks-pump-rule.md: chosen before the test record was run,
+            // by training error and the held-out last fifth of the training record.
+            v.push((
+                "+ linear term in the lower outflow, pump lag 4 s".into(),
+                grey::tanks_model(&grey::TanksOptions {
+                    pump_lag: Some(4.0),
+                    ..base
+                })?,
+            ));
             if mode == Mode::Full {
                 v.push((
                     "+ lower sensor offset 1 V".into(),
