@@ -329,5 +329,12 @@ fn explore_silverbox_schroeder() {
             .map(|t| format!("{} {:+.4e}", t.effect, t.coefficient))
             .collect();
         println!("    {}", terms.join(", "));
+        if let (Ok(path), Ok(sim)) = (std::env::var("SB_DUMP"), &fit.tests[0].sim) {
+            let mut text = String::from("u,y,sim\n");
+            for k in 0..sch.len() {
+                text += &format!("{},{},{}\n", sch.inputs()[(0, k)], ysch[k], sim[k]);
+            }
+            std::fs::write(format!("{path}-{label}.csv"), text).unwrap();
+        }
     }
 }
