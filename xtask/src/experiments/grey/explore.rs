@@ -295,7 +295,6 @@ fn explore_silverbox_schroeder() {
     let d = data(Benchmark::Silverbox);
     let est = &d.estimation.experiments()[0];
     let sch = schroeder();
-    let ysch: Vec<f64> = sch.outputs().row(0).iter().copied().collect();
     let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
     let stage = Feedthrough(SILVERBOX_STAGE_TAU);
     let all: Vec<(&str, Vec<SilverboxExtra>)> = vec![
@@ -304,7 +303,26 @@ fn explore_silverbox_schroeder() {
         ("C2", vec![QuadraticSpring, QuadraticDrag, stage]),
         ("C3", vec![DisplacementDamping, QuadraticDrag, stage]),
         ("C4", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, QuinticSpring, stage]),
+        // Rule 2's proposals (from the first half's residuals: at |y| > 0.15 V the error is
+        // mostly along the simulated velocity, a phase error growing with the amplitude).
+        ("P1", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, Monomial("v^3"), stage]),
+        ("P2", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, Monomial("abs(y)*v"), stage]),
+        ("P3", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, Monomial("u^3"), stage]),
     ];
+    // Rule 2 judges on the second half: samples 65 486.. (the first 50 fit the state).
+    let sch = if std::env::var("SB_HALF").is_ok() {
+        let a = 65_536 - 50;
+        Experiment::new(
+            0.0,
+            SILVERBOX_DT,
+            sch.inputs().columns(a, sch.len() - a).into_owned(),
+            sch.outputs().columns(a, sch.len() - a).into_owned(),
+        )
+        .unwrap()
+    } else {
+        sch
+    };
+    let ysch: Vec<f64> = sch.outputs().row(0).iter().copied().collect();
     let only = std::env::var("SB_ONLY").unwrap_or_default();
     for (label, extra) in all {
         if !only.is_empty() && !only.split(',').any(|o| o == label) {
