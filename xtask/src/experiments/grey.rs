@@ -52,9 +52,10 @@ pub struct GreyFit {
     pub x0: Vec<f64>,
     /// Training free-run RMSE (recorded units, after the window).
     pub train_rmse: f64,
-    /// Training free-run RMSE over every sample from the calibrated state (recorded
-    /// units): the protocol of dynoNet's published EMPS script, which scores the
-    /// estimation record.
+    /// Training free-run RMSE over every sample from the record's measured start
+    /// (`x0_guess`, not a fitted state; recorded units): the protocol of dynoNet's published
+    /// EMPS script, which scores the estimation record from zero initial conditions
+    /// (docs/decisions/emps-start-and-position-force.md).
     pub train_rmse_all: f64,
     /// Test runs, in the order given.
     pub tests: Vec<GreyTest>,
@@ -163,9 +164,8 @@ pub fn fit_grey(
     let train_rmse = train_sim
         .as_ref()
         .map_or(f64::NAN, |s| rmse_after(&y, s, window));
-    let train_rmse_all = train_sim
-        .as_ref()
-        .map_or(f64::NAN, |s| rmse_after(&y, s, 0));
+    let train_rmse_all = free_run(spec, &model, est, &(spec.x0_guess)(est))
+        .map_or(f64::NAN, |s| rmse_after(&y, &s, 0));
     let tests = tests
         .iter()
         .map(|(name, exp)| {
@@ -222,6 +222,9 @@ pub struct EmpsOptions {
     /// Coulomb, offset, as [`emps_spec`] orders its terms), e.g. a calibrated symmetric
     /// model's; `None`: the reference IDIM-LS estimates.
     pub start: Option<[f64; 4]>,
+    /// Whether a force linear in the position, `k_q·q`, is calibrated beside the friction
+    /// (a cable carrier, preload varying along the screw; symmetric model only).
+    pub position_force: bool,
 }
 
 /// EMPS (Janot et al. 2019, eqs. 1–3): `M q'' = gτ·u − Fv·q' − Fc·tanh(q'/ε) − offset`
@@ -233,6 +236,7 @@ pub fn emps_spec(eps: f64) -> Result<GreySpec> {
         eps,
         asymmetric: false,
         start: None,
+        position_force: false,
     })
 }
 
@@ -295,6 +299,10 @@ pub fn emps_model(o: &EmpsOptions) -> Result<GreySpec> {
                 ("offset", "1".to_string(), -off / m),
             ]
         };
+    let mut specs = specs;
+    if o.position_force && !o.asymmetric {
+        specs.push(("position_force", "q".to_string(), 0.0));
+    }
     let free = (0..specs.len()).collect();
     let model = TermModel::from_specs(
         linear,
@@ -340,6 +348,7 @@ pub fn emps_asymmetric_from(symmetric: &TermModel, eps: f64) -> Result<GreySpec>
         eps,
         asymmetric: true,
         start: Some([c[0], c[1], c[2], c[3]]),
+        position_force: false,
     })
 }
 

@@ -4,7 +4,7 @@
 //! pumpq lag
 //! holdout (calibrate on the first 80 %, score the last 20 %) sub hz
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
-//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full; `GREY_SB` keys q dd vv
+//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos holdout; `GREY_SB` keys q dd vv
 //! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
 //! `GREY_DUMP=/tmp/prefix` writes the training and first test run as CSV. E.g.
 //! `GREY_TANKS="pump0=1 lin=1 c=1" cargo test --release -p xtask explore_tanks --
@@ -119,9 +119,11 @@ fn explore_emps() {
             eps: 3e-4,
             asymmetric: false,
             start: None,
+            position_force: false,
         };
         let mut substeps = 1;
         let mut full = false;
+        let mut holdout = false;
         for (k, v) in kv(item) {
             match k.as_str() {
                 "eps" => o.eps = v,
@@ -132,6 +134,8 @@ fn explore_emps() {
                 "off" => o.start.get_or_insert([0.0; 4])[3] = v,
                 "sub" => substeps = v as usize,
                 "full" => full = v != 0.0,
+                "pos" => o.position_force = v != 0.0,
+                "holdout" => holdout = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
@@ -140,7 +144,11 @@ fn explore_emps() {
         if full {
             spec.horizons = vec![1.0];
         }
-        report(Benchmark::Emps, item.trim(), &spec);
+        if holdout {
+            held_out(Benchmark::Emps, item.trim(), &spec);
+        } else {
+            report(Benchmark::Emps, item.trim(), &spec);
+        }
     }
 }
 
@@ -223,18 +231,19 @@ fn explore_tanks() {
             spec.horizons = vec![0.1, 0.25, 0.5, 1.0];
         }
         if holdout {
-            held_out(item.trim(), &spec);
+            held_out(Benchmark::CascadedTanks, item.trim(), &spec);
         } else {
             report(Benchmark::CascadedTanks, item.trim(), &spec);
         }
     }
 }
 
-/// Calibrate on the first 80 % of the Cascaded Tanks training record and score the
-/// free run on the last 20 % (state fitted to its first 50 samples, as the test
-/// protocol does).
-fn held_out(label: &str, spec: &GreySpec) {
-    let d = data(Benchmark::CascadedTanks);
+/// Calibrate on the first 80 % of a benchmark's training record and score the free run on
+/// the last 20 % (state fitted to its first window samples, as the test protocol does).
+fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
+    let d = data(bench);
+    let w = bench.init_window();
+    let (scale, unit) = bench.reporting_unit();
     let est = &d.estimation.experiments()[0];
     let n = est.len();
     let cut = n * 4 / 5;
@@ -249,16 +258,16 @@ fn held_out(label: &str, spec: &GreySpec) {
         .with_intersample(est.intersample())
     };
     let (fit_part, held) = (part(0, cut), part(cut, n));
-    match fit_grey(spec, &fit_part, &[("held".into(), held.clone())], 50) {
+    match fit_grey(spec, &fit_part, &[("held".into(), held.clone())], w) {
         Ok(f) => {
             let y: Vec<f64> = held.outputs().row(0).iter().copied().collect();
             let r = match &f.tests[0].sim {
-                Ok(s) => rmse_after(&y, s, 50),
+                Ok(s) => scale * rmse_after(&y, s, w),
                 Err(_) => f64::NAN,
             };
             println!(
-                "{label}: first 80 % {:.4} V | held-out last 20 % {r:.4} V",
-                f.train_rmse
+                "{label}: first 80 % {:.4} {unit} | held-out last 20 % {r:.4} {unit}",
+                scale * f.train_rmse
             );
         }
         Err(e) => println!("{label}: failed {e:#}"),

@@ -228,7 +228,13 @@ pub(super) fn grey_rows(
     if !beyond.is_empty() {
         let names: Vec<&str> = extra.iter().map(|t| t.name.as_str()).collect();
         table.note(format!(
-            "Beyond the training amplitude: free-run RMSE of every grey-box candidate on {}              (a record of the benchmark's distribution outside the loader's split: a Schroeder              multisine whose output reaches 0.265 V, against 0.216 V in the training record              and 0.300 V in test_arrow_full; state from its first {window} samples, RMSE              after them): {}. The structure is chosen by training error; a rule fixed before              this record was first run (docs/decisions/silverbox-schroeder-rule.md) would              replace it only if another candidate scored at least 2 % lower here.",
+            "Beyond the training amplitude: free-run RMSE of every grey-box candidate on {} \
+             (a record of the benchmark's distribution outside the loader's split: a \
+             Schroeder multisine whose output reaches 0.265 V, against 0.216 V in the training \
+             record and 0.300 V in test_arrow_full; state from its first {window} samples, \
+             RMSE after them): {}. The structure is chosen by training error; a rule fixed \
+             before this record was first run (docs/decisions/silverbox-schroeder-rule.md) \
+             would replace it only if another candidate scored at least 2 % lower here.",
             names.join(", "),
             beyond.join("; ")
         ));
@@ -287,7 +293,7 @@ pub(super) fn push_dynonet(table: &mut Table, label: &str, fit: &grey::GreyFit, 
             label,
             DYNONET_RECORD,
             "dynoNet's published EMPS script: estimation record (DATA_EMPS), free run over \
-             every sample from the calibrated initial state",
+             every sample from the record's measured start (position y[0], first-difference velocity)",
         ],
         &[value],
     );
