@@ -395,7 +395,11 @@ mod tests {
         assert_eq!(e.len(), 5);
         assert!((e.dt() - 16_384.0 / 1e7).abs() < 1e-15);
         assert_eq!(e.output(3), &[6.0]);
-        assert!(load_extra(Benchmark::CascadedTanks, &root).unwrap().is_empty());
+        assert!(
+            load_extra(Benchmark::CascadedTanks, &root)
+                .unwrap()
+                .is_empty()
+        );
         std::fs::remove_dir_all(&root).unwrap();
     }
 

@@ -277,8 +277,7 @@ fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
 /// The Schroeder multisine record of the Silverbox distribution (outside the loader's
 /// split; docs/decisions/silverbox-schroeder-rule.md).
 fn schroeder() -> Experiment {
-    let text =
-        std::fs::read_to_string("/work/shared/data/silverbox/schroeder80mV.csv").unwrap();
+    let text = std::fs::read_to_string("/work/shared/data/silverbox/schroeder80mV.csv").unwrap();
     let (mut u, mut y) = (Vec::new(), Vec::new());
     for line in text.lines().skip(1) {
         let f: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
@@ -307,16 +306,55 @@ fn explore_silverbox_schroeder() {
     let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
     let stage = Feedthrough(SILVERBOX_STAGE_TAU);
     let all: Vec<(&str, Vec<SilverboxExtra>)> = vec![
-        ("C0", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, stage]),
+        (
+            "C0",
+            vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, stage],
+        ),
         ("C1", vec![QuadraticSpring, DisplacementDamping, stage]),
         ("C2", vec![QuadraticSpring, QuadraticDrag, stage]),
         ("C3", vec![DisplacementDamping, QuadraticDrag, stage]),
-        ("C4", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, QuinticSpring, stage]),
+        (
+            "C4",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                QuinticSpring,
+                stage,
+            ],
+        ),
         // Rule 2's proposals (from the first half's residuals: at |y| > 0.15 V the error is
         // mostly along the simulated velocity, a phase error growing with the amplitude).
-        ("P1", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, Monomial("v^3"), stage]),
-        ("P2", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, Monomial("abs(y)*v"), stage]),
-        ("P3", vec![QuadraticSpring, DisplacementDamping, QuadraticDrag, Monomial("u^3"), stage]),
+        (
+            "P1",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                Monomial("v^3"),
+                stage,
+            ],
+        ),
+        (
+            "P2",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                Monomial("abs(y)*v"),
+                stage,
+            ],
+        ),
+        (
+            "P3",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                Monomial("u^3"),
+                stage,
+            ],
+        ),
     ];
     // Rule 2 judges on the second half: samples 65 486.. (the first 50 fit the state).
     let sch = if std::env::var("SB_HALF").is_ok() {

@@ -165,7 +165,10 @@ pub(super) fn grey_rows(
         match grey::fit_grey(&spec, est, &with_extra, window) {
             Ok(mut fit) => {
                 tried.push(format!("{name}: {:.4} {unit}", scale * fit.train_rmse));
-                for (t, (_, e)) in fit.tests[tests.len()..].iter().zip(&with_extra[tests.len()..]) {
+                for (t, (_, e)) in fit.tests[tests.len()..]
+                    .iter()
+                    .zip(&with_extra[tests.len()..])
+                {
                     let y = row(e.outputs(), 0);
                     beyond.push(match &t.sim {
                         Ok(v) => format!(

@@ -11,8 +11,10 @@ pub(super) const DYNONET_NOTE: &str = "dynoNet's 2.64 mm (Forgione & Piga; paper
      loads DATA_EMPS.mat, the training record, and reports the RMSE over every sample of a \
      free run from the model's zero initial conditions. The rows marked \"estimation \
      (dynoNet's protocol)\" score our models the same way (the estimation record, every \
-     sample, free run from the record's measured start, the grey box's as docs/decisions/emps-start-and-position-force.md says; the hybrid's from MME's x̂(t0)); on the official test record the \
-     best published number is continuous-time SUBNET's 4.61 mm";
+     sample, free run from the record's measured start, the grey box's as \
+     docs/decisions/emps-start-and-position-force.md says; the hybrid's from MME's x̂(t0)); \
+     on the official test record the best published number is continuous-time SUBNET's \
+     4.61 mm";
 
 /// Issue 16's target 4 for each test record that has one: the best published free-run
 /// RMSE, its source, and the best black box, in the published unit.
@@ -71,9 +73,9 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              tanks-pump-rule.md: training free-run RMSE at least 2 % lower and a lower score \
              on the held-out last fifth of the training record; 0.1890 → 0.1821 V and \
              0.2421 → 0.2348 V; a pump flow quadratic in the voltage failed both). It lowered \
-             the grey box's test RMSE from 0.2441 to 0.233 V, and the hybrid built on it (the \
-             rule's step 3) scores 0.192 V against 0.1800 V on the grey box without the lag; \
-             the hybrid's guard had seen it coming on training data (held-out 0.1724 V for \
+             the grey box's test RMSE from 0.2441 to 0.2326 V, and the hybrid built on it (the \
+             rule's step 3) scores 0.1931 V against 0.1800 V on the grey box without the lag; \
+             the hybrid's guard had seen it coming on training data (held-out 0.1736 V for \
              its kept network against 0.1600 V), but choosing the hybrid's base by that guard \
              was not in the rule, so the table reports the rule's outcome. What follows was \
              measured on the grey box without the lag. Its test error is spread over the whole record (RMSE 0.12–0.37 V in \
@@ -143,8 +145,13 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
         Benchmark::Emps => {
             "the published 2.64 mm was not measured on the test record: dynoNet's script scores \
              the estimation record (first note), and under that protocol the rows marked \
-             \"estimation (dynoNet's protocol)\" compare with it. On the official test record \
-             the training free run is at 2.43 mm but the test error of the grey box (5.97 mm) \
+             \"estimation (dynoNet's protocol)\" compare with it. Under that protocol the grey box \
+             scores 5.41 mm from the record's measured start; from its calibrated initial \
+             state, two numbers fitted with the coefficients (q'(0) = −23 mm/s where the \
+             record starts at +6.9 mm/s), it scored 2.43 mm, which this table reported until \
+             docs/decisions/emps-start-and-position-force.md; the hybrid's 2.45 mm starts \
+             from MME's x̂(t0) = (0.072 mm, 4.4 mm/s), estimated from the record and near its \
+             measured start (full run on fba9f3e). On the official test record the test error of the grey box (5.97 mm) \
              is almost all slow drift: its 1-s moving average carries 5.76 mm RMS and the rest \
              0.45 mm; it does not depend on speed (5.8–6.2 mm RMS at every |v| band from rest \
              to 0.2 m/s), moves in steps during the strokes and stays between them (segment \
