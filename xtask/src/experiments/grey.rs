@@ -628,14 +628,7 @@ fn oscillator_x0(e: &Experiment) -> Vec<f64> {
     vec![y[(0, 0)], v]
 }
 
-/// Silverbox (Wigren & Schoukens 2013, eqs. 13–14): `y'' = b·u + β − k·y − c·y' − k3·y³`
-/// (`β`: the input's DC offset through the gain), inputs linear between samples; started
-/// from the linear oscillator `(k, c, b)` and no cubic term.
-pub fn silverbox_spec(k: f64, c: f64, b: f64) -> Result<GreySpec> {
-    silverbox_model(k, c, b, &[])
-}
-
-/// Terms a Silverbox grey box may add to [`silverbox_spec`]'s, each a named physical
+/// Terms a Silverbox grey box may add to [`silverbox_model`]'s base, each a named physical
 /// effect of the electronic Duffing oscillator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SilverboxExtra {
@@ -676,7 +669,10 @@ const SILVERBOX_DT: f64 = 16_384.0 / 1e7;
 /// input, and the more sub-steps it costs.
 pub const SILVERBOX_STAGE_TAU: f64 = 1e-4;
 
-/// [`silverbox_spec`] with extra terms (started at zero, calibrated with the others).
+/// Silverbox (Wigren & Schoukens 2013, eqs. 13–14): `y'' = b·u + β − k·y − c·y' − k3·y³`
+/// (`β`: the input's DC offset through the gain), inputs linear between samples; started
+/// from the linear oscillator `(k, c, b)` and no cubic term, with extra terms (started at
+/// zero, calibrated with the others).
 pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Result<GreySpec> {
     let lag = extra.iter().find_map(|e| match e {
         SilverboxExtra::Feedthrough(tau) => Some(*tau),

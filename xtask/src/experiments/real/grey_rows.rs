@@ -85,15 +85,6 @@ pub(super) fn grey_candidates(
                         ],
                     )?,
                 ));
-                v.push(("cubic spring".into(), grey::silverbox_spec(k, c, b)?));
-                v.push((
-                    "cubic + quadratic spring".into(),
-                    grey::silverbox_model(k, c, b, &[QuadraticSpring])?,
-                ));
-                v.push((
-                    "cubic + quadratic spring, y²·y' damping".into(),
-                    grey::silverbox_model(k, c, b, &[QuadraticSpring, DisplacementDamping])?,
-                ));
             }
             (
                 "physics-first grey box (polynomial spring and damping, input stage, input offset)"
