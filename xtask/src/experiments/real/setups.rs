@@ -174,7 +174,7 @@ pub(super) fn silverbox(mode: Mode, b: &mmenn::benchmarks::BenchmarkData) -> Res
              without extrapolation: GP-NARX 0.301 / 0.259, LSTM 1.50 / 0.96, linear 6.96 / 6.58."
                 .into(),
             "Grey-box structures without the input stage were candidates of the full run until \
-             e2ec66a and are no longer run (about 40 s of its 10 minutes): cubic spring, + \
+             e2ec66a and are no longer run (about 18 s of one core): cubic spring, + \
              quadratic spring, + y²·y' damping scored 0.9068, 0.8892 and 0.8798 mV on the \
              training record and 1.1173, 1.0984 and 1.0929 mV on the Schroeder record (full run \
              on e2ec66a), against 0.2311 and 0.3311 mV for the reported structure."
