@@ -81,26 +81,36 @@ fn report(b: Benchmark, label: &str, spec: &GreySpec) {
         // Every test record (input, measured, simulated), one file each.
         for (t, (name, e)) in fit.tests.iter().zip(&tests) {
             let sim = t.sim.clone().unwrap_or_default();
-            let mut text = String::from("u,y,sim\n");
-            for k in 0..e.len() {
-                text += &format!(
-                    "{},{},{}\n",
-                    e.inputs()[(0, k)],
-                    e.outputs()[(0, k)],
-                    sim.get(k).copied().unwrap_or(f64::NAN)
-                );
-            }
             let file = format!("{path}-{}-{name}.csv", label.replace(' ', "_"));
-            std::fs::write(file, text).unwrap();
+            dump(&file, e, &sim);
         }
     }
+    println!("    {} x0 {:?}", terms(&fit), fit.x0);
+}
+
+/// A record's input, measured output and simulated output as CSV (NaN past the run's end).
+fn dump(file: &str, e: &Experiment, sim: &[f64]) {
+    let mut text = String::from("u,y,sim\n");
+    for k in 0..e.len() {
+        text += &format!(
+            "{},{},{}\n",
+            e.inputs()[(0, k)],
+            e.outputs()[(0, k)],
+            sim.get(k).copied().unwrap_or(f64::NAN)
+        );
+    }
+    std::fs::write(file, text).unwrap();
+}
+
+/// The calibrated coefficients, one `effect ±c` per term.
+fn terms(fit: &GreyFit) -> String {
     let terms: Vec<String> = fit
         .model
         .terms()
         .iter()
         .map(|t| format!("{} {:+.4e}", t.effect, t.coefficient))
         .collect();
-    println!("    {} x0 {:?}", terms.join(", "), fit.x0);
+    terms.join(", ")
 }
 
 fn kv(item: &str) -> Vec<(String, f64)> {
@@ -277,21 +287,9 @@ fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
 /// The Schroeder multisine record of the Silverbox distribution (outside the loader's
 /// split; docs/decisions/silverbox-schroeder-rule.md).
 fn schroeder() -> Experiment {
-    let text = std::fs::read_to_string("/work/shared/data/silverbox/schroeder80mV.csv").unwrap();
-    let (mut u, mut y) = (Vec::new(), Vec::new());
-    for line in text.lines().skip(1) {
-        let f: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
-        u.push(f[2]);
-        y.push(f[3]);
-    }
-    let n = u.len();
-    Experiment::new(
-        0.0,
-        SILVERBOX_DT,
-        DMatrix::from_row_slice(1, n, &u),
-        DMatrix::from_row_slice(1, n, &y),
-    )
-    .unwrap()
+    let dir = std::path::Path::new("/work/shared/data/silverbox");
+    let extra = mmenn::benchmarks::load_extra(Benchmark::Silverbox, dir).unwrap();
+    extra[0].data.experiments()[0].clone()
 }
 
 /// The candidates of docs/decisions/silverbox-schroeder-rule.md, calibrated on the
@@ -387,19 +385,9 @@ fn explore_silverbox_schroeder() {
             1e3 * fit.train_rmse,
             clock.elapsed().as_secs_f64()
         );
-        let terms: Vec<String> = fit
-            .model
-            .terms()
-            .iter()
-            .map(|t| format!("{} {:+.4e}", t.effect, t.coefficient))
-            .collect();
-        println!("    {}", terms.join(", "));
+        println!("    {}", terms(&fit));
         if let (Ok(path), Ok(sim)) = (std::env::var("SB_DUMP"), &fit.tests[0].sim) {
-            let mut text = String::from("u,y,sim\n");
-            for k in 0..sch.len() {
-                text += &format!("{},{},{}\n", sch.inputs()[(0, k)], ysch[k], sim[k]);
-            }
-            std::fs::write(format!("{path}-{label}.csv"), text).unwrap();
+            dump(&format!("{path}-{label}.csv"), &sch, sim);
         }
     }
 }
