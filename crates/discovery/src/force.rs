@@ -19,7 +19,7 @@
 //!    parameters held; the coefficients are estimated by free-run output error
 //!    (`sysid_core::estimate_parameters`, initial states estimated too), with the
 //!    Gauss–Newton σ inflated by `√(N/N_eff)` of the residuals' autocorrelation
-//!    ([`crate::stats::effective_sample_size`]): the free run's residuals are coloured.
+//!    (`stats::effective_sample_size`): the free run's residuals are coloured.
 //! 3. **Elimination**: while a coefficient's 95 % interval covers zero (or has no σ), the
 //!    least significant term is dropped and the rest recalibrated.
 //! 4. **Acceptance**: with validation records, the kept terms must lower the validation

@@ -107,7 +107,7 @@ pub struct WorkflowConfig {
     pub holdout_fraction: f64,
     /// Whether the noise variance is given (`true`) or estimated by MME (`false`).
     pub noise_given: bool,
-    /// Reference draws of the flexible stand-in ([`crate::standin`]), which a `found` or
+    /// Reference draws of the flexible stand-in (`standin`), which a `found` or
     /// `none` verdict must also pass; 0 skips it. Default 12.
     pub stand_in_draws: usize,
 }
@@ -175,7 +175,7 @@ pub struct Outcome {
     /// MME with the final model, when it ran on exactly that model.
     pub final_estimate: Option<MmeEstimate>,
     /// The flexible stand-in on MME's `d̂` with the final model and its reference (see
-    /// [`crate::standin`]): it decides between `found`/`none` and `unexplained`, and is
+    /// `standin`): it decides between `found`/`none` and `unexplained`, and is
     /// evidence of what remains on an `unexplained` verdict when MME's estimate with the
     /// final model is at hand. `None` when it did not run: an `unexplained` verdict
     /// without that estimate, switched off, or failed (`stand_in_note` says why).

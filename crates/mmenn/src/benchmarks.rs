@@ -1,7 +1,9 @@
 //! Loaders for the real measured benchmarks kept outside the repository (Cascaded Tanks,
 //! Silverbox, EMPS): each record as a [`Dataset`] with the official estimation/test split,
 //! sampling period and state-initialisation window, and the search for the data folder
-//! (explicit path, `MMENN_DATA_DIR`, or `../shared/data` beside the workspace).
+//! (explicit path, `MMENN_DATA_DIR`, or `../shared/data` beside the workspace). Records of
+//! a benchmark's distribution that are outside the official split ([`load_extra`]:
+//! Silverbox's Schroeder record) are read separately and never enter an official score.
 //!
 //! Splits and windows follow the folders' READMEs, which cite the official loader
 //! `nonlinear_benchmarks` (M. Schoukens et al.): Cascaded Tanks (Schoukens, Mattsson, Wigren

@@ -675,7 +675,7 @@ pub fn read_with_validation(
 
 /// Render columns as CSV text: header, then one row per sample; NaN becomes an empty cell.
 /// Numbers are the shortest text that reads back to the same bits, written as ryu writes
-/// them ([`push_shortest`]).
+/// them (`push_shortest`).
 pub fn format_csv(header: &[String], columns: &[&[f64]]) -> String {
     let mut out = Vec::new();
     // Writing into a Vec cannot fail.

@@ -143,7 +143,7 @@ pub struct Round {
 
 /// Two sets of terms that both bring the free-run cost to the noise level, found when
 /// the first touches an unmeasured state whose scale the measurements leave free (see
-/// [`crate::gauge`]): the search run again without the terms touching such states
+/// `gauge`): the search run again without the terms touching such states
 /// found the second. Neither is claimed (verdict `unexplained`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Ambiguity {

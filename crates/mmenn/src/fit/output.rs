@@ -16,7 +16,7 @@ use crate::model::{FreeRunReport, Judgement};
 use crate::model_file::ModelSpec;
 use crate::plot::{Figure, Series};
 
-/// Write what [`compute_fit`] computed into `out`: `model.json`, `sweep.csv`,
+/// Write what [`compute_fit`](super::compute_fit) computed into `out`: `model.json`, `sweep.csv`,
 /// `summary.json`, `report.md` and the figures (atomically, each file).
 pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
     ensure_dir(out)?;

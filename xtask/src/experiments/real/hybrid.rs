@@ -1,5 +1,5 @@
 //! MME/NN on top of the calibrated grey box (physics first, the network for what
-//! remains): the grey box of [`super::grey_candidates`] with the lowest training free-run
+//! remains): the grey box of [`super::grey_rows::grey_candidates`] with the lowest training free-run
 //! error (the one the grey-box row reports, calibrated once) becomes the assumed model (its named terms included) of `mmenn fit`; MME on the
 //! whole official training record at full rate gives `x̂`, `d̂` on the corrected equation;
 //! a small network learns `d̂` from `(x̂, u)`, is picked by its free-run error on the
