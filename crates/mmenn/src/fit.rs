@@ -13,6 +13,7 @@
 //! the trajectory training hurt.
 
 use std::collections::BTreeMap;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
@@ -33,13 +34,14 @@ pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
 pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkSelection, Training};
-pub use guard::{CandidateScore, GuardCandidate, GuardReport};
+pub use guard::{CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
 pub use output::write_fit;
 use trajectory::train_network_on_trajectories;
 pub use trajectory::{TrajectoryChoice, TrajectorySummary};
 
 mod choices;
 mod d_figures;
+mod folds;
 mod guard;
 mod output;
 mod trajectory;
@@ -78,17 +80,22 @@ pub struct FitOptions {
     /// One network or the average of the equally good ones. Default
     /// [`NetworkEnsemble::Single`].
     pub ensemble: NetworkEnsemble,
+    /// Where the guard judges physics alone, the network and the refined network when no
+    /// validation data is given. Default [`GuardHeldOut::LastFifth`].
+    pub guard: GuardHeldOut,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
 /// and its sum of squared output errors (observed samples of every channel, first
-/// experiment; inputs between samples as its `intersample` says).
+/// experiment, samples in `skip` not scored; inputs between samples as its
+/// `intersample` says).
 fn select_by_free_run(
     spec: &ModelSpec,
     networks: &[Mlp],
     data: &Dataset,
     x0: &[f64],
     substeps: usize,
+    skip: Option<&Range<usize>>,
 ) -> Result<(usize, f64)> {
     let exp = &data.experiments()[0];
     let c = spec.linear.c();
@@ -102,7 +109,7 @@ fn select_by_free_run(
         };
         let y = c * xs;
         let mut sse = 0.0;
-        for k in 0..exp.len() {
+        for k in (0..exp.len()).filter(|k| skip.is_none_or(|r| !r.contains(k))) {
             for (j, m) in exp.output(k).iter().enumerate() {
                 if !m.is_nan() {
                     sse += (m - y[(j, k)]).powi(2);
@@ -140,6 +147,7 @@ impl Default for FitOptions {
             trajectory: nn::TrajectoryConfig::default(),
             training: Training::Trainlm,
             ensemble: NetworkEnsemble::Single,
+            guard: GuardHeldOut::LastFifth,
         }
     }
 }
@@ -150,16 +158,27 @@ pub fn training_pairs(
     data: &Dataset,
     trim_fraction: f64,
 ) -> (DMatrix<f64>, DMatrix<f64>) {
+    training_pairs_without(est, data, trim_fraction, None)
+}
+
+/// [`training_pairs`] without the samples `skip` of the first record.
+fn training_pairs_without(
+    est: &MmeEstimate,
+    data: &Dataset,
+    trim_fraction: f64,
+    skip: Option<&Range<usize>>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
     let n = est.state_names.len();
     let m = data.input_channels().len();
     let q = est.correction_names.len();
     let mut cols_x = Vec::new();
     let mut cols_d = Vec::new();
-    for (e, exp) in est.experiments.iter().zip(data.experiments()) {
+    for (i, (e, exp)) in est.experiments.iter().zip(data.experiments()).enumerate() {
         let d = e.corrections_at_samples();
         let len = e.len();
         let cut = ((len as f64) * trim_fraction).floor() as usize;
-        for k in cut..len.saturating_sub(cut) {
+        let skipped = |k: &usize| i == 0 && skip.is_some_and(|r| r.contains(k));
+        for k in (cut..len.saturating_sub(cut)).filter(|k| !skipped(k)) {
             cols_x.extend(e.states.column(k).iter().copied());
             cols_x.extend(exp.input(k).iter().copied());
             cols_d.extend(d.column(k).iter().copied());
@@ -401,7 +420,7 @@ pub fn compute_fit(
 
     // The sweep's test set: MME on the validation data at the training W and noise, or the
     // last 20 % of the training pairs when there is no validation data.
-    let (x_fit, d_fit, x_test, d_test, test_source, val_est) = match &val {
+    let (fit_pairs, test_pairs, test_source, val_est) = match &val {
         Some(v) => {
             let mut vconf = config.clone();
             vconf.w = mme_core::WeightSpec::Matrix(est.w.clone());
@@ -409,107 +428,46 @@ pub fn compute_fit(
             let vres = estimate_spec(&spec, v, &vconf)?;
             let (xv, dv) = training_pairs(&vres.estimate, v, opts.trim_fraction);
             (
-                x_train.clone(),
-                d_train.clone(),
-                xv,
-                dv,
+                (x_train.clone(), d_train.clone()),
+                (xv, dv),
                 "MME on the validation data at the training W and noise".to_string(),
                 Some(vres.estimate),
             )
         }
         None => {
-            let k = x_train.ncols();
-            let cut = k - k / 5;
+            let (fit, test) = split_last_fifth(&x_train, &d_train);
             (
-                x_train.columns(0, cut).into_owned(),
-                d_train.columns(0, cut).into_owned(),
-                x_train.columns(cut, k - cut).into_owned(),
-                d_train.columns(cut, k - cut).into_owned(),
+                fit,
+                test,
                 "last 20 % of the training pairs (no validation data given)".to_string(),
                 None,
             )
         }
     };
-    let sweep_config = SweepConfig {
-        hidden_sizes: match opts.hidden {
-            HiddenChoice::Auto => (1..=opts.max_hidden.max(1)).collect(),
-            HiddenChoice::Fixed(h) => vec![h],
-        },
-        inits: opts.inits,
-        seed: opts.seed,
-        ..SweepConfig::default()
-    };
-    let sweep_config = match opts.training {
-        Training::Trainlm => sweep_config,
-        Training::Accelerated => SweepConfig {
-            lm: nn::LmConfig {
-                damping: nn::Damping::TrainlmThenGainRatio,
-                acceleration: nn::Acceleration::Geodesic,
-                ..sweep_config.lm
-            },
-            ..sweep_config
-        },
-    };
-    const SWEEP: &str = "network sizing sweep";
-    let on_run = |p: nn::SweepProgress| {
-        progress.report(
-            &crate::progress::Progress::new(SWEEP, p.done, Some(p.total)).with_note(format!(
-                "{} hidden, init {}: test MSE {:.3e}",
-                p.hidden, p.init, p.test_mse
-            )),
-        );
-    };
-    progress.report(&crate::progress::Progress::new(
-        SWEEP,
-        0,
-        Some(sweep_config.hidden_sizes.len() * sweep_config.inits),
-    ));
-    let sweep = nn::sizing_sweep(
-        &x_fit,
-        &d_fit,
-        &x_test,
-        &d_test,
-        &sweep_config,
-        Some(&on_run),
-    );
-    progress.finish(SWEEP);
-    let sweep = sweep?;
     let x0: Vec<f64> = est.experiments[0]
         .states
         .column(0)
         .iter()
         .copied()
         .collect();
-    let (chosen, free_run_sse) = match opts.selection {
-        NetworkSelection::CorrectionMse => (sweep.chosen, None),
-        NetworkSelection::FreeRun => {
-            let (i, sse) = select_by_free_run(&spec, &sweep.networks, data, &x0, opts.substeps)?;
-            (i, Some(sse))
-        }
-    };
-    let (mut network, ensemble_rows) = match opts.ensemble {
-        NetworkEnsemble::Single => (sweep.networks[chosen].clone(), Vec::new()),
-        NetworkEnsemble::Band => {
-            let rows = nn::band_members(&sweep.rows, &sweep_config.selection);
-            let members: Vec<Mlp> = rows.iter().map(|&i| sweep.networks[i].clone()).collect();
-            (nn::ensemble::average(&members)?, rows)
-        }
-    };
-    let hidden_units = network.hidden().first().copied().unwrap_or(0);
-    let before_refinement = network.clone();
     let val_pair = val_est.as_ref().zip(val.as_ref());
-    let mut refinement = match opts.train_on_trajectories {
-        TrajectoryChoice::None => None,
-        TrajectoryChoice::Trajectory => Some(train_network_on_trajectories(
-            &spec,
-            &mut network,
-            (est, data),
-            val_pair,
-            &x0,
-            opts,
-            progress,
-        )?),
+    let whole = TrainingSet {
+        fit: fit_pairs,
+        test: test_pairs,
+        data,
+        skip: None,
+        shooting: trajectory::shooting(data, est),
     };
+    let Trained {
+        sweep,
+        chosen,
+        free_run_sse,
+        ensemble_rows,
+        before: before_refinement,
+        network,
+        mut refinement,
+    } = train_networks(&spec, &whole, val_pair, &x0, opts, progress)?;
+    let hidden_units = network.hidden().first().copied().unwrap_or(0);
 
     let exp0 = &data.experiments()[0];
     // The guard: physics alone, the network before and after refinement, judged free-run
@@ -524,8 +482,15 @@ pub fn compute_fit(
     if refinement.is_some() {
         candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
-    let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
-    let (guard_report, kept) = guard::choose(&spec, candidates, &held, exp0.dt(), opts.substeps)?;
+    let (guard_report, kept) = match (opts.guard, &val) {
+        (GuardHeldOut::Folds(k), None) => {
+            folds::choose_by_folds(&spec, est, data, &x0, k, candidates, opts, progress)?
+        }
+        _ => {
+            let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
+            guard::choose(&spec, candidates, &held, exp0.dt(), opts.substeps)?
+        }
+    };
     let network = kept;
     let (file, loaded) = hybrid_loaded(&spec, &network, &x0, exp0.dt(), opts.substeps)?;
     let train_j = judge_outputs(&loaded, data, opts.x0_window)?;
@@ -582,6 +547,152 @@ pub fn compute_fit(
         d_train,
         d_network,
         x_train,
+    })
+}
+
+/// Training pairs: inputs `[x̂; u]` and targets `d̂`, one column each.
+type Pairs = (DMatrix<f64>, DMatrix<f64>);
+
+/// The pairs split into the first 80 % (fit) and the last 20 % (test).
+fn split_last_fifth(x: &DMatrix<f64>, d: &DMatrix<f64>) -> (Pairs, Pairs) {
+    let k = x.ncols();
+    let cut = k - k / 5;
+    (
+        (
+            x.columns(0, cut).into_owned(),
+            d.columns(0, cut).into_owned(),
+        ),
+        (
+            x.columns(cut, k - cut).into_owned(),
+            d.columns(cut, k - cut).into_owned(),
+        ),
+    )
+}
+
+/// What one network training reads: the sweep's fit and test pairs, the record the
+/// free-run selection simulates (first experiment; samples in `skip` not scored), and the
+/// shooting records of trajectory training.
+struct TrainingSet<'a> {
+    fit: Pairs,
+    test: Pairs,
+    data: &'a Dataset,
+    skip: Option<Range<usize>>,
+    shooting: Vec<nn::ShootingRecord<'a>>,
+}
+
+/// What one network training gives: the sweep, the row chosen, the network before
+/// trajectory training and the network after it (the same network without it).
+struct Trained {
+    sweep: nn::SweepResult,
+    chosen: usize,
+    free_run_sse: Option<f64>,
+    ensemble_rows: Vec<usize>,
+    before: Mlp,
+    network: Mlp,
+    refinement: Option<TrajectorySummary>,
+}
+
+fn sweep_config(opts: &FitOptions) -> SweepConfig {
+    let config = SweepConfig {
+        hidden_sizes: match opts.hidden {
+            HiddenChoice::Auto => (1..=opts.max_hidden.max(1)).collect(),
+            HiddenChoice::Fixed(h) => vec![h],
+        },
+        inits: opts.inits,
+        seed: opts.seed,
+        ..SweepConfig::default()
+    };
+    match opts.training {
+        Training::Trainlm => config,
+        Training::Accelerated => SweepConfig {
+            lm: nn::LmConfig {
+                damping: nn::Damping::TrainlmThenGainRatio,
+                acceleration: nn::Acceleration::Geodesic,
+                ..config.lm
+            },
+            ..config
+        },
+    }
+}
+
+/// The network sizing sweep on `set`'s pairs, the selection, the ensemble and the
+/// trajectory training, as `opts` say.
+fn train_networks(
+    spec: &ModelSpec,
+    set: &TrainingSet<'_>,
+    val_pair: Option<(&MmeEstimate, &Dataset)>,
+    x0: &[f64],
+    opts: &FitOptions,
+    progress: &dyn crate::progress::ProgressSink,
+) -> Result<Trained> {
+    let sweep_config = sweep_config(opts);
+    const SWEEP: &str = "network sizing sweep";
+    let on_run = |p: nn::SweepProgress| {
+        progress.report(
+            &crate::progress::Progress::new(SWEEP, p.done, Some(p.total)).with_note(format!(
+                "{} hidden, init {}: test MSE {:.3e}",
+                p.hidden, p.init, p.test_mse
+            )),
+        );
+    };
+    progress.report(&crate::progress::Progress::new(
+        SWEEP,
+        0,
+        Some(sweep_config.hidden_sizes.len() * sweep_config.inits),
+    ));
+    let sweep = nn::sizing_sweep(
+        &set.fit.0,
+        &set.fit.1,
+        &set.test.0,
+        &set.test.1,
+        &sweep_config,
+        Some(&on_run),
+    );
+    progress.finish(SWEEP);
+    let sweep = sweep?;
+    let (chosen, free_run_sse) = match opts.selection {
+        NetworkSelection::CorrectionMse => (sweep.chosen, None),
+        NetworkSelection::FreeRun => {
+            let (i, sse) = select_by_free_run(
+                spec,
+                &sweep.networks,
+                set.data,
+                x0,
+                opts.substeps,
+                set.skip.as_ref(),
+            )?;
+            (i, Some(sse))
+        }
+    };
+    let (mut network, ensemble_rows) = match opts.ensemble {
+        NetworkEnsemble::Single => (sweep.networks[chosen].clone(), Vec::new()),
+        NetworkEnsemble::Band => {
+            let rows = nn::band_members(&sweep.rows, &sweep_config.selection);
+            let members: Vec<Mlp> = rows.iter().map(|&i| sweep.networks[i].clone()).collect();
+            (nn::ensemble::average(&members)?, rows)
+        }
+    };
+    let before = network.clone();
+    let refinement = match opts.train_on_trajectories {
+        TrajectoryChoice::None => None,
+        TrajectoryChoice::Trajectory => Some(train_network_on_trajectories(
+            spec,
+            &mut network,
+            &set.shooting,
+            val_pair,
+            x0,
+            opts,
+            progress,
+        )?),
+    };
+    Ok(Trained {
+        sweep,
+        chosen,
+        free_run_sse,
+        ensemble_rows,
+        before,
+        network,
+        refinement,
     })
 }
 

@@ -2,8 +2,9 @@
 //! it starts from. Three candidates — the assumed model alone (a network whose output is
 //! zero), the network as trained on `d̂`, and the network after trajectory training —
 //! are run free on held-out data (the validation record when given, else the last fifth
-//! of the first training record; never a test record) and the one with the smallest
-//! normalised free-run error is kept, ties going to the simpler candidate.
+//! of the first training record, or K contiguous stretches of it with the networks
+//! retrained per stretch: [`GuardHeldOut`]; never a test record) and the one with the
+//! smallest normalised free-run error is kept, ties going to the simpler candidate.
 
 use nn::{Mlp, Scaler};
 use serde::Serialize;
@@ -12,6 +13,50 @@ use sysid_core::{Dataset, Judgement, MmeEstimate};
 use crate::error::{MmennError, Result};
 use crate::fit::{FitOptions, hybrid_loaded, judge_outputs};
 use crate::model_file::ModelSpec;
+
+/// Where the guard judges its candidates when no validation data is given.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GuardHeldOut {
+    /// The last fifth of the first training record (the network sweep holds its `d̂`
+    /// pairs out; trajectory training does not).
+    #[default]
+    LastFifth,
+    /// K contiguous stretches of the first training record (`--guard 5-fold`): for each,
+    /// the sweep, selection and trajectory training run again with the stretch left out
+    /// of the `d̂` pairs and of the shooting windows, and every candidate is run free over
+    /// it from a state fitted to its first samples. A candidate's score pools its K
+    /// squared errors; the kept kind is then trained on the whole record, as with
+    /// [`GuardHeldOut::LastFifth`]. Costs K more network trainings.
+    Folds(usize),
+}
+
+impl std::str::FromStr for GuardHeldOut {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        let bad = || format!("'{s}': expected last-fifth or K-fold with K ≥ 2 (e.g. 5-fold)");
+        if s == "last-fifth" {
+            return Ok(Self::LastFifth);
+        }
+        let k: usize = s
+            .strip_suffix("-fold")
+            .and_then(|k| k.parse().ok())
+            .ok_or_else(bad)?;
+        if k < 2 {
+            return Err(bad());
+        }
+        Ok(Self::Folds(k))
+    }
+}
+
+impl std::fmt::Display for GuardHeldOut {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::LastFifth => f.write_str("last-fifth"),
+            Self::Folds(k) => write!(f, "{k}-fold"),
+        }
+    }
+}
 
 /// A model `fit` may keep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -67,6 +112,20 @@ pub struct GuardReport {
     /// Whether trajectory training made the held-out free run worse than the network
     /// before it (`None` when there was no trajectory training or either run failed).
     pub refinement_hurt: Option<bool>,
+    /// Each stretch's scores, when the guard judged K stretches
+    /// ([`GuardHeldOut::Folds`]; empty otherwise).
+    pub folds: Vec<FoldScores>,
+}
+
+/// The candidates' free runs over one held-out stretch of the K-fold guard, with networks
+/// trained without it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FoldScores {
+    /// First and one-past-last sample of the stretch in the first training record.
+    pub samples: (usize, usize),
+    /// Each candidate's score on the stretch, in the order of
+    /// [`GuardReport::candidates`].
+    pub candidates: Vec<CandidateScore>,
 }
 
 impl GuardReport {
@@ -106,6 +165,28 @@ impl GuardReport {
                 "\n**Trajectory training made the held-out free run worse**; the network \
                  before it (or the physics alone) was kept instead.\n",
             );
+        }
+        if !self.folds.is_empty() {
+            s.push_str("\nPer held-out stretch (networks trained without it):\n\n| samples |");
+            for c in &self.candidates {
+                s.push_str(&format!(" {} |", c.candidate.describe()));
+            }
+            s.push_str(&format!(
+                "\n|---|{}\n",
+                "---|".repeat(self.candidates.len())
+            ));
+            for f in &self.folds {
+                s.push_str(&format!("| {}..{} |", f.samples.0, f.samples.1));
+                for c in &f.candidates {
+                    let cell = match (&c.held_out_error, &c.failure) {
+                        (Some(_), _) => crate::words::named_values(&c.rmse),
+                        (None, Some(why)) => format!("failed: {why}"),
+                        (None, None) => "—".into(),
+                    };
+                    s.push_str(&format!(" {cell} |"));
+                }
+                s.push('\n');
+            }
         }
         s
     }
@@ -188,7 +269,7 @@ pub(crate) fn zero_network(like: &Mlp) -> Result<Mlp> {
     )?)
 }
 
-fn score(candidate: GuardCandidate, judged: Result<Judgement>) -> CandidateScore {
+pub(super) fn score(candidate: GuardCandidate, judged: Result<Judgement>) -> CandidateScore {
     match judged {
         Ok(j) => {
             let fits: Vec<f64> = j.channels.values().map(|m| m.fit_percent).collect();
@@ -240,6 +321,22 @@ pub(crate) fn choose(
             .and_then(|(_, loaded)| judge_outputs(&loaded, &held.data, held.window));
         scores.push(score(*c, judged));
     }
+    Ok(decide(
+        scores,
+        candidates,
+        held.description.clone(),
+        Vec::new(),
+    ))
+}
+
+/// Keep the candidate with the smallest held-out error (a later one only when strictly
+/// better; the physics alone when every one failed).
+pub(super) fn decide(
+    scores: Vec<CandidateScore>,
+    candidates: Vec<(GuardCandidate, Mlp)>,
+    held_out: String,
+    folds: Vec<FoldScores>,
+) -> (GuardReport, Mlp) {
     let mut best: Option<usize> = None;
     for (i, s) in scores.iter().enumerate() {
         if let Some(e) = s.held_out_error
@@ -287,21 +384,33 @@ pub(crate) fn choose(
     };
     let chosen = scores[index].candidate;
     let network = candidates[index].1.clone();
-    Ok((
+    (
         GuardReport {
-            held_out: held.description.clone(),
+            held_out,
             candidates: scores,
             chosen,
             reason,
             refinement_hurt,
+            folds,
         },
         network,
-    ))
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn guard_held_out_reads_and_writes_its_spellings() {
+        assert_eq!("last-fifth".parse(), Ok(GuardHeldOut::LastFifth));
+        assert_eq!("5-fold".parse(), Ok(GuardHeldOut::Folds(5)));
+        for bad in ["1-fold", "0-fold", "five-fold", "5", "", "5-folds"] {
+            assert!(bad.parse::<GuardHeldOut>().is_err(), "{bad}");
+        }
+        assert_eq!(GuardHeldOut::Folds(7).to_string(), "7-fold");
+        assert_eq!(GuardHeldOut::LastFifth.to_string(), "last-fifth");
+    }
     use nn::Architecture;
     use sysid_core::{Channel, Experiment};
 

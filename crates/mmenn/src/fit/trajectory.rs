@@ -94,7 +94,7 @@ impl TrajectorySummary {
 
 /// Shooting records: each experiment (with its `intersample`, which the windows follow)
 /// with MME's `x̂` of it.
-fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<ShootingRecord<'a>> {
+pub(super) fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<ShootingRecord<'a>> {
     data.experiments()
         .iter()
         .zip(&est.experiments)
@@ -105,14 +105,14 @@ fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<ShootingRecord<'
         .collect()
 }
 
-/// Train `network` on the training records' trajectories, windows starting from MME's
-/// `x̂`; windows of the validation records (with MME's `x̂` of them) decide when to stop,
+/// Train `network` on the training records' trajectories (`train`, from [`shooting`] or
+/// pieces of it), windows starting from MME's `x̂`; windows of the validation records (with MME's `x̂` of them) decide when to stop,
 /// when given. The validation free-run fit % of the `d̂`-trained network is recorded
 /// first, to say later whether the trajectory training helped.
 pub(super) fn train_network_on_trajectories(
     spec: &ModelSpec,
     network: &mut Mlp,
-    (est, data): (&MmeEstimate, &Dataset),
+    train: &[ShootingRecord<'_>],
     val: Option<(&MmeEstimate, &Dataset)>,
     x0: &[f64],
     opts: &FitOptions,
@@ -139,7 +139,6 @@ pub(super) fn train_network_on_trajectories(
         ..opts.trajectory
     };
     let mut model = crate::hybrid::hybrid_model(spec, network.clone(), x0, opts.substeps)?;
-    let train = shooting(data, est);
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
     const TASK: &str = "trajectory training";
     let most = config.max_iterations;
@@ -152,7 +151,7 @@ pub(super) fn train_network_on_trajectories(
             .report(&crate::progress::Progress::new(TASK, p.iteration, Some(most)).with_note(note));
     };
     progress.report(&crate::progress::Progress::new(TASK, 0, Some(most)));
-    let report = nn::train_on_trajectories(&mut model, &train, &val, &config, Some(&mut on_step));
+    let report = nn::train_on_trajectories(&mut model, train, &val, &config, Some(&mut on_step));
     progress.finish(TASK);
     let report = report?;
     network.clone_from(model.correction().network());

@@ -280,6 +280,12 @@ pub(crate) struct FitArgs {
     /// `--refine-window`).
     #[arg(long, alias = "refine-window", default_value_t = 100, value_parser = at_least_one)]
     pub(crate) trajectory_window: usize,
+    /// Where physics alone, the network and the refined network are judged when no
+    /// validation data is given: last-fifth (the last fifth of the first record) or
+    /// K-fold, e.g. 5-fold (K stretches, the networks retrained without each; K more
+    /// trainings).
+    #[arg(long, default_value = "last-fifth")]
+    pub(crate) guard: mmenn::fit::GuardHeldOut,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
     pub(crate) w: mmenn::estimate::WeightChoice,

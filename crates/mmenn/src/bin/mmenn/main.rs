@@ -382,6 +382,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         seed: args.seed,
         train_on_trajectories: args.train_on_trajectories,
         training: args.training,
+        guard: args.guard,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.trajectory_window,
             ..Default::default()
