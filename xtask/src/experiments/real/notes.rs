@@ -11,8 +11,9 @@ pub(super) const DYNONET_NOTE: &str = "dynoNet's 2.64 mm (Forgione & Piga; paper
      loads DATA_EMPS.mat, the training record, and reports the RMSE over every sample of a \
      free run from the model's zero initial conditions. The rows marked \"estimation \
      (dynoNet's protocol)\" score our models the same way (the estimation record, every \
-     sample, free run from the record's measured start, the grey box's as \
-     docs/decisions/emps-start-and-position-force.md says; the hybrid's from MME's x̂(t0)); \
+     sample, free run from the record's measured start: \
+     docs/decisions/emps-start-and-position-force.md and \
+     emps-kfold-guard-and-hybrid-start.md); \
      on the official test record the best published number is continuous-time SUBNET's \
      4.61 mm";
 
@@ -72,59 +73,46 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              4df7330, chosen by a rule written before its runs (docs/decisions/\
              tanks-pump-rule.md: training free-run RMSE at least 2 % lower and a lower score \
              on the held-out last fifth of the training record; 0.1890 → 0.1821 V and \
-             0.2421 → 0.2348 V; a pump flow quadratic in the voltage failed both). It lowered \
-             the grey box's test RMSE from 0.2441 to 0.2326 V, and the hybrid built on it (the \
-             rule's step 3) scores 0.1931 V against 0.1800 V on the grey box without the lag; \
-             the hybrid's guard had seen it coming on training data (held-out 0.1736 V for \
-             its kept network against 0.1600 V), but choosing the hybrid's base by that guard \
-             was not in the rule, so the table reports the rule's outcome. On the new grey \
-             box the thesis's 1–10 × 10 network sweep keeps a network with a held-out score of \
-             0.1821 V, not below 0.1736 V, so by its rule (docs/decisions/\
-             tanks-hybrid-sweep-rule.md) it is not taken; its test RMSE, read after, is \
-             0.1854 V. What follows was \
-             measured on the grey box without the lag. Its test error is spread over the whole record (RMSE 0.12–0.37 V in \
-             every 64-sample stretch) rather than held in its overflow episodes: the samples \
-             where the sensor reads its top (10 V) carry 1.5 % of the test squared error and \
-             clipping the simulated level at 10 V changes the test RMSE by 0.0001 V (the \
-             lower tank's overflow, which holds the level at the sensor top, is in the model); \
-             a saturating first-order sensor instead of that overflow, a smooth overflow, a \
-             linear term in the upper outflow or a sensor offset each fit the training record \
-             worse or the test record worse (explore_tanks on d52faee). The hybrid's gain is \
-             judged on 204 held-out training samples, which do not rank its variants on the \
-             test record: with 256-sample shooting windows the guard keeps the refined network \
-             (held-out 0.155 V against 0.160 V) and the test RMSE rises to 0.199 V; 4–6 \
-             initialisations give 0.1791 V on test with a slightly worse held-out score \
-             (0.1603 V), and so does the thesis's full sweep of 1–10 units × 10 \
-             initialisations (a 2-unit network, 0.1603 V held out, 0.179 V on test), so \
-             they are not taken; averaging every network inside the sizing \
-             rule's band into one (fit's ensemble = band, 9 hidden units; rule fixed before \
-             the run: adopt it if its held-out score is lower) scores 0.1664 V held out \
-             against 0.1600 V, so it is not taken (its test RMSE was 0.183 V), and picking \
-             the network by training free-run error picks the same network. The upper level is not measured, so its test \
-             state comes from the first 50 samples of the lower level alone. The hybrid's \
-             test RMSE moves with the seed of its network training more than its distance \
-             to the target (below). Both records also show an effect the model has no state \
-             for: every descent of the reading through about 5.5 V that had been above 6.9 V \
-             drops 0.34–0.63 V within one 4-s sample (training at 1432 and 3756 s, test at \
-             776, 1876, 2456, 2748, 3296 and 3776 s), while descents from 6.5 V or lower and \
-             every ascent through the same band move 0.1–0.2 V per sample, and the grey box's \
-             test error next to these drops reaches 0.76 V — a hysteresis of the level or of \
-             its sensor. A hysteretic offset of the reading (a state filling above 6.5–6.7 V \
-             and emptying below 5.0–5.2 V) fits the training record a little better with \
-             calibrated rates (0.179–0.181 V against 0.189 V; the fill converges to nearly \
-             nothing) or worse with held ones (0.193–0.205 V), and the test record no better \
-             (0.242–0.254 V against 0.244 V), and a cross-section that \
-             varies with the level (lower tank, or both: `TanksOptions::area2`, `area1`) fits \
-             the training record better (0.143–0.150 V) but not the test record (0.235 and \
-             0.282 V), and calibrated on the first 80 % of the training record it scores \
-             worse on the last 20 % than this structure (0.269 and 0.366 V against 0.242 V), \
-             so a held-out choice would not take it either (explore_tanks on 35b555b). The \
-             hybrid's network training with `mmenn fit` on this model and record (up to 3 hidden units × 3 \
-             initialisations, refinement windows of 128 samples, W held at 1.877e4) with \
-             seeds 1–7, then `mmenn predict --x0-window 50` on the test record (48923f2), \
-             gives 0.1818, 0.1788, 0.1814, 0.1787, 0.1789, 0.1786 and 0.1801 V, and the mean \
-             of the first five members' free runs 0.1796 V, so a result this close to 0.18 V \
-             meets or misses it by chance"
+             0.2421 → 0.2348 V; a pump flow quadratic in the voltage failed both); it lowered \
+             the grey box's test RMSE from 0.2441 to 0.2326 V. The hybrid keeps the physics \
+             alone, so it scores what the grey box scores: its guard runs every candidate \
+             free over five 204-sample stretches of the training record with the networks \
+             trained again without each (docs/decisions/tanks-kfold-guard-rule.md, adopted \
+             before its test number was read), and a network trained without a stretch is \
+             worse there than the physics (pooled 0.1865 V against 0.1713 V; on the last \
+             stretch 0.235 against 0.189 V). The hybrids this table reported before (0.1800 V \
+             on the grey box without the lag, 0.1931 V with it; seeds 1–7 gave 0.1786–0.1818 V) \
+             were kept by a guard on the last fifth alone whose network had been chosen by \
+             that fifth's d̂ pairs and trained on its trajectories; it scored them 0.1600 and \
+             0.1736 V there. On the grey box without the lag the 5-fold guard also keeps the \
+             physics alone (pooled 0.1793 V). So on 1024 training samples the network's gain \
+             on the test record is not one a choice made on training data can find. What \
+             follows was measured on the grey box without the lag. Its test error is spread \
+             over the whole record (RMSE 0.12–0.37 V in every 64-sample stretch) rather than \
+             held in its overflow episodes: the samples where the sensor reads its top (10 V) \
+             carry 1.5 % of the test squared error and clipping the simulated level at 10 V \
+             changes the test RMSE by 0.0001 V (the lower tank's overflow, which holds the \
+             level at the sensor top, is in the model); a saturating first-order sensor \
+             instead of that overflow, a smooth overflow, a linear term in the upper outflow \
+             or a sensor offset each fit the training record worse or the test record worse \
+             (explore_tanks on d52faee). The upper level is not measured, so its test state \
+             comes from the first 50 samples of the lower level alone. Both records also \
+             show an effect the model has no state for: every descent of the reading through \
+             about 5.5 V that had been above 6.9 V drops 0.34–0.63 V within one 4-s sample \
+             (training at 1432 and 3756 s, test at 776, 1876, 2456, 2748, 3296 and 3776 s), \
+             while descents from 6.5 V or lower and every ascent through the same band move \
+             0.1–0.2 V per sample, and the grey box's test error next to these drops reaches \
+             0.76 V — a hysteresis of the level or of its sensor. A hysteretic offset of the \
+             reading (a state filling above 6.5–6.7 V and emptying below 5.0–5.2 V) fits the \
+             training record a little better with calibrated rates (0.179–0.181 V against \
+             0.189 V; the fill converges to nearly nothing) or worse with held ones \
+             (0.193–0.205 V), and the test record no better (0.242–0.254 V against 0.244 V), \
+             and a cross-section that varies with the level (lower tank, or both: \
+             `TanksOptions::area2`, `area1`) fits the training record better (0.143–0.150 V) \
+             but not the test record (0.235 and 0.282 V), and calibrated on the first 80 % of \
+             the training record it scores worse on the last 20 % than this structure (0.269 \
+             and 0.366 V against 0.242 V), so a held-out choice would not take it either \
+             (explore_tanks on 35b555b)"
         }
         Benchmark::Silverbox => {
             "test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
@@ -153,9 +141,12 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              scores 5.41 mm from the record's measured start; from its calibrated initial \
              state, two numbers fitted with the coefficients (q'(0) = −23 mm/s where the \
              record starts at +6.9 mm/s), it scored 2.43 mm, which this table reported until \
-             docs/decisions/emps-start-and-position-force.md; the hybrid's 2.45 mm starts \
-             from MME's x̂(t0) = (0.072 mm, 4.4 mm/s), estimated from the record and near its \
-             measured start (full run on fba9f3e). On the official test record the test error of the grey box (5.97 mm) \
+             docs/decisions/emps-start-and-position-force.md; the hybrid scores 2.50 mm from \
+             the same measured start (2.45 mm from MME's x̂(t0) = (0.072 mm, 4.4 mm/s) until \
+             docs/decisions/emps-kfold-guard-and-hybrid-start.md). Its network's gain holds on \
+             training stretches it was not trained on (5-fold guard, pooled 1.48 mm against \
+             the physics' 2.84 mm) but not on the official test record (7.52 against \
+             5.97 mm), whose force pulses the input does not carry. On the official test record the test error of the grey box (5.97 mm) \
              is almost all slow drift: its 1-s moving average carries 5.76 mm RMS and the rest \
              0.45 mm; it does not depend on speed (5.8–6.2 mm RMS at every |v| band from rest \
              to 0.2 m/s), moves in steps during the strokes and stays between them (segment \
