@@ -242,3 +242,28 @@ fn k_fold_guard_keeps_a_network_that_completes_missing_damping() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn k_fold_guard_gives_the_same_numbers_on_any_thread_count() {
+    // The stretches are trained in parallel; every number must not depend on how.
+    let dir = scratch("folds-threads");
+    let truth = dir.join("truth.toml");
+    std::fs::write(&truth, OSCILLATOR.replace("-0.4]", "-0.8]")).unwrap();
+    let data = exact_data(&dir, &truth, vec![0.5, 0.0]);
+    let model = dir.join("model.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let run = |threads: usize, name: &str| {
+        let sub = dir.join(name);
+        std::fs::create_dir_all(&sub).unwrap();
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| fit_with_folds(&sub, &data, &model, 3))
+            .guard
+    };
+    let one = run(1, "one");
+    let three = run(3, "three");
+    assert_eq!(one, three);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

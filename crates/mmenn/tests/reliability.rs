@@ -557,6 +557,37 @@ fn trajectory_training_flag_and_its_old_spelling_both_parse() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `fit --guard` reads `last-fifth` and `K-fold` (K ≥ 2): such runs get as far as reading
+/// the missing model file (exit 1); anything else is a command-line error (exit 2) that
+/// names the accepted spellings.
+#[test]
+fn fit_guard_flag_reads_last_fifth_and_k_fold_only() {
+    let dir = scratch("guard-flag");
+    let base = [
+        "fit",
+        "--data",
+        "missing.csv",
+        "--model",
+        "m.toml",
+        "--out",
+        "o",
+        "--guard",
+    ];
+    for good in ["last-fifth", "5-fold", "2-fold"] {
+        let args: Vec<&str> = base.iter().copied().chain([good]).collect();
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 1, "{good}: {err}");
+        assert!(err.contains("m.toml"), "{good}: {err}");
+    }
+    for bad in ["1-fold", "fold", "5", "last"] {
+        let args: Vec<&str> = base.iter().copied().chain([bad]).collect();
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(err.contains("K-fold with K ≥ 2"), "{bad}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Issue 21: `fit` and `discover` on the same unreachable covariance constraint write
 /// their results and exit with status 3 (not 0, not the input-error status 1), naming the
 /// W search; on data with noise of the stated variance the same runs exit 0.
