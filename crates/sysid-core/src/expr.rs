@@ -330,6 +330,43 @@ pub struct Expr {
     tree: Tree,
     names: Arc<[String]>,
     program: Box<[Op]>,
+    shape: Shape,
+}
+
+/// How [`Expr::run`] evaluates the program: the shapes most model terms and their
+/// derivatives have (a constant, a variable, its square or integer power, a product of two
+/// variables) directly, the rest on a stack of the size the program needs. Each shape
+/// computes exactly what its program computes (same operations, same order).
+#[derive(Debug, Clone, Copy)]
+enum Shape {
+    Const(f64),
+    Var(usize),
+    Square(usize),
+    PowI(usize, i32),
+    Product(usize, usize),
+    /// The stack machine with [`SMALL_STACK`] slots.
+    Small,
+    /// The stack machine with [`STACK`] slots.
+    Large,
+}
+
+/// Stack slots of [`Shape::Small`]: enough for trees of up to 8 leaves.
+const SMALL_STACK: usize = 4;
+
+impl Shape {
+    fn of(program: &[Op], need: usize) -> Shape {
+        use tree::BinOp::Mul;
+        match *program {
+            [Op::Const(c)] => Shape::Const(c),
+            [Op::Var(i)] => Shape::Var(i),
+            [Op::Var(i), Op::Square] => Shape::Square(i),
+            [Op::Var(i), Op::PowI(n)] => Shape::PowI(i, n),
+            [Op::Var(i), Op::Var(j), Op::Bin(Mul)] => Shape::Product(i, j),
+            [Op::Var(i), Op::Var(j), Op::BinRev(Mul)] => Shape::Product(j, i),
+            _ if need <= SMALL_STACK => Shape::Small,
+            _ => Shape::Large,
+        }
+    }
 }
 
 impl PartialEq for Expr {
@@ -351,10 +388,12 @@ impl Expr {
     fn from_tree(tree: Tree, names: Arc<[String]>) -> Expr {
         let (program, need) = compile(&tree);
         debug_assert!(need <= STACK, "Sethi-Ullman bound exceeded");
+        let shape = Shape::of(&program, need);
         Expr {
             tree,
             names,
             program: program.into_boxed_slice(),
+            shape,
         }
     }
 
@@ -402,10 +441,27 @@ impl Expr {
         })
     }
 
-    /// The postfix program on a fixed stack, variable `i` read by `var(i)`.
+    /// The program, variable `i` read by `var(i)` (see [`Shape`]).
     #[inline(always)]
     fn run(&self, var: impl Fn(usize) -> f64) -> f64 {
-        let mut stack = [0.0_f64; STACK];
+        match self.shape {
+            Shape::Const(c) => c,
+            Shape::Var(i) => var(i),
+            Shape::Square(i) => {
+                let x = var(i);
+                x * x
+            }
+            Shape::PowI(i, n) => var(i).powi(n),
+            Shape::Product(i, j) => var(i) * var(j),
+            Shape::Small => self.exec::<SMALL_STACK>(var),
+            Shape::Large => self.exec::<STACK>(var),
+        }
+    }
+
+    /// The postfix program on a stack of `N` slots.
+    #[inline(always)]
+    fn exec<const N: usize>(&self, var: impl Fn(usize) -> f64) -> f64 {
+        let mut stack = [0.0_f64; N];
         let mut sp = 0_usize;
         for op in self.program.iter() {
             match *op {
