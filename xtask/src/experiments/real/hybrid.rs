@@ -411,7 +411,9 @@ fn rayon_threads() -> usize {
 
 /// Cascaded Tanks: the hybrid's guard on the grey-box bases named in `TANKS_BASES`
 /// (`|`-separated candidate names; default the two of docs/decisions/tanks-kfold-guard-rule.md)
-/// with the guard `TANKS_GUARD` (`last-fifth` or `K-fold`; default the reproduced one).
+/// with the guard `TANKS_GUARD` (`last-fifth` or `K-fold`; default the reproduced one) and
+/// the network variant `TANKS_VARIANT` (band, freerun, thesis, window256, one;
+/// docs/decisions/tanks-hybrid-variants-kfold.md).
 /// Calibrates each on the training record and fits the hybrid; no test record is run.
 #[cfg(test)]
 #[allow(clippy::print_stdout)]
@@ -440,7 +442,20 @@ fn explore_tanks_hybrid_base() {
             Integrator::Rk4 { substeps } => substeps,
             _ => 4,
         };
-        let opts = fit_options(&eff, substeps, window);
+        let mut opts = fit_options(&eff, substeps, window);
+        // docs/decisions/tanks-hybrid-variants-kfold.md: V1–V5.
+        match std::env::var("TANKS_VARIANT").as_deref() {
+            Ok("band") => opts.ensemble = mmenn::fit::NetworkEnsemble::Band,
+            Ok("freerun") => opts.selection = NetworkSelection::FreeRun,
+            Ok("thesis") => {
+                opts.max_hidden = 10;
+                opts.inits = 10;
+            }
+            Ok("window256") => opts.trajectory.window = 256,
+            Ok("one") => opts.max_hidden = 1,
+            Ok("") | Err(_) => {}
+            Ok(other) => panic!("unknown TANKS_VARIANT {other}"),
+        }
         // The channels as the reproduced run's CSV names them.
         let output = spec.linear.output_names()[0].clone();
         let record = mmenn::sysid_core::Dataset::new(
