@@ -85,7 +85,11 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              were kept by a guard on the last fifth alone whose network had been chosen by \
              that fifth's d̂ pairs and trained on its trajectories; it scored them 0.1600 and \
              0.1736 V there. On the grey box without the lag the 5-fold guard also keeps the \
-             physics alone (pooled 0.1793 V). So on 1024 training samples the network's gain \
+             physics alone (pooled 0.1793 V), and so does each of five network variants \
+             judged by the same guard: the band ensemble, selection by free-run error, the \
+             thesis's 1–10 × 10 sweep, 256-sample shooting windows and one hidden unit (best \
+             network 0.1774 V pooled; docs/decisions/tanks-hybrid-variants-kfold.md). So on \
+             1024 training samples the network's gain \
              on the test record is not one a choice made on training data can find. What \
              follows was measured on the grey box without the lag. Its test error is spread \
              over the whole record (RMSE 0.12–0.37 V in every 64-sample stretch) rather than \
