@@ -69,13 +69,7 @@ pub fn acf(x: &[f64], max_lag: usize) -> Result<Vec<f64>> {
 /// `τ = −max_lag..=max_lag`; element `i` is lag `i − max_lag`. A positive lag means `y`
 /// follows `x`.
 pub fn xcf(x: &[f64], y: &[f64], max_lag: usize) -> Result<Vec<f64>> {
-    if x.len() != y.len() {
-        return Err(CoreError::Length {
-            what: "cross-correlation series",
-            found: y.len(),
-            expected: x.len(),
-        });
-    }
+    CoreError::check_len("cross-correlation series", y.len(), x.len())?;
     let (cx, sx) = centred(x, "cross-correlation series x")?;
     let (cy, sy) = centred(y, "cross-correlation series y")?;
     let n = cx.len() as isize;

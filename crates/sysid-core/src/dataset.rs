@@ -107,13 +107,11 @@ impl Experiment {
                 reason: "must be finite",
             });
         }
-        if inputs.ncols() != outputs.ncols() {
-            return Err(CoreError::Length {
-                what: "input samples vs output samples",
-                found: inputs.ncols(),
-                expected: outputs.ncols(),
-            });
-        }
+        CoreError::check_len(
+            "input samples vs output samples",
+            inputs.ncols(),
+            outputs.ncols(),
+        )?;
         let exp = Self {
             t0,
             dt,
@@ -131,13 +129,7 @@ impl Experiment {
     /// uniform to [`UNIFORM_TIME_RTOL`] of the mean step.
     pub fn from_times(t: &[f64], inputs: DMatrix<f64>, outputs: DMatrix<f64>) -> Result<Self> {
         let (t0, dt) = uniform_step(t)?;
-        if inputs.ncols() != t.len() {
-            return Err(CoreError::Length {
-                what: "input samples vs time samples",
-                found: inputs.ncols(),
-                expected: t.len(),
-            });
-        }
+        CoreError::check_len("input samples vs time samples", inputs.ncols(), t.len())?;
         Self::new(t0, dt, inputs, outputs)
     }
 
@@ -324,20 +316,16 @@ impl Dataset {
         let names_u: Vec<String> = inputs.iter().map(|c| c.name.clone()).collect();
         let names_y: Vec<String> = outputs.iter().map(|c| c.name.clone()).collect();
         for (e, exp) in experiments.iter().enumerate() {
-            if exp.n_inputs() != inputs.len() {
-                return Err(CoreError::Length {
-                    what: "input channels of an experiment",
-                    found: exp.n_inputs(),
-                    expected: inputs.len(),
-                });
-            }
-            if exp.n_outputs() != outputs.len() {
-                return Err(CoreError::Length {
-                    what: "output channels of an experiment",
-                    found: exp.n_outputs(),
-                    expected: outputs.len(),
-                });
-            }
+            CoreError::check_len(
+                "input channels of an experiment",
+                exp.n_inputs(),
+                inputs.len(),
+            )?;
+            CoreError::check_len(
+                "output channels of an experiment",
+                exp.n_outputs(),
+                outputs.len(),
+            )?;
             exp.check_values(e, &names_u, &names_y)?;
         }
         Ok(Self {

@@ -222,3 +222,38 @@ pub fn check_finite(matrix: &'static str, m: &nalgebra::DMatrix<f64>) -> Result<
     }
     Ok(())
 }
+
+impl CoreError {
+    /// `Ok` when `found == expected`, else [`CoreError::Length`] naming `what`: the one
+    /// spelling of a length or dimension check.
+    pub fn check_len(what: &'static str, found: usize, expected: usize) -> Result<()> {
+        if found == expected {
+            Ok(())
+        } else {
+            Err(CoreError::Length {
+                what,
+                found,
+                expected,
+            })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn check_len_names_what_and_both_lengths() {
+        assert_eq!(CoreError::check_len("inputs", 3, 3), Ok(()));
+        let e = CoreError::check_len("inputs", 2, 3).unwrap_err();
+        assert_eq!(
+            e,
+            CoreError::Length {
+                what: "inputs",
+                found: 2,
+                expected: 3
+            }
+        );
+    }
+}

@@ -491,13 +491,11 @@ fn validate<D: ParametricDynamics>(
         });
     }
     crate::error::check_finite("C", data.c)?;
-    if data.noise_variance.len() != p {
-        return Err(CoreError::Length {
-            what: "noise variances (one per output)",
-            found: data.noise_variance.len(),
-            expected: p,
-        });
-    }
+    CoreError::check_len(
+        "noise variances (one per output)",
+        data.noise_variance.len(),
+        p,
+    )?;
     for (i, &v) in data.noise_variance.iter().enumerate() {
         if !(v.is_finite() && v > 0.0) {
             return Err(CoreError::NonPositiveVariance {
@@ -521,13 +519,7 @@ fn validate<D: ParametricDynamics>(
         });
     }
     for x in data.x0 {
-        if x.len() != n {
-            return Err(CoreError::Length {
-                what: "start state",
-                found: x.len(),
-                expected: n,
-            });
-        }
+        CoreError::check_len("start state", x.len(), n)?;
     }
     opts.substeps.validate()?;
     if let Shooting::Multiple { segment } = opts.shooting
@@ -541,20 +533,16 @@ fn validate<D: ParametricDynamics>(
     }
     let mut measured = 0;
     for (e, exp) in data.records.iter().enumerate() {
-        if exp.n_inputs() != model.n_inputs() {
-            return Err(CoreError::Length {
-                what: "input channels of a record vs the model",
-                found: exp.n_inputs(),
-                expected: model.n_inputs(),
-            });
-        }
-        if exp.n_outputs() != p {
-            return Err(CoreError::Length {
-                what: "output channels of a record vs the rows of C",
-                found: exp.n_outputs(),
-                expected: p,
-            });
-        }
+        CoreError::check_len(
+            "input channels of a record vs the model",
+            exp.n_inputs(),
+            model.n_inputs(),
+        )?;
+        CoreError::check_len(
+            "output channels of a record vs the rows of C",
+            exp.n_outputs(),
+            p,
+        )?;
         let count = exp.outputs().iter().filter(|v| !v.is_nan()).count();
         if count == 0 {
             return Err(CoreError::TooFewSamples {

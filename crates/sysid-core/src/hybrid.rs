@@ -58,20 +58,8 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
         };
         shape("E", e.nrows(), e.ncols(), n, q)?;
         shape("C", c.nrows(), c.ncols(), output_names.len(), n)?;
-        if correction.n_states() != n {
-            return Err(CoreError::Length {
-                what: "states read by the correction",
-                found: correction.n_states(),
-                expected: n,
-            });
-        }
-        if correction.n_inputs() != m {
-            return Err(CoreError::Length {
-                what: "inputs read by the correction",
-                found: correction.n_inputs(),
-                expected: m,
-            });
-        }
+        CoreError::check_len("states read by the correction", correction.n_states(), n)?;
+        CoreError::check_len("inputs read by the correction", correction.n_inputs(), m)?;
         Ok(Self {
             base,
             correction,

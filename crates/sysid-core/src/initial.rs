@@ -116,13 +116,7 @@ pub fn fit_initial_state<D: Dynamics + ?Sized>(
     opt: &InitialStateFit,
 ) -> Result<Vec<f64>> {
     let n = f.n_states();
-    if guess.len() != n {
-        return Err(CoreError::Length {
-            what: "initial-state guess",
-            found: guess.len(),
-            expected: n,
-        });
-    }
+    CoreError::check_len("initial-state guess", guess.len(), n)?;
     if c.ncols() != n || c.nrows() != exp.n_outputs() {
         return Err(CoreError::Shape {
             matrix: "C",

@@ -382,20 +382,8 @@ pub fn simulate_with<D: Dynamics + ?Sized>(
     blow_up: f64,
 ) -> Result<DMatrix<f64>> {
     let n = f.n_states();
-    if x0.len() != n {
-        return Err(CoreError::Length {
-            what: "initial state",
-            found: x0.len(),
-            expected: n,
-        });
-    }
-    if inputs.nrows() != f.n_inputs() {
-        return Err(CoreError::Length {
-            what: "input channels",
-            found: inputs.nrows(),
-            expected: f.n_inputs(),
-        });
-    }
+    CoreError::check_len("initial state", x0.len(), n)?;
+    CoreError::check_len("input channels", inputs.nrows(), f.n_inputs())?;
     if !(dt.is_finite() && dt > 0.0) {
         return Err(CoreError::BadSamplePeriod { dt });
     }

@@ -51,13 +51,11 @@ impl Observation {
     /// Channels `names` observed through `matrix` (one row per name). Errors when the
     /// counts differ.
     pub fn new(names: Vec<String>, matrix: DMatrix<f64>) -> Result<Self> {
-        if names.len() != matrix.nrows() {
-            return Err(CoreError::Length {
-                what: "observed channel names vs rows of the observation matrix",
-                found: names.len(),
-                expected: matrix.nrows(),
-            });
-        }
+        CoreError::check_len(
+            "observed channel names vs rows of the observation matrix",
+            names.len(),
+            matrix.nrows(),
+        )?;
         Ok(Self { names, matrix })
     }
 

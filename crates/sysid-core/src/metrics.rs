@@ -25,13 +25,11 @@ pub struct ChannelMetrics {
 /// Errors: different lengths, fewer than 2 valid samples, a non-finite prediction where
 /// the measurement is present.
 pub fn channel_metrics(measured: &[f64], predicted: &[f64]) -> Result<ChannelMetrics> {
-    if measured.len() != predicted.len() {
-        return Err(CoreError::Length {
-            what: "predicted vs measured samples",
-            found: predicted.len(),
-            expected: measured.len(),
-        });
-    }
+    CoreError::check_len(
+        "predicted vs measured samples",
+        predicted.len(),
+        measured.len(),
+    )?;
     let pairs = || measured.iter().zip(predicted).filter(|(y, _)| !y.is_nan());
     let n = pairs().count();
     if n < 2 {

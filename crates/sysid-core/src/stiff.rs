@@ -175,20 +175,12 @@ pub fn probe_substeps<D: Dynamics + ?Sized>(
 ) -> Result<StiffProbe> {
     let n = f.n_states();
     let m = f.n_inputs();
-    if x0.len() != n {
-        return Err(CoreError::Length {
-            what: "initial state of the sub-step probe",
-            found: x0.len(),
-            expected: n,
-        });
-    }
-    if exp.n_inputs() != m {
-        return Err(CoreError::Length {
-            what: "input channels of the record vs the model",
-            found: exp.n_inputs(),
-            expected: m,
-        });
-    }
+    CoreError::check_len("initial state of the sub-step probe", x0.len(), n)?;
+    CoreError::check_len(
+        "input channels of the record vs the model",
+        exp.n_inputs(),
+        m,
+    )?;
     let min = min.max(1);
     let mut a = DMatrix::zeros(n, n);
     let mut b = DMatrix::zeros(n, m);
