@@ -8,9 +8,10 @@
 //! on the official test records, beside the published numbers.
 //!
 //! `--quick` keeps every row and the protocol; it cuts effort only: linear SS orders up
-//! to 4 (6), one grey-box candidate on Silverbox (5) and two on Cascaded Tanks (3), hybrid
-//! sweeps of 1–3 hidden units × 2 initialisations with 5–10 refinement steps, and NARX on
-//! two orders (4, 4), (8, 8) with 3 hidden units and one restart, selected on 8192 samples.
+//! to 4 (6), one grey-box candidate on Silverbox (5), calibrated with one horizon stage
+//! fewer, and two on Cascaded Tanks (3), hybrid sweeps of 1–3 hidden units × 2
+//! initialisations with 3–10 refinement steps, and NARX on two orders (4, 4), (8, 8) with 3
+//! hidden units and one restart, selected on 8192 samples.
 
 use std::collections::BTreeMap;
 use std::path::Path;

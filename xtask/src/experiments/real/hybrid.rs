@@ -70,12 +70,13 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
         },
         // σ = 0.1 mV: far below the grey box's error, above the CSV rounding.
         Benchmark::Silverbox => Effort {
+            // Quick: the critical path of the quick run (3 refinement steps).
             max_hidden: if quick { 3 } else { 4 },
             inits: 2,
             window: 1000,
             // 15 steps in the full run on b801ccd moved the test RMSE by < 0.001 mV (the
             // network barely changes the grey box here) and cost most of 227 s.
-            steps: if quick { 5 } else { 8 },
+            steps: if quick { 3 } else { 8 },
             noise: 1e-8,
             // The covariance constraint's W on the training record with this grey box
             // (1.243509870 with quadratic drag and the 0.1-ms input stage, `--only "real
