@@ -147,6 +147,10 @@ pub(crate) struct CompareArgs {
     /// How the MME/NN networks are trained: trainlm or accelerated (as `fit --training`).
     #[arg(long, default_value = "trainlm")]
     pub(crate) training: mmenn::fit::Training,
+    /// Where MME/NN's guard judges its candidates without --val: last-fifth or K-fold
+    /// (as `fit --guard`).
+    #[arg(long, default_value = "last-fifth")]
+    pub(crate) guard: mmenn::fit::GuardHeldOut,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,

@@ -492,6 +492,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             inits: a.inits,
             seed: a.seed,
             training: a.training,
+            guard: a.guard,
             ..Default::default()
         },
         narx_lags: a.narx_lags,
