@@ -111,7 +111,8 @@ pub fn window_state_from(
         .remove(0))
 }
 
-fn free_run(
+/// The free-run output of `exp` from `x0` (recorded units), or why it failed.
+pub fn free_run(
     spec: &GreySpec,
     model: &TermModel,
     exp: &Experiment,
