@@ -483,8 +483,8 @@ pub fn compute_fit(
         candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
     let (guard_report, kept) = match (opts.guard, &val) {
-        (GuardHeldOut::Folds(k), None) => {
-            folds::choose_by_folds(&spec, est, data, &x0, k, candidates, opts, progress)?
+        (held @ (GuardHeldOut::Folds(_) | GuardHeldOut::LastFifthRetrained), None) => {
+            folds::choose_by_folds(&spec, est, data, &x0, held, candidates, opts, progress)?
         }
         _ => {
             let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;

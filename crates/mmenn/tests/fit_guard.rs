@@ -156,6 +156,16 @@ noise_variance = [1e-6]
 
 /// `fit` with the K-fold guard and a small fixed network.
 fn fit_with_folds(dir: &Path, data: &Path, model: &Path, folds: usize) -> mmenn::fit::FitSummary {
+    fit_with_guard(dir, data, model, mmenn::fit::GuardHeldOut::Folds(folds))
+}
+
+/// `fit` with the given guard and a small fixed network.
+fn fit_with_guard(
+    dir: &Path,
+    data: &Path,
+    model: &Path,
+    guard: mmenn::fit::GuardHeldOut,
+) -> mmenn::fit::FitSummary {
     run_fit(
         &[data.to_path_buf()],
         model,
@@ -163,7 +173,7 @@ fn fit_with_folds(dir: &Path, data: &Path, model: &Path, folds: usize) -> mmenn:
         &FitOptions {
             hidden: HiddenChoice::Fixed(2),
             inits: 2,
-            guard: mmenn::fit::GuardHeldOut::Folds(folds),
+            guard,
             train_on_trajectories: TrajectoryChoice::Trajectory,
             trajectory: mmenn::nn::TrajectoryConfig {
                 window: 100,
@@ -325,5 +335,38 @@ fn k_fold_guard_on_independent_records_keeps_a_network_only_where_an_effect_is_m
         kept <= 0.5 * physics,
         "cubic: kept {kept} against physics {physics}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn last_fifth_retrained_is_one_stretch_and_too_few_folds_fall_back() {
+    let dir = scratch("retrained");
+    let truth = dir.join("truth.toml");
+    std::fs::write(&truth, OSCILLATOR.replace("-0.4]", "-0.8]")).unwrap();
+    let data = exact_data(&dir, &truth, vec![0.5, 0.0]);
+    let model = dir.join("model.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    let s = fit_with_guard(
+        &dir,
+        &data,
+        &model,
+        mmenn::fit::GuardHeldOut::LastFifthRetrained,
+    );
+    let g = &s.guard;
+    // One stretch, the last fifth of the 2000 samples, and the network that completes the
+    // damping still wins there.
+    let cuts: Vec<(usize, usize)> = g.folds.iter().map(|f| f.samples).collect();
+    assert_eq!(cuts, vec![(1600, 2000)]);
+    assert!(g.held_out.contains("ran again without it"), "{}", g.held_out);
+    assert_ne!(g.chosen, GuardCandidate::PhysicsAlone, "{}", g.reason);
+    // Through the library, fewer than two folds is not an error: the last-fifth guard
+    // judges, and says why.
+    for k in [0, 1] {
+        let sub = dir.join(format!("k{k}"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let s = fit_with_folds(&sub, &data, &model, k);
+        assert!(s.guard.folds.is_empty());
+        assert!(s.guard.held_out.contains("fewer than 2 stretches"), "{}", s.guard.held_out);
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

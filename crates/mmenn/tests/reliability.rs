@@ -573,7 +573,7 @@ fn fit_guard_flag_reads_last_fifth_and_k_fold_only() {
         "o",
         "--guard",
     ];
-    for good in ["last-fifth", "5-fold", "2-fold"] {
+    for good in ["last-fifth", "last-fifth-retrained", "5-fold", "2-fold"] {
         let args: Vec<&str> = base.iter().copied().chain([good]).collect();
         let (code, err) = mmenn(&dir, &args, &[]);
         assert_eq!(code, 1, "{good}: {err}");

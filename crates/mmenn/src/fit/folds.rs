@@ -1,4 +1,5 @@
-//! The K-fold guard ([`super::GuardHeldOut::Folds`]): the first training record is cut into K
+//! The K-fold guard ([`GuardHeldOut::Folds`], and [`GuardHeldOut::LastFifthRetrained`] as
+//! its one-stretch case): the first training record is cut into K
 //! contiguous stretches; for each, the networks are trained again without it (its `d̂`
 //! pairs and its samples in the shooting windows left out; the free-run selection does
 //! not score it) and physics alone, the network and the refined network are run free over
@@ -17,7 +18,7 @@ use nn::{Mlp, ShootingRecord};
 use rayon::prelude::*;
 use sysid_core::{Dataset, Experiment, MmeEstimate};
 
-use super::guard::{self, CandidateScore, FoldScores, GuardCandidate, GuardReport};
+use super::guard::{self, CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
 use super::{
     FitOptions, TrainingSet, hybrid_loaded, judge_outputs, split_last_fifth, train_networks,
     training_pairs_without,
@@ -37,19 +38,29 @@ pub(super) fn choose_by_folds(
     est: &MmeEstimate,
     data: &Dataset,
     x0: &[f64],
-    folds: usize,
+    held: GuardHeldOut,
     candidates: Vec<(GuardCandidate, Mlp)>,
     opts: &FitOptions,
     progress: &dyn ProgressSink,
 ) -> Result<(GuardReport, Mlp)> {
     let exp = &data.experiments()[0];
     let len = exp.len();
-    if folds < 2 || len / folds < MIN_STRETCH {
-        let held = guard::held_out(data, None, est, x0, opts)?;
-        let (mut report, kept) = guard::choose(spec, candidates, &held, exp.dt(), opts.substeps)?;
+    // The stretches: K equal ones, or the last fifth alone.
+    let (folds, stretches): (usize, Vec<Range<usize>>) = match held {
+        GuardHeldOut::Folds(k) if k >= 2 => (
+            k,
+            (0..k).map(|i| (i * len / k)..((i + 1) * len / k)).collect(),
+        ),
+        GuardHeldOut::Folds(k) => (k, Vec::new()),
+        _ => (1, vec![(len - len / 5)..len]),
+    };
+    if stretches.is_empty() || stretches.iter().any(|r| r.len() < MIN_STRETCH) {
+        let last = guard::held_out(data, None, est, x0, opts)?;
+        let (mut report, kept) = guard::choose(spec, candidates, &last, exp.dt(), opts.substeps)?;
         report.held_out = format!(
-            "{} ({} stretches of {len} samples would be shorter than {MIN_STRETCH})",
-            report.held_out, folds
+            "{} ({held} asked for: fewer than 2 stretches or stretches shorter than \
+             {MIN_STRETCH} samples of {len})",
+            report.held_out
         );
         return Ok((report, kept));
     }
@@ -57,11 +68,10 @@ pub(super) fn choose_by_folds(
     const TASK: &str = "K-fold guard";
     let done = AtomicUsize::new(0);
     progress.report(&Progress::new(TASK, 0, Some(folds)));
-    let per_fold: Vec<Result<FoldScores>> = (0..folds)
-        .into_par_iter()
-        .map(|k| {
-            let stretch = (k * len / folds)..((k + 1) * len / folds);
-            let scores = fold(spec, est, data, x0, stretch, &kinds, opts);
+    let per_fold: Vec<Result<FoldScores>> = stretches
+        .par_iter()
+        .map(|stretch| {
+            let scores = fold(spec, est, data, x0, stretch.clone(), &kinds, opts);
             let n = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress.report(&Progress::new(TASK, n, Some(folds)));
             scores
@@ -74,13 +84,23 @@ pub(super) fn choose_by_folds(
         .enumerate()
         .map(|(i, &c)| pooled(c, per_fold.iter().map(|f| &f.candidates[i])))
         .collect();
-    let description = format!(
-        "{folds} contiguous stretches of the first training record ({len} samples; for each, \
-         the network sweep, selection and trajectory training ran again without it), each \
-         run free from a state fitted to its first {} samples from MME's x̂ there; scores \
-         pool the {folds} stretches' squared errors",
-        window(len / folds, opts)
-    );
+    let w = window(stretches[0].len(), opts);
+    let description = if held == GuardHeldOut::LastFifthRetrained {
+        let r = &stretches[0];
+        format!(
+            "the last fifth of the first training record (samples {}..{}; the network sweep, \
+             selection and trajectory training ran again without it), run free from a state \
+             fitted to its first {w} samples from MME's x̂ there",
+            r.start, r.end
+        )
+    } else {
+        format!(
+            "{folds} contiguous stretches of the first training record ({len} samples; for \
+             each, the network sweep, selection and trajectory training ran again without \
+             it), each run free from a state fitted to its first {w} samples from MME's x̂ \
+             there; scores pool the {folds} stretches' squared errors"
+        )
+    };
     Ok(guard::decide(scores, candidates, description, per_fold))
 }
 

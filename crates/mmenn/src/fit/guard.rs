@@ -29,14 +29,26 @@ pub enum GuardHeldOut {
     /// squared errors; the kept kind is then trained on the whole record, as with
     /// [`GuardHeldOut::LastFifth`]. Costs K more network trainings.
     Folds(usize),
+    /// The last fifth of the first training record, with the networks trained once more
+    /// without it, as one stretch of [`GuardHeldOut::Folds`] (`--guard
+    /// last-fifth-retrained`): nothing judged there was trained or chosen on it. Costs one
+    /// more network training.
+    LastFifthRetrained,
 }
 
 impl std::str::FromStr for GuardHeldOut {
     type Err = String;
     fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
-        let bad = || format!("'{s}': expected last-fifth or K-fold with K ≥ 2 (e.g. 5-fold)");
-        if s == "last-fifth" {
-            return Ok(Self::LastFifth);
+        let bad = || {
+            format!(
+                "'{s}': expected last-fifth, last-fifth-retrained or K-fold with K ≥ 2 \
+                 (e.g. 5-fold)"
+            )
+        };
+        match s {
+            "last-fifth" => return Ok(Self::LastFifth),
+            "last-fifth-retrained" => return Ok(Self::LastFifthRetrained),
+            _ => {}
         }
         let k: usize = s
             .strip_suffix("-fold")
@@ -54,6 +66,7 @@ impl std::fmt::Display for GuardHeldOut {
         match self {
             Self::LastFifth => f.write_str("last-fifth"),
             Self::Folds(k) => write!(f, "{k}-fold"),
+            Self::LastFifthRetrained => f.write_str("last-fifth-retrained"),
         }
     }
 }
@@ -405,6 +418,14 @@ mod tests {
     fn guard_held_out_reads_and_writes_its_spellings() {
         assert_eq!("last-fifth".parse(), Ok(GuardHeldOut::LastFifth));
         assert_eq!("5-fold".parse(), Ok(GuardHeldOut::Folds(5)));
+        assert_eq!(
+            "last-fifth-retrained".parse(),
+            Ok(GuardHeldOut::LastFifthRetrained)
+        );
+        assert_eq!(
+            GuardHeldOut::LastFifthRetrained.to_string(),
+            "last-fifth-retrained"
+        );
         for bad in ["1-fold", "0-fold", "five-fold", "5", "", "5-folds"] {
             assert!(bad.parse::<GuardHeldOut>().is_err(), "{bad}");
         }
