@@ -357,7 +357,11 @@ fn last_fifth_retrained_is_one_stretch_and_too_few_folds_fall_back() {
     // damping still wins there.
     let cuts: Vec<(usize, usize)> = g.folds.iter().map(|f| f.samples).collect();
     assert_eq!(cuts, vec![(1600, 2000)]);
-    assert!(g.held_out.contains("ran again without it"), "{}", g.held_out);
+    assert!(
+        g.held_out.contains("ran again without it"),
+        "{}",
+        g.held_out
+    );
     assert_ne!(g.chosen, GuardCandidate::PhysicsAlone, "{}", g.reason);
     // Through the library, fewer than two folds is not an error: the last-fifth guard
     // judges, and says why.
@@ -366,7 +370,11 @@ fn last_fifth_retrained_is_one_stretch_and_too_few_folds_fall_back() {
         std::fs::create_dir_all(&sub).unwrap();
         let s = fit_with_folds(&sub, &data, &model, k);
         assert!(s.guard.folds.is_empty());
-        assert!(s.guard.held_out.contains("fewer than 2 stretches"), "{}", s.guard.held_out);
+        assert!(
+            s.guard.held_out.contains("fewer than 2 stretches"),
+            "{}",
+            s.guard.held_out
+        );
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -240,7 +240,14 @@ pub(super) fn grey_rows(
     if data.benchmark == Benchmark::CascadedTanks
         && let Some((_, e)) = tests.first()
     {
-        table.note(shared_state_note(&chosen_spec, &fit, e, window, scale, unit));
+        table.note(shared_state_note(
+            &chosen_spec,
+            &fit,
+            e,
+            window,
+            scale,
+            unit,
+        ));
     }
     if data.benchmark == Benchmark::Emps {
         // Janot et al. 2019 (§3) report direction-dependent friction; started from the
