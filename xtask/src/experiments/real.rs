@@ -10,7 +10,8 @@
 //! `--quick` keeps every row and the protocol; it cuts effort only: linear SS orders up
 //! to 4 (6), one grey-box candidate on Silverbox (5), calibrated with one horizon stage
 //! fewer, and two on Cascaded Tanks (3), hybrid sweeps of 1–3 hidden units × 2
-//! initialisations with 3–10 refinement steps, and NARX on two orders (4, 4), (8, 8) with 3
+//! initialisations with 3–10 refinement steps (Silverbox's guard on the plain last fifth,
+//! without the extra training), and NARX on two orders (4, 4), (8, 8) with 3
 //! hidden units and one restart, selected on 8192 samples.
 
 use std::collections::BTreeMap;
