@@ -52,7 +52,7 @@ pub(super) fn choose_by_folds(
             (0..k).map(|i| (i * len / k)..((i + 1) * len / k)).collect(),
         ),
         GuardHeldOut::Folds(k) => (k, Vec::new()),
-        _ => (1, vec![(len - len / 5)..len]),
+        _ => (1, std::iter::once((len - len / 5)..len).collect()),
     };
     if stretches.is_empty() || stretches.iter().any(|r| r.len() < MIN_STRETCH) {
         let last = guard::held_out(data, None, est, x0, opts)?;
