@@ -154,6 +154,17 @@ noise_variance = [1e-6]
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Data of the oscillator with damping 0.8 and the model file assuming 0.4 (the missing
+/// −0.4·v is linear in the network's inputs), written into `dir`: (data, model).
+fn missing_damping(dir: &Path) -> (PathBuf, PathBuf) {
+    let truth = dir.join("truth.toml");
+    std::fs::write(&truth, OSCILLATOR.replace("-0.4]", "-0.8]")).unwrap();
+    let data = exact_data(dir, &truth, vec![0.5, 0.0]);
+    let model = dir.join("model.toml");
+    std::fs::write(&model, OSCILLATOR).unwrap();
+    (data, model)
+}
+
 /// `fit` with the K-fold guard and a small fixed network.
 fn fit_with_folds(dir: &Path, data: &Path, model: &Path, folds: usize) -> mmenn::fit::FitSummary {
     fit_with_guard(dir, data, model, mmenn::fit::GuardHeldOut::Folds(folds))
@@ -235,11 +246,7 @@ fn k_fold_guard_keeps_a_network_that_completes_missing_damping() {
     // network's inputs, so a network trained without any one stretch still predicts it,
     // and physics alone is worse on every stretch.
     let dir = scratch("folds-missing");
-    let truth = dir.join("truth.toml");
-    std::fs::write(&truth, OSCILLATOR.replace("-0.4]", "-0.8]")).unwrap();
-    let data = exact_data(&dir, &truth, vec![0.5, 0.0]);
-    let model = dir.join("model.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
+    let (data, model) = missing_damping(&dir);
     let s = fit_with_folds(&dir, &data, &model, 5);
     let g = &s.guard;
     assert_ne!(g.chosen, GuardCandidate::PhysicsAlone, "{}", g.reason);
@@ -257,11 +264,7 @@ fn k_fold_guard_keeps_a_network_that_completes_missing_damping() {
 fn k_fold_guard_gives_the_same_numbers_on_any_thread_count() {
     // The stretches are trained in parallel; every number must not depend on how.
     let dir = scratch("folds-threads");
-    let truth = dir.join("truth.toml");
-    std::fs::write(&truth, OSCILLATOR.replace("-0.4]", "-0.8]")).unwrap();
-    let data = exact_data(&dir, &truth, vec![0.5, 0.0]);
-    let model = dir.join("model.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
+    let (data, model) = missing_damping(&dir);
     let run = |threads: usize, name: &str| {
         let sub = dir.join(name);
         std::fs::create_dir_all(&sub).unwrap();
@@ -341,11 +344,7 @@ fn k_fold_guard_on_independent_records_keeps_a_network_only_where_an_effect_is_m
 #[test]
 fn last_fifth_retrained_is_one_stretch_and_too_few_folds_fall_back() {
     let dir = scratch("retrained");
-    let truth = dir.join("truth.toml");
-    std::fs::write(&truth, OSCILLATOR.replace("-0.4]", "-0.8]")).unwrap();
-    let data = exact_data(&dir, &truth, vec![0.5, 0.0]);
-    let model = dir.join("model.toml");
-    std::fs::write(&model, OSCILLATOR).unwrap();
+    let (data, model) = missing_damping(&dir);
     let s = fit_with_guard(
         &dir,
         &data,
