@@ -165,6 +165,12 @@ fn missing_damping(dir: &Path) -> (PathBuf, PathBuf) {
     (data, model)
 }
 
+/// The held-out RMSE of channel `x` of the physics alone and of the kept candidate.
+fn physics_and_kept(g: &mmenn::fit::GuardReport) -> (f64, f64) {
+    let rmse = |c: GuardCandidate| g.score(c).unwrap().rmse["x"];
+    (rmse(GuardCandidate::PhysicsAlone), rmse(g.chosen))
+}
+
 /// `fit` with the K-fold guard and a small fixed network.
 fn fit_with_folds(dir: &Path, data: &Path, model: &Path, folds: usize) -> mmenn::fit::FitSummary {
     fit_with_guard(dir, data, model, mmenn::fit::GuardHeldOut::Folds(folds))
@@ -251,8 +257,7 @@ fn k_fold_guard_keeps_a_network_that_completes_missing_damping() {
     let g = &s.guard;
     assert_ne!(g.chosen, GuardCandidate::PhysicsAlone, "{}", g.reason);
     assert_eq!(g.folds.len(), 5);
-    let physics = g.score(GuardCandidate::PhysicsAlone).unwrap().rmse["x"];
-    let kept = g.score(g.chosen).unwrap().rmse["x"];
+    let (physics, kept) = physics_and_kept(g);
     assert!(
         kept < 0.5 * physics,
         "kept {kept} vs physics alone {physics}"
@@ -309,14 +314,10 @@ fn k_fold_guard_on_independent_records_keeps_a_network_only_where_an_effect_is_m
         },
         ..FitOptions::default()
     };
-    let pooled = |g: &mmenn::fit::GuardReport, c: GuardCandidate| g.score(c).unwrap().rmse["x"];
     let dir = scratch("folds-suite");
     let (data, model) = suite_case("msd_control");
     let s = run_fit(&[data], &model, &[], &opts, &dir.join("control")).unwrap();
-    let (physics, kept) = (
-        pooled(&s.guard, GuardCandidate::PhysicsAlone),
-        pooled(&s.guard, s.guard.chosen),
-    );
+    let (physics, kept) = physics_and_kept(&s.guard);
     assert!(
         kept >= 0.99 * physics,
         "control: kept {:?} at {kept} against physics {physics}",
@@ -324,10 +325,7 @@ fn k_fold_guard_on_independent_records_keeps_a_network_only_where_an_effect_is_m
     );
     let (data, model) = suite_case("msd_cubic_hard");
     let s = run_fit(&[data], &model, &[], &opts, &dir.join("cubic")).unwrap();
-    let (physics, kept) = (
-        pooled(&s.guard, GuardCandidate::PhysicsAlone),
-        pooled(&s.guard, s.guard.chosen),
-    );
+    let (physics, kept) = physics_and_kept(&s.guard);
     assert_ne!(
         s.guard.chosen,
         GuardCandidate::PhysicsAlone,
