@@ -657,6 +657,12 @@ pub enum SilverboxExtra {
     /// A further state monomial of degree ≤ 3 in `(y, v)` (explored, not a candidate).
     #[cfg_attr(not(test), allow(dead_code))]
     Monomial(&'static str),
+    /// A first-order measurement filter of this held time constant (s) on the output,
+    /// `z' = (y − z)/τo`, the measured voltage being `z` (an anti-alias filter or output
+    /// buffer acting on the measurement, not on the oscillator; Rule 3 of
+    /// docs/decisions/silverbox-schroeder-rule.md).
+    #[cfg_attr(not(test), allow(dead_code))]
+    OutputFilter(f64),
 }
 
 /// Silverbox's sample interval, s (10 MHz / 16 384 = 610.35 Hz; the data README).
@@ -679,21 +685,40 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
         SilverboxExtra::Feedthrough(tau) => Some(*tau),
         _ => None,
     });
-    let n = if lag.is_some() { 3 } else { 2 };
+    let filter = extra.iter().find_map(|e| match e {
+        SilverboxExtra::OutputFilter(tau) => Some(*tau),
+        _ => None,
+    });
+    let mut names = vec!["y".to_string(), "v".to_string()];
+    let w = lag.map(|_| {
+        names.push("w".into());
+        names.len() - 1
+    });
+    let z = filter.map(|_| {
+        names.push("z".into());
+        names.len() - 1
+    });
+    let n = names.len();
     let mut a = DMatrix::zeros(n, n);
     a[(0, 1)] = 1.0;
-    let mut names = vec!["y".to_string(), "v".to_string()];
-    if let Some(tau) = lag {
-        names.push("w".into());
-        a[(2, 2)] = -1.0 / tau;
+    let mut bm = DMatrix::zeros(n, 1);
+    if let (Some(i), Some(tau)) = (w, lag) {
+        a[(i, i)] = -1.0 / tau;
+        bm[(i, 0)] = 1.0 / tau;
+    }
+    let mut cm = DMatrix::zeros(1, n);
+    match (z, filter) {
+        (Some(i), Some(tau)) => {
+            a[(i, 0)] = 1.0 / tau;
+            a[(i, i)] = -1.0 / tau;
+            cm[(0, i)] = 1.0;
+        }
+        _ => cm[(0, 0)] = 1.0,
     }
     let linear = LinearModel::with_names(
         a,
-        DMatrix::from_fn(n, 1, |i, _| match (i, lag) {
-            (2, Some(tau)) => 1.0 / tau,
-            _ => 0.0,
-        }),
-        DMatrix::from_fn(1, n, |_, j| if j == 0 { 1.0 } else { 0.0 }),
+        bm,
+        cm,
         DMatrix::from_fn(n, 1, |i, _| if i == 1 { 1.0 } else { 0.0 }),
         ModelNames {
             states: names,
@@ -716,7 +741,7 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
             SilverboxExtra::QuinticSpring => ("v", "quintic_spring", "y^5", 0.0),
             SilverboxExtra::QuadraticDrag => ("v", "quadratic_drag", "v*abs(v)", 0.0),
             SilverboxExtra::Monomial(m) => ("v", "monomial", m, 0.0),
-            SilverboxExtra::Feedthrough(_) => continue,
+            SilverboxExtra::Feedthrough(_) | SilverboxExtra::OutputFilter(_) => continue,
         });
     }
     if lag.is_some() {
@@ -742,19 +767,29 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
         free,
         intersample: InterSample::Foh,
         integrator: Integrator::Rk4 {
-            substeps: match lag {
+            substeps: match lag.into_iter().chain(filter).reduce(f64::min) {
                 Some(tau) => (SILVERBOX_DT / (2.1 * tau)).ceil() as usize,
                 None => 2,
             },
         },
-        x0_guess: if lag.is_some() {
-            |e| {
+        x0_guess: match (lag.is_some(), filter.is_some()) {
+            (false, false) => oscillator_x0,
+            (true, false) => |e| {
                 let mut x = oscillator_x0(e);
                 x.push(e.inputs()[(0, 0)]);
                 x
-            }
-        } else {
-            oscillator_x0
+            },
+            (false, true) => |e| {
+                let mut x = oscillator_x0(e);
+                x.push(x[0]);
+                x
+            },
+            (true, true) => |e| {
+                let mut x = oscillator_x0(e);
+                x.push(e.inputs()[(0, 0)]);
+                x.push(x[0]);
+                x
+            },
         },
         horizons: vec![0.02, 0.1, 0.3, 1.0],
         test_from_training_x0: false,

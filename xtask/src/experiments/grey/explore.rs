@@ -353,6 +353,62 @@ fn explore_silverbox_schroeder() {
                 stage,
             ],
         ),
+        // Rule 3 (docs/decisions/silverbox-schroeder-rule.md): a measurement filter on the
+        // output at three held time constants, PNLSS's state polynomial, input coupling.
+        (
+            "O0.1",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                stage,
+                OutputFilter(1e-4),
+            ],
+        ),
+        (
+            "O0.2",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                stage,
+                OutputFilter(2e-4),
+            ],
+        ),
+        (
+            "O0.4",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                stage,
+                OutputFilter(4e-4),
+            ],
+        ),
+        (
+            "R1",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                Monomial("y*v"),
+                Monomial("v^2"),
+                Monomial("y*v^2"),
+                Monomial("v^3"),
+                stage,
+            ],
+        ),
+        (
+            "R2",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                Monomial("u*y"),
+                Monomial("u*y^2"),
+                stage,
+            ],
+        ),
     ];
     // Rule 2 judges on the second half: samples 65 486.. (the first 50 fit the state).
     let sch = if std::env::var("SB_HALF").is_ok() {
