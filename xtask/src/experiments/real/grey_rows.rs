@@ -54,10 +54,12 @@ pub(super) fn grey_candidates(
             let (k, c, b) = oscillator_guess(&data.estimation.experiments()[0])?;
             use grey::SILVERBOX_STAGE_TAU;
             use grey::SilverboxExtra::{
-                DisplacementDamping, Feedthrough, QuadraticDrag, QuadraticSpring,
+                DisplacementDamping, Feedthrough, InputGainVariation, QuadraticDrag,
+                QuadraticSpring,
             };
             let mut v = vec![(
-                "cubic + quadratic spring, y²·y' damping, quadratic drag, input stage τ = 0.1 ms"
+                "cubic + quadratic spring, y²·y' damping, quadratic drag, input gain varying \
+                 with y, input stage τ = 0.1 ms"
                     .to_string(),
                 grey::silverbox_model(
                     k,
@@ -67,6 +69,7 @@ pub(super) fn grey_candidates(
                         QuadraticSpring,
                         DisplacementDamping,
                         QuadraticDrag,
+                        InputGainVariation,
                         Feedthrough(SILVERBOX_STAGE_TAU),
                     ],
                 )?,

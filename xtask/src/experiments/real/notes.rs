@@ -127,7 +127,16 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              above 0.25 V: 1.72 mV; below 0.1 V: 0.26 mV; explore_silverbox with the 0.1-ms \
              input stage on dde3da8). The polynomial spring and damping fitted on the training \
              amplitudes do not hold at the arrow's largest ones, and the network, trained on \
-             the same amplitudes, changes that little (0.286 → 0.283 mV). Quadratic drag \
+             the same amplitudes, changes that little (0.286 → 0.283 mV; with the input gain \
+             below, 0.285 → 0.279 mV). Since db1acd2 the grey box has an input gain that \
+             varies with the displacement (u·y, u·y²), chosen by a rule written before its \
+             runs on the Schroeder record's second half (0.3165 against 0.3261 mV, training \
+             0.2305 against 0.2311 mV; Rule 3 of docs/decisions/silverbox-schroeder-rule.md): \
+             it moved test_arrow_full only from 0.2856 to 0.285 mV, and the two other \
+             proposals of that rule extrapolated worse there (a measurement filter on the \
+             output, 0.3339 mV at its best time constant; PNLSS's full state polynomial in \
+             (y, y'), 0.3360 mV, though it fitted the training record best, 0.2250 mV); the \
+             error split above was measured without it. Quadratic drag \
              (v·|v|) moved the arrow most: without it (training 0.2565 mV, 0.2-ms stage) \
              test_arrow_full was 0.378 mV, with it 0.293 mV; the input stage's time constant \
              then went from 0.2 to 0.1 ms by its training RMSE (0.2392 → 0.2311 mV; \
