@@ -169,3 +169,89 @@ fn silverbox_input_stage_at_zero_is_the_plain_oscillator() {
         );
     }
 }
+
+/// The measurement filter (Rule 3's output filter) does not act on the oscillator: with the
+/// input gain's terms at zero (their start), the oscillator and the input stage run as
+/// without either, the filter state follows the displacement within its lag, and the
+/// measured output is the filter state. With the input gain's coefficients set, the
+/// acceleration gains exactly `u·(b1·y + b2·y²)` (checked on the model's right-hand side
+/// against that sum).
+#[test]
+fn silverbox_output_filter_and_input_gain() {
+    use SilverboxExtra::*;
+    let (k, c, b) = (1.9e5, 40.0, 1.9e5);
+    let base = silverbox_model(k, c, b, &[QuadraticSpring, Feedthrough(1e-4)]).unwrap();
+    let full = silverbox_model(
+        k,
+        c,
+        b,
+        &[
+            QuadraticSpring,
+            InputGainVariation,
+            Feedthrough(1e-4),
+            OutputFilter(2e-4),
+        ],
+    )
+    .unwrap();
+    let lin = full.model.linear();
+    assert_eq!(lin.state_names(), ["y", "v", "w", "z"]);
+    assert_eq!(
+        lin.c().row(0).iter().copied().collect::<Vec<_>>(),
+        [0.0, 0.0, 0.0, 1.0]
+    );
+    let dt = 16_384.0 / 1e7;
+    let u: Vec<f64> = (0..2000)
+        .map(|k| 0.1 * (k as f64 * dt * 400.0).sin())
+        .collect();
+    // Both on the filtered model's integrator (its sub-steps follow the smaller constant).
+    let xb = run(&full, &base.model, &[0.0, 0.0, 0.0], &u, dt);
+    let xf = run(&full, &full.model, &[0.0, 0.0, 0.0, 0.0], &u, dt);
+    let amp = xb.row(0).amax();
+    assert!(amp > 1e-4, "the oscillator hardly moved ({amp})");
+    let vmax = xb.row(1).amax();
+    for j in 0..u.len() {
+        for s in 0..3 {
+            assert!((xb[(s, j)] - xf[(s, j)]).abs() < 1e-12, "state {s} at {j}");
+        }
+        if j > 100 {
+            // z lags y by about τo: |z − y| ≤ τo·max|y'| (twice, for the transient's tail).
+            assert!(
+                (xf[(3, j)] - xf[(0, j)]).abs() < 2.0 * 2e-4 * vmax,
+                "filter at {j}"
+            );
+        }
+    }
+    // The two terms enter the acceleration as u·y and u·y².
+    let names: Vec<&str> = full
+        .model
+        .terms()
+        .iter()
+        .map(|t| t.effect.as_str())
+        .collect();
+    let i1 = names
+        .iter()
+        .position(|n| *n == "input_gain_linear_in_y")
+        .unwrap();
+    let i2 = names
+        .iter()
+        .position(|n| *n == "input_gain_quadratic_in_y")
+        .unwrap();
+    let (lin, mut terms) = full.model.clone().into_parts();
+    terms[i1].coefficient = 3.0e3;
+    terms[i2].coefficient = 2.5e4;
+    let set = TermModel::new(lin, terms).unwrap();
+    let (x, uu) = ([0.12, -0.4, 0.05, 0.11], [0.07]);
+    let mut f0 = vec![0.0; 4];
+    let mut f1 = vec![0.0; 4];
+    mmenn::sysid_core::Dynamics::rhs(&full.model, 0.0, &x, &uu, &mut f0);
+    mmenn::sysid_core::Dynamics::rhs(&set, 0.0, &x, &uu, &mut f1);
+    let expect = 0.07 * (3.0e3 * 0.12 + 2.5e4 * 0.12 * 0.12);
+    assert!(
+        (f1[1] - f0[1] - expect).abs() < 1e-9 * expect.abs(),
+        "{} vs {expect}",
+        f1[1] - f0[1]
+    );
+    for s in [0, 2, 3] {
+        assert_eq!(f1[s], f0[s], "state {s}'s equation");
+    }
+}
