@@ -252,6 +252,6 @@ fn silverbox_output_filter_and_input_gain() {
         f1[1] - f0[1]
     );
     for s in [0, 2, 3] {
-        assert_eq!(f1[s], f0[s], "state {s}'s equation");
+        assert!((f1[s] - f0[s]).abs() < 1e-12, "state {s}'s equation");
     }
 }
