@@ -136,7 +136,14 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              proposals of that rule extrapolated worse there (a measurement filter on the \
              output, 0.3339 mV at its best time constant; PNLSS's full state polynomial in \
              (y, y'), 0.3360 mV, though it fitted the training record best, 0.2250 mV); the \
-             error split above was measured without it. Quadratic drag \
+             error split above was measured without it. More amplitude in the training \
+             data does not close the gap either: the same structure calibrated on the \
+             training record plus schroeder80mV (outputs to 0.265 V; outside the loader's \
+             split, a diagnosis, never a reported row) scores 0.2789 mV on test_arrow_full \
+             against 0.2846 mV, 0.2224 against 0.2270 mV before sample 29 049 and 0.3868 \
+             against 0.3946 mV after it (explore_silverbox_amplitude_coverage on 1e0abe4), \
+             so what the grey box misses at the arrow's largest amplitudes is not in this \
+             polynomial class or not excited by the multisines. Quadratic drag \
              (v·|v|) moved the arrow most: without it (training 0.2565 mV, 0.2-ms stage) \
              test_arrow_full was 0.378 mV, with it 0.293 mV; the input stage's time constant \
              then went from 0.2 to 0.1 ms by its training RMSE (0.2392 → 0.2311 mV; \
