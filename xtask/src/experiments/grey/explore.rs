@@ -484,7 +484,7 @@ fn explore_silverbox_amplitude_coverage() {
         ],
     )
     .unwrap();
-    let with_sch = std::env::var("SB_COVER").map_or(false, |v| v == "1");
+    let with_sch = std::env::var("SB_COVER").is_ok_and(|v| v == "1");
     let exps = if with_sch {
         vec![est.clone(), sch.clone()]
     } else {
