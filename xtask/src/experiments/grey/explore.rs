@@ -494,16 +494,8 @@ fn explore_silverbox_amplitude_coverage() {
     let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("y")], exps)
         .unwrap()
         .with_intersample(spec.intersample);
-    let cfg = CalibrationConfig {
-        integrator: spec.integrator,
-        weights: OutputWeights::DataVariance,
-        terms: Some(spec.free.clone()),
-        horizons: spec.horizons.clone(),
-        max_iterations: 60,
-        tolerance: 1e-10,
-        initial_state: InitialState::Estimate,
-        ..CalibrationConfig::default()
-    };
+    // Exactly the reported grey box's calibration, on one or two records.
+    let cfg = calibration(&spec);
     let clock = std::time::Instant::now();
     let cal = calibrate(&spec.model, &data, &x0, &cfg).unwrap();
     let xs = window_state(&spec, &cal.model, &arrow, 50).unwrap();
