@@ -55,8 +55,8 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             steps: if quick { 10 } else { 30 },
             noise: 1e-3,
             // The covariance constraint's W, computed each run (1.762750916e4 with the
-            // pump-lag grey box on 4df7330; a held value went stale when the grey box
-            // changed).
+            // pump-lag grey box on 4df7330, as held until 5046733; a held value goes stale
+            // when the grey box changes, as Silverbox's did).
             w: None,
             // 1024 samples and an unmeasured upper level: the network picked by training
             // free-run error overfitted (full run on 6f01f80: training 0.244 V, test
