@@ -681,6 +681,17 @@ pub enum SilverboxExtra {
     OutputFilter(f64),
 }
 
+/// The structure the Silverbox table reports (and MME/NN builds on): cubic + quadratic
+/// spring, y²·y' damping, quadratic drag, the displacement-dependent input gain and the
+/// 0.1-ms input stage (docs/decisions/silverbox-schroeder-rule.md).
+pub const SILVERBOX_REPORTED: [SilverboxExtra; 5] = [
+    SilverboxExtra::QuadraticSpring,
+    SilverboxExtra::DisplacementDamping,
+    SilverboxExtra::QuadraticDrag,
+    SilverboxExtra::InputGainVariation,
+    SilverboxExtra::Feedthrough(SILVERBOX_STAGE_TAU),
+];
+
 /// Silverbox's sample interval, s (10 MHz / 16 384 = 610.35 Hz; the data README).
 const SILVERBOX_DT: f64 = 16_384.0 / 1e7;
 

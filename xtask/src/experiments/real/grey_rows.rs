@@ -53,26 +53,12 @@ pub(super) fn grey_candidates(
         Benchmark::Silverbox => {
             let (k, c, b) = oscillator_guess(&data.estimation.experiments()[0])?;
             use grey::SILVERBOX_STAGE_TAU;
-            use grey::SilverboxExtra::{
-                DisplacementDamping, Feedthrough, InputGainVariation, QuadraticDrag,
-                QuadraticSpring,
-            };
+            use grey::SilverboxExtra::{DisplacementDamping, Feedthrough, QuadraticSpring};
             let mut v = vec![(
                 "cubic + quadratic spring, y²·y' damping, quadratic drag, input gain varying \
                  with y, input stage τ = 0.1 ms"
                     .to_string(),
-                grey::silverbox_model(
-                    k,
-                    c,
-                    b,
-                    &[
-                        QuadraticSpring,
-                        DisplacementDamping,
-                        QuadraticDrag,
-                        InputGainVariation,
-                        Feedthrough(SILVERBOX_STAGE_TAU),
-                    ],
-                )?,
+                grey::silverbox_model(k, c, b, &grey::SILVERBOX_REPORTED)?,
             )];
             if mode == Mode::Quick {
                 // The quick run's critical path: one horizon stage fewer (0.3 dropped).

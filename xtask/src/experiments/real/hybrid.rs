@@ -37,8 +37,6 @@ struct Effort {
     window: usize,
     steps: usize,
     noise: f64,
-    /// MME's `W`, or `None` for the covariance constraint's.
-    w: Option<f64>,
     selection: NetworkSelection,
     /// Where the guard judges physics alone, the network and the refined network.
     guard: GuardHeldOut,
@@ -54,10 +52,6 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             window: 128,
             steps: if quick { 10 } else { 30 },
             noise: 1e-3,
-            // The covariance constraint's W, computed each run (1.762750916e4 with the
-            // pump-lag grey box on 4df7330, as held until 5046733; a held value goes stale
-            // when the grey box changes, as Silverbox's did).
-            w: None,
             // 1024 samples and an unmeasured upper level: the network picked by training
             // free-run error overfitted (full run on 6f01f80: training 0.244 V, test
             // 0.624 V against the grey box's 0.393 / 0.458 V); the thesis rule on the
@@ -77,11 +71,6 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             // network barely changes the grey box here) and cost most of 227 s.
             steps: if quick { 3 } else { 8 },
             noise: 1e-8,
-            // The covariance constraint's W, computed each run (1.236783635 with the
-            // displacement-dependent input gain on 64505f9, 1.243509870 without it: the
-            // value held until 97a9116 had gone stale with the grey box; computing it cost
-            // about 5 s of the 257-s job).
-            w: None,
             selection: NetworkSelection::FreeRun,
             // Five more fits would break the 10-minute budget; one more does not
             // (docs/decisions/silverbox-leak-free-guard.md). Quick: the plain last fifth
@@ -99,8 +88,6 @@ fn effort(b: Benchmark, mode: Mode) -> Effort {
             window: 500,
             steps: if quick { 10 } else { 30 },
             noise: 4e-10,
-            // The covariance constraint's W, computed each run (20467692.54 on 7b7e0a7).
-            w: None,
             selection: NetworkSelection::FreeRun,
             // docs/decisions/emps-kfold-guard-and-hybrid-start.md: the fit takes under 60 s.
             guard: GuardHeldOut::Folds(5),
@@ -119,9 +106,10 @@ fn fit_options(eff: &Effort, substeps: usize, window: usize) -> FitOptions {
         x0_window: window,
         estimate: mmenn::estimate::EstimateOptions {
             substeps: Some(substeps),
-            w: eff.w.map_or(mmenn::estimate::WeightChoice::Auto, |w| {
-                mmenn::estimate::WeightChoice::Value(w)
-            }),
+            // The covariance constraint's W, computed each run (values held until 5046733
+            // went stale when a grey box changed; computing it costs about 5 s on
+            // Silverbox, 26 s on Cascaded Tanks).
+            w: mmenn::estimate::WeightChoice::Auto,
             ..Default::default()
         },
         selection: eff.selection,
@@ -368,27 +356,22 @@ fn hybrid_rows_inner(
             Err(err) => table.push_remark(&cells, &[None], &failure(&err)),
         }
     }
+    let w_text = summary
+        .w_by_correction
+        .iter()
+        .map(|(k, w)| format!("{k} {w:.9e}"))
+        .collect::<Vec<_>>()
+        .join(", ");
     table.note(format!(
         "{LABEL} ({OFFICIAL}): assumed model = the calibrated grey box ({chosen}, training \
-         free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W {}) on all {} training samples at full rate, correction on the {} \
+         free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W by the covariance constraint: {}) on all {} training samples at full rate, correction on the {} \
          equation; network of {} hidden units picked by {} from a 1–{} × {} sweep on d̂; {refine}; {guard}; training free-run RMSE {train_rmse:.4} {unit} (from MME's x̂(t0)). \
          Test: x0 fitted to the first {window} samples, free run over the whole record ({}). \
          Time to accuracy: grey box {grey_seconds:.1} s, MME + network + refinement \
          {fit_seconds:.1} s wall, rayon pool of {} threads on 2 shared cores.",
         scale * gfit.train_rmse,
         eff.noise,
-        match eff.w {
-            Some(w) => format!("= {w:.4e}, the covariance constraint's value on the training record, held"),
-            None => format!(
-                "by the covariance constraint: {}",
-                summary
-                    .w_by_correction
-                    .iter()
-                    .map(|(k, w)| format!("{k} {w:.9e}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ),
-        },
+        w_text,
         est.len(),
         spec.linear.correction_names().join(", "),
         summary.hidden,
