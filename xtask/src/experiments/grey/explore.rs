@@ -2,7 +2,8 @@
 //! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
 //! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 area1 area2 trainx0
 //! pumpq lag
-//! holdout (calibrate on the first 80 %, score the last 20 %) sub hz
+//! holdout (calibrate on the first 80 %, score the last 20 %) sub hz;
+//! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
 //! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos holdout; `GREY_SB` keys q dd vv
 //! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
@@ -512,4 +513,41 @@ fn explore_silverbox_amplitude_coverage() {
             tests: Vec::new(),
         })
     );
+}
+
+/// The rule of docs/decisions/emps-window-state-calibration.md on the training record only
+/// (no test record is run): (a) each procedure's training free run from the state fitted to
+/// the first 20 samples, (b) calibrated on the first 80 %, the last 20 % from its own
+/// 20-sample state.
+#[test]
+#[ignore]
+fn explore_emps_window_rule() {
+    let d = data(Benchmark::Emps);
+    let est = &d.estimation.experiments()[0];
+    let w = Benchmark::Emps.init_window();
+    let (scale, unit) = Benchmark::Emps.reporting_unit();
+    let y: Vec<f64> = est.outputs().row(0).iter().copied().collect();
+    for (label, state) in [
+        ("current (state calibrated)", TrainState::Calibrated),
+        ("W (state fitted to the window)", TrainState::Window),
+    ] {
+        let mut spec = emps_spec(3e-4).unwrap();
+        spec.train_state = state;
+        let clock = std::time::Instant::now();
+        let fit = fit_grey(&spec, est, &[], w).unwrap();
+        let secs = clock.elapsed().as_secs_f64();
+        let proto = window_state(&spec, &fit.model, est, w)
+            .ok()
+            .and_then(|x| free_run(&spec, &fit.model, est, &x).ok())
+            .map(|s| scale * rmse_after(&y, &s, w))
+            .unwrap_or(f64::NAN);
+        println!(
+            "{label}: (a) train from the 20-sample state {proto:.4} {unit} (from its own \
+             state {:.4}; {secs:.1} s)\n    {} x0 {:?}",
+            scale * fit.train_rmse,
+            terms(&fit),
+            fit.x0
+        );
+        held_out(Benchmark::Emps, &format!("{label} (b)"), &spec);
+    }
 }
