@@ -260,8 +260,9 @@ pub(super) fn grey_rows(
                      calibrated as above from the symmetric grey box's coefficients; \
                      calibrated terms: {}; training free-run RMSE {:.4} {unit} (symmetric: \
                      {:.4}); training wall time {seconds:.1} s. It fits the training record \
-                     better and the test record worse: the test experiment adds force pulses \
-                     that the input vir does not carry and excites a flexibility the \
+                     better and the test record worse: the test experiment adds 5-V force \
+                     pulses to the drive command vir (a wider input than the training \
+                     record's, with steps it never has) and excites a flexibility the \
                      training record does not (data README), so training error does not \
                      rank these structures on the test record.",
                     grey_terms(&a),

@@ -166,25 +166,36 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              docs/decisions/emps-kfold-guard-and-hybrid-start.md). Its network's gain holds on \
              training stretches it was not trained on (5-fold guard, pooled 1.48 mm against \
              the physics' 2.84 mm) but not on the official test record (7.52 against \
-             5.97 mm), whose force pulses the input does not carry. On the official test record the test error of the grey box (5.97 mm) \
+             5.97 mm), whose input has 5-V steps (the force pulses, below) that the training \
+             input never has. On the official test record the test error of the grey box (5.97 mm) \
              is almost all slow drift: its 1-s moving average carries 5.76 mm RMS and the rest \
              0.45 mm; it does not depend on speed (5.8–6.2 mm RMS at every |v| band from rest \
              to 0.2 m/s), moves in steps during the strokes and stays between them (segment \
              means from −11.3 to +8.6 mm), and grows with position (slope −0.042 mm/mm; \
              removing an affine function of position leaves 3.9 mm) — measured with \
              explore_emps on 7b7e0a7. The position is the integral of the simulated velocity: \
-             a force the input vir does not carry (the test record adds force pulses) or a \
-             flexibility the training record does not excite (data README) leaves a permanent \
-             position offset that the open-loop model cannot remove; the same training run \
-             started from a state fitted to its first 20 samples (the test protocol) gives \
-             5.21 mm instead of 2.43 mm from the calibrated state, so part of it is the \
-             20-sample state itself. The pulse force is not in the data either: the test \
-             record's pulses_N column is a 0/5 square wave (switching every 0.5 s from \
-             0.343 s, 50 % duty), and adding it to the calibrated grey box as a 5-N force on \
-             the load, with either sign, raises the test RMSE from 6.46 mm to 148 and 131 mm \
-             (an independent scipy LSODA run of the same equation at rtol 1e-8 from the \
-             measured start, not the 20-sample state), so the column cannot be read as the \
-             force on the load (a trigger level, probably), and no model under the protocol (input vir only) is told the pulses. \
+             a force error the calibration did not see or a flexibility the training \
+             record does not excite (data README) leaves a permanent position offset that the \
+             open-loop model cannot remove; the same training run started from a state \
+             fitted to its first 20 samples (the test protocol) gives 5.21 mm instead of \
+             2.43 mm from the calibrated state, so part of it is the 20-sample state itself \
+             (calibrating with the state fitted to the window instead lowers that to \
+             2.91 mm but predicts a held-out last fifth worse, 4.82 against 4.58 mm: \
+             docs/decisions/emps-window-state-calibration.md). The force pulses are in the \
+             input: the test record's pulses_N column is a 0/5 square wave (switching every \
+             0.5 s from 0.343 s, 50 % duty), and vir steps by +5.02…+5.15 at each of its 25 \
+             rising edges and by −4.92…−5.17 at each of its 24 falling ones, while between \
+             other samples it moves by at most 0.74 (median 0.009), and vir minus pulses_N \
+             has no step larger than 0.74. So the pulses were added to the drive command \
+             (in volts, despite the column's name), every model here is driven by them, and \
+             adding the column again as a 5-N force on the load double-counts it (the test \
+             RMSE rises from 6.46 mm to 148 and 131 mm with either sign; an independent \
+             scipy LSODA run of the same equation at rtol 1e-8 from the measured start). \
+             Until 2026-11-27 this note read the column as a force the input does not carry; \
+             the edges above show otherwise. What the test record does carry that the \
+             training record does not is a wider input (vir from −7.9 to +9.0 V against \
+             −4.3 to +4.1 V) and 5-V steps where the training input moves by at most 0.37 V \
+             per sample, which excite the flexibility the data README reports. \
              Training error does not rank the structures on the test record (the \
              asymmetric-friction row)"
         }
