@@ -26,8 +26,8 @@ pub struct GreySpec {
     pub intersample: InterSample,
     /// Integrator of every free run.
     pub integrator: Integrator,
-    /// Starting state of a record (from its first outputs).
-    pub x0_guess: fn(&Experiment) -> Vec<f64>,
+    /// Where each state starts on a record, in state order ([`GreySpec::x0_guess`]).
+    pub starts: Vec<Start>,
     /// Horizons of the calibration stages (fractions of the record).
     pub horizons: Vec<f64>,
     /// Whether a test record's window fit starts from the calibrated training initial state
@@ -36,6 +36,33 @@ pub struct GreySpec {
     pub test_from_training_x0: bool,
     /// How the training record's initial state enters the calibration.
     pub train_state: TrainState,
+}
+
+/// Where one state of a grey box starts on a record, read from its first samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// The first output (a measured position or level, or a filter on it).
+    Output,
+    /// The first difference of the output over one sample (a velocity).
+    OutputSlope,
+    /// The first input (a lag on the input, settled).
+    Input,
+}
+
+impl GreySpec {
+    /// The starting state of `e` from its first samples (see [`Start`]).
+    pub fn x0_guess(&self, e: &Experiment) -> Vec<f64> {
+        let (y, u) = (e.outputs(), e.inputs());
+        self.starts
+            .iter()
+            .map(|s| match s {
+                Start::Output => y[(0, 0)],
+                Start::OutputSlope if e.len() > 1 => (y[(0, 1)] - y[(0, 0)]) / e.dt(),
+                Start::OutputSlope => 0.0,
+                Start::Input => u[(0, 0)],
+            })
+            .collect()
+    }
 }
 
 /// How the training record's initial state enters a grey box's calibration.
@@ -98,7 +125,7 @@ pub fn window_state(
     exp: &Experiment,
     window: usize,
 ) -> Result<Vec<f64>> {
-    window_state_from(spec, model, exp, window, (spec.x0_guess)(exp))
+    window_state_from(spec, model, exp, window, spec.x0_guess(exp))
 }
 
 /// [`window_state`] started from the given state.
@@ -180,7 +207,7 @@ pub fn fit_grey(
     let cal = calibrate(
         &spec.model,
         &data,
-        &[(spec.x0_guess)(est)],
+        &[spec.x0_guess(est)],
         &calibration(spec),
     )
     .context("grey-box calibration")?;
@@ -194,7 +221,7 @@ pub fn fit_grey(
     let train_rmse = train_sim
         .as_ref()
         .map_or(f64::NAN, |s| rmse_after(&y, s, window));
-    let train_rmse_all = free_run(spec, &model, est, &(spec.x0_guess)(est))
+    let train_rmse_all = free_run(spec, &model, est, &spec.x0_guess(est))
         .map_or(f64::NAN, |s| rmse_after(&y, &s, 0));
     let tests = tests
         .iter()
@@ -472,7 +499,7 @@ pub fn emps_model(o: &EmpsOptions) -> Result<GreySpec> {
         // 800 1/s, is inside its stability bound (2.8/ms); two sub-steps gave the same
         // training RMSE to 0.001 mm at three times the cost.
         integrator: Integrator::Rk4 { substeps: 1 },
-        x0_guess: oscillator_x0,
+        starts: vec![Start::Output, Start::OutputSlope],
         // From a calibrated start, one stage over the whole record: the staged horizons
         // from the symmetric fit's coefficients failed (the asymmetric model's free run
         // diverged at t = 3.2 s in the 25 % stage).
@@ -744,40 +771,21 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
             coefficient: *c,
         }),
     )?;
-    // Levels start at the first reading; a pump lag starts at the first input.
-    let x0_guess: fn(&Experiment) -> Vec<f64> = match (o.sensor.is_some(), o.pump_lag.is_some()) {
-        (true, false) => |e| vec![e.outputs()[(0, 0)]; 3],
-        (false, false) => |e| vec![e.outputs()[(0, 0)]; 2],
-        (true, true) => |e| {
-            let y0 = e.outputs()[(0, 0)];
-            vec![y0, y0, y0, e.inputs()[(0, 0)]]
-        },
-        (false, true) => |e| {
-            let y0 = e.outputs()[(0, 0)];
-            vec![y0, y0, e.inputs()[(0, 0)]]
-        },
-    };
+    // Levels (and the sensor) start at the first reading; a pump lag at the first input.
+    let mut starts = vec![Start::Output; if o.sensor.is_some() { 3 } else { 2 }];
+    if o.pump_lag.is_some() {
+        starts.push(Start::Input);
+    }
     Ok(GreySpec {
         model,
         free,
         intersample: InterSample::Zoh,
         integrator: Integrator::Rk4 { substeps: 8 },
-        x0_guess,
+        starts,
         horizons: vec![0.5, 1.0],
         test_from_training_x0: false,
         train_state: TrainState::Calibrated,
     })
-}
-
-/// Position and finite-difference velocity at a record's start.
-fn oscillator_x0(e: &Experiment) -> Vec<f64> {
-    let y = e.outputs();
-    let v = if e.len() > 1 {
-        (y[(0, 1)] - y[(0, 0)]) / e.dt()
-    } else {
-        0.0
-    };
-    vec![y[(0, 0)], v]
 }
 
 /// Terms a Silverbox grey box may add to [`silverbox_model`]'s base, each a named physical
@@ -944,25 +952,13 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
                 None => 2,
             },
         },
-        x0_guess: match (lag.is_some(), filter.is_some()) {
-            (false, false) => oscillator_x0,
-            (true, false) => |e| {
-                let mut x = oscillator_x0(e);
-                x.push(e.inputs()[(0, 0)]);
-                x
-            },
-            (false, true) => |e| {
-                let mut x = oscillator_x0(e);
-                x.push(x[0]);
-                x
-            },
-            (true, true) => |e| {
-                let mut x = oscillator_x0(e);
-                x.push(e.inputs()[(0, 0)]);
-                x.push(x[0]);
-                x
-            },
-        },
+        // Position and velocity from the first samples; the input stage settled at the
+        // first input; the measurement filter at the first reading (state order as above).
+        starts: [Start::Output, Start::OutputSlope]
+            .into_iter()
+            .chain(w.map(|_| Start::Input))
+            .chain(z.map(|_| Start::Output))
+            .collect(),
         horizons: vec![0.02, 0.1, 0.3, 1.0],
         test_from_training_x0: false,
         train_state: TrainState::Calibrated,

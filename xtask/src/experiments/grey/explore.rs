@@ -477,7 +477,7 @@ fn explore_silverbox_amplitude_coverage() {
     } else {
         vec![est.clone()]
     };
-    let x0: Vec<Vec<f64>> = exps.iter().map(|e| (spec.x0_guess)(e)).collect();
+    let x0: Vec<Vec<f64>> = exps.iter().map(|e| spec.x0_guess(e)).collect();
     let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("y")], exps)
         .unwrap()
         .with_intersample(spec.intersample);

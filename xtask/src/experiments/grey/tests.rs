@@ -295,3 +295,37 @@ fn window_state_calibration_recovers_a_known_model() {
         "{x:?}"
     );
 }
+
+/// Each state starts where its [`Start`] says, in state order: position, first-difference
+/// velocity, the input stage at the first input, the measurement filter at the first
+/// reading (Silverbox); both levels, the sensor and the pump lag (Cascaded Tanks).
+#[test]
+fn starting_states_follow_the_state_layout() {
+    let e = Experiment::new(
+        0.0,
+        0.5,
+        DMatrix::from_row_slice(1, 3, &[7.0, 8.0, 9.0]),
+        DMatrix::from_row_slice(1, 3, &[2.0, 3.0, 5.0]),
+    )
+    .unwrap();
+    let sb = silverbox_model(
+        1.0,
+        0.1,
+        1.0,
+        &[
+            SilverboxExtra::Feedthrough(1e-4),
+            SilverboxExtra::OutputFilter(1e-4),
+        ],
+    )
+    .unwrap();
+    assert_eq!(sb.x0_guess(&e), vec![2.0, 2.0, 7.0, 2.0]);
+    let plain = silverbox_model(1.0, 0.1, 1.0, &[]).unwrap();
+    assert_eq!(plain.x0_guess(&e), vec![2.0, 2.0]);
+    let tanks = tanks_model(&TanksOptions {
+        sensor: Some(10.0),
+        pump_lag: Some(4.0),
+        ..TanksOptions::default()
+    })
+    .unwrap();
+    assert_eq!(tanks.x0_guess(&e), vec![2.0, 2.0, 2.0, 7.0]);
+}

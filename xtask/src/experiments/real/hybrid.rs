@@ -334,7 +334,7 @@ fn hybrid_rows_inner(
     if data.benchmark == Benchmark::Emps {
         // docs/decisions/emps-kfold-guard-and-hybrid-start.md, item 2: from the record's
         // measured start, as the grey-box rows (was MME's x̂(t0)).
-        let start = (gspec.x0_guess)(est);
+        let start = gspec.x0_guess(est);
         let cells = [
             LABEL,
             super::DYNONET_RECORD,
