@@ -83,6 +83,10 @@ pub struct FitOptions {
     /// Where the guard judges physics alone, the network and the refined network when no
     /// validation data is given. Default [`GuardHeldOut::LastFifth`].
     pub guard: GuardHeldOut,
+    /// What the network does outside the box its training pairs spanned, in every hybrid
+    /// this fit builds, judges and saves. Default [`nn::Domain::Extrapolate`] (the thesis
+    /// method; `--hold-network-domain` on the command line for [`nn::Domain::Hold`]).
+    pub network_domain: nn::Domain,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
@@ -95,13 +99,14 @@ fn select_by_free_run(
     data: &Dataset,
     x0: &[f64],
     substeps: usize,
+    domain: nn::Domain,
     skip: Option<&Range<usize>>,
 ) -> Result<(usize, f64)> {
     let exp = &data.experiments()[0];
     let c = spec.linear.c();
     let mut best: Option<(usize, f64)> = None;
     for (i, net) in networks.iter().enumerate() {
-        let model = hybrid_model(spec, net.clone(), x0, substeps)?;
+        let model = hybrid_model(spec, net.clone(), x0, substeps, domain)?;
         let Ok(xs) =
             model.simulate_states_with(x0, exp.t0(), exp.dt(), exp.inputs(), exp.intersample())
         else {
@@ -148,6 +153,7 @@ impl Default for FitOptions {
             training: Training::Trainlm,
             ensemble: NetworkEnsemble::Single,
             guard: GuardHeldOut::LastFifth,
+            network_domain: nn::Domain::Extrapolate,
         }
     }
 }
@@ -199,6 +205,7 @@ pub(crate) fn hybrid_loaded(
     x0: &[f64],
     dt: f64,
     substeps: usize,
+    domain: nn::Domain,
 ) -> Result<(HybridFile, LoadedModel)> {
     let file = HybridFile {
         format: HYBRID_FORMAT.into(),
@@ -207,8 +214,9 @@ pub(crate) fn hybrid_loaded(
         x0: x0.to_vec(),
         dt,
         substeps,
+        domain,
     };
-    let model = hybrid_model(spec, network.clone(), x0, substeps)?;
+    let model = hybrid_model(spec, network.clone(), x0, substeps, domain)?;
     let loaded = LoadedModel {
         path: PathBuf::from("model.json"),
         kind: ModelKind::Hybrid,
@@ -488,11 +496,25 @@ pub fn compute_fit(
         }
         _ => {
             let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
-            guard::choose(&spec, candidates, &held, exp0.dt(), opts.substeps)?
+            guard::choose(
+                &spec,
+                candidates,
+                &held,
+                exp0.dt(),
+                opts.substeps,
+                opts.network_domain,
+            )?
         }
     };
     let network = kept;
-    let (file, loaded) = hybrid_loaded(&spec, &network, &x0, exp0.dt(), opts.substeps)?;
+    let (file, loaded) = hybrid_loaded(
+        &spec,
+        &network,
+        &x0,
+        exp0.dt(),
+        opts.substeps,
+        opts.network_domain,
+    )?;
     let train_j = judge_outputs(&loaded, data, opts.x0_window)?;
     let train = FreeRunReport::of(&train_j);
     let validation_j = match &val {
@@ -659,6 +681,7 @@ fn train_networks(
                 set.data,
                 x0,
                 opts.substeps,
+                opts.network_domain,
                 set.skip.as_ref(),
             )?;
             (i, Some(sse))

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use nn::{Mlp, NetCorrection};
+use nn::{Domain, Mlp, NetCorrection};
 use serde::{Deserialize, Serialize};
 use sysid_core::{CorrectedModel, TermModel};
 
@@ -31,6 +31,10 @@ pub struct HybridFile {
     pub dt: f64,
     /// RK4 sub-steps per sample interval in free-run simulation.
     pub substeps: usize,
+    /// What the network does outside the box its training pairs spanned (absent in
+    /// files written before it existed: [`Domain::Extrapolate`]).
+    #[serde(default)]
+    pub domain: Domain,
 }
 
 /// The completed plant model: assumed dynamics (with named terms) plus the network.
@@ -94,7 +98,13 @@ impl HybridFile {
     /// Build the simulatable hybrid model.
     pub fn model(&self) -> Result<HybridModel> {
         let spec = self.spec()?;
-        hybrid_model(&spec, self.network.clone(), &self.x0, self.substeps)
+        hybrid_model(
+            &spec,
+            self.network.clone(),
+            &self.x0,
+            self.substeps,
+            self.domain,
+        )
     }
 }
 
@@ -107,16 +117,18 @@ fn model_problem(problem: crate::error::ModelProblem) -> MmennError {
     }
 }
 
-/// Build `ẋ = f(x, u) + E·NN(x, u)` from a model file and a network.
+/// Build `ẋ = f(x, u) + E·NN(x, u)` from a model file and a network, which acts outside
+/// its training box as `domain` says.
 pub fn hybrid_model(
     spec: &ModelSpec,
     network: Mlp,
     x0: &[f64],
     substeps: usize,
+    domain: Domain,
 ) -> Result<HybridModel> {
     let lin = &spec.linear;
     let base = spec.term_model().map_err(model_problem)?;
-    let corr = NetCorrection::new(network, lin.n_states())?;
+    let corr = NetCorrection::new(network, lin.n_states())?.with_domain(domain);
     let mut model = CorrectedModel::new(
         base,
         corr,

@@ -8,6 +8,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_core::{ChannelMetrics, Dataset, Experiment, Substeps};
 
@@ -68,8 +69,52 @@ pub struct PredictSummary {
     pub substeps: Option<usize>,
     /// k-step-ahead prediction, when asked for (its own rule and scored window).
     pub k_step: Option<Judgement>,
+    /// A hybrid model's network along the free run: how often it was asked outside the
+    /// box its training pairs spanned, and what it did there.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub network_domain: Option<NetworkDomainReport>,
     /// Files written.
     pub files: Vec<String>,
+}
+
+/// Where a hybrid's free run took its network (`nn::NetCorrection::in_domain`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NetworkDomainReport {
+    /// What the network does outside its training box.
+    pub domain: nn::Domain,
+    /// Samples of the free run at which `[x; u]` lies outside the box.
+    pub outside: usize,
+    /// Samples of the free run.
+    pub samples: usize,
+}
+
+impl NetworkDomainReport {
+    /// Fraction of the free run's samples outside the box.
+    pub fn fraction(&self) -> f64 {
+        self.outside as f64 / self.samples.max(1) as f64
+    }
+
+    /// The report of `model`'s network along the free-run `states` (`n × N`) driven by
+    /// `exp`'s inputs, or `None` for a model without a network.
+    pub fn of(model: &LoadedModel, exp: &Experiment, states: &DMatrix<f64>) -> Option<Self> {
+        let file = model.hybrid.as_ref()?;
+        let corr = nn::NetCorrection::new(file.network.clone(), states.nrows()).ok()?;
+        let mut x = vec![0.0; states.nrows()];
+        let samples = states.ncols().min(exp.len());
+        let outside = (0..samples)
+            .filter(|&k| {
+                for (i, v) in x.iter_mut().enumerate() {
+                    *v = states[(i, k)];
+                }
+                !corr.in_domain(&x, exp.input(k))
+            })
+            .count();
+        Some(Self {
+            domain: file.domain,
+            outside,
+            samples,
+        })
+    }
 }
 
 /// [`run_predict_with`] with free run only, the initial-state fit over `window` samples.
@@ -292,6 +337,7 @@ pub fn compute_predict_record_with(
         scored: free.scored,
         substeps,
         k_step,
+        network_domain: NetworkDomainReport::of(model, &exp, &free.states),
         files,
     };
     Ok(PredictOutcome {

@@ -432,3 +432,103 @@ fn band_ensemble_is_one_network_of_the_equally_good_ones() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `FitOptions::network_domain = Hold` is saved in `model.json`, and `predict` counts the
+/// free-run samples at which the network's inputs leave the box of its training pairs —
+/// checked by brute force from `prediction.csv`'s states, the record's input and the
+/// saved network's scaler. The test recipe's input is another signal than the training
+/// one, and some of its samples leave the box; with the saved domain switched to
+/// `extrapolate` the prediction changes (its count checked the same way).
+#[test]
+fn held_network_domain_is_saved_and_reported() {
+    let dir = scratch("pend-hold");
+    let (train, test) = clean_pendulum(&dir);
+    let fit_dir = dir.join("fit");
+    run_fit(
+        std::slice::from_ref(&train.data),
+        &train.model,
+        &[],
+        &FitOptions {
+            network_domain: mmenn::nn::Domain::Hold,
+            max_hidden: 2,
+            inits: 2,
+            ..FitOptions::default()
+        },
+        &fit_dir,
+    )
+    .unwrap();
+    let json = std::fs::read_to_string(fit_dir.join("model.json")).unwrap();
+    let file: mmenn::fit::HybridFile = serde_json::from_str(&json).unwrap();
+    assert_eq!(file.domain, mmenn::nn::Domain::Hold);
+    let held = predict_truth(&fit_dir, &test, &dir.join("pred-hold"));
+    let report = held.network_domain.expect("a hybrid's report");
+    assert_eq!(report.domain, mmenn::nn::Domain::Hold);
+    // Brute force: every sample's [x; u] against the saved scaler's box.
+    let pred = mmenn::data_file::read_table(&dir.join("pred-hold").join("prediction.csv")).unwrap();
+    let rec = mmenn::data_file::read_table(&test.truth).unwrap();
+    let col = |t: &mmenn::data_file::Table, n: &str| t.columns[t.column_index(n).unwrap()].clone();
+    let (theta, omega, u) = (col(&pred, "theta"), col(&pred, "omega"), col(&rec, "u"));
+    let s = file.network.input_scaler().clone();
+    // Samples within rounding of the box's faces may fall either way: bounds.
+    let count = |edge: f64| {
+        (0..theta.len())
+            .filter(|&k| {
+                [theta[k], omega[k], u[k]]
+                    .iter()
+                    .zip(s.centre().iter().zip(s.half_range()))
+                    .any(|(v, (c, h))| ((v - c) / h).abs() > edge)
+            })
+            .count()
+    };
+    let (surely, maybe) = (count(1.0 + 1e-9), count(1.0 - 1e-9));
+    assert_eq!(report.samples, theta.len());
+    assert!(
+        (surely..=maybe).contains(&report.outside),
+        "{} outside, brute force {surely}..={maybe}",
+        report.outside
+    );
+    assert!(surely > 0, "the test record never left the training box");
+    let outside = report.outside;
+    // The same network extrapolating: same count, another prediction.
+    let free = mmenn::fit::HybridFile {
+        domain: mmenn::nn::Domain::Extrapolate,
+        ..file
+    };
+    let free_dir = dir.join("fit-free");
+    std::fs::create_dir_all(&free_dir).unwrap();
+    std::fs::write(
+        free_dir.join("model.json"),
+        serde_json::to_string(&free).unwrap(),
+    )
+    .unwrap();
+    let other = predict_truth(&free_dir, &test, &dir.join("pred-free"));
+    let r = other.network_domain.unwrap();
+    assert_eq!(r.domain, mmenn::nn::Domain::Extrapolate);
+    // Its own trajectory leaves the box elsewhere: brute force on its states.
+    let pred_free =
+        mmenn::data_file::read_table(&dir.join("pred-free").join("prediction.csv")).unwrap();
+    let (th, om) = (col(&pred_free, "theta"), col(&pred_free, "omega"));
+    let count_free = |edge: f64| {
+        (0..th.len())
+            .filter(|&k| {
+                [th[k], om[k], u[k]]
+                    .iter()
+                    .zip(s.centre().iter().zip(s.half_range()))
+                    .any(|(v, (c, h))| ((v - c) / h).abs() > edge)
+            })
+            .count()
+    };
+    assert!((count_free(1.0 + 1e-9)..=count_free(1.0 - 1e-9)).contains(&r.outside));
+    assert!(r.outside > 0 && outside > 0);
+    let omega_free = col(
+        &mmenn::data_file::read_table(&dir.join("pred-free").join("prediction.csv")).unwrap(),
+        "omega",
+    );
+    assert!(
+        omega
+            .iter()
+            .zip(&omega_free)
+            .any(|(a, b)| (a - b).abs() > 1e-9)
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

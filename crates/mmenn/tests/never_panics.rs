@@ -145,6 +145,7 @@ fn model_json() -> String {
         x0: vec![0.0, 0.0],
         dt: 0.01,
         substeps: 4,
+        domain: mmenn::nn::Domain::Extrapolate,
     };
     serde_json::to_string(&file).unwrap()
 }

@@ -286,6 +286,7 @@ fn model_json_with_a_bad_period_is_refused() {
         x0: vec![0.0, 0.0],
         dt: 0.01,
         substeps: 4,
+        domain: mmenn::nn::Domain::Extrapolate,
     };
     let good = serde_json::to_string(&file).unwrap();
     assert!(mmenn::fit::HybridFile::parse(Path::new("model.json"), &good).is_ok());

@@ -1,6 +1,12 @@
 //! A trained network used as the model-error term of a hybrid model: [`NetCorrection`]
 //! implements `sysid_core::Correction` with network inputs `[x, u]` and outputs `d`, and
 //! gives the Jacobians `∂d/∂x`, `∂d/∂u` for linearisation.
+//!
+//! Outside the box its training pairs spanned (the input scaler's `[−1, 1]` per input),
+//! a network extrapolates however its weights happen to: [`Domain::Hold`] clamps every
+//! scaled input to `[−1, 1]` first, so the correction keeps its value at the nearest
+//! point of the box (the physics carries the model beyond the data, the network does
+//! not). [`Domain::Extrapolate`], the thesis method, evaluates the network anywhere.
 
 use std::cell::RefCell;
 
@@ -18,18 +24,35 @@ use crate::mlp::{Mlp, Workspace};
 pub struct NetCorrection {
     net: Mlp,
     n_states: usize,
+    #[serde(default)]
+    domain: Domain,
+}
+
+/// What a [`NetCorrection`] does with inputs outside the box its training data spanned
+/// (module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Domain {
+    /// Evaluate the network wherever it is asked (the thesis method).
+    #[default]
+    Extrapolate,
+    /// Clamp each scaled input to `[−1, 1]`: the correction holds its value at the box's
+    /// nearest point, and its derivative along a clamped input is zero.
+    Hold,
 }
 
 #[derive(Deserialize)]
 struct NetCorrectionRaw {
     net: Mlp,
     n_states: usize,
+    #[serde(default)]
+    domain: Domain,
 }
 
 impl TryFrom<NetCorrectionRaw> for NetCorrection {
     type Error = NnError;
     fn try_from(raw: NetCorrectionRaw) -> Result<Self> {
-        NetCorrection::new(raw.net, raw.n_states)
+        Ok(NetCorrection::new(raw.net, raw.n_states)?.with_domain(raw.domain))
     }
 }
 
@@ -52,7 +75,35 @@ impl NetCorrection {
                 n_inputs: net.n_inputs(),
             });
         }
-        Ok(Self { net, n_states })
+        Ok(Self {
+            net,
+            n_states,
+            domain: Domain::Extrapolate,
+        })
+    }
+
+    /// The same correction with the given behaviour outside the training box.
+    pub fn with_domain(mut self, domain: Domain) -> Self {
+        self.domain = domain;
+        self
+    }
+
+    /// What the correction does outside the training box.
+    pub fn domain(&self) -> Domain {
+        self.domain
+    }
+
+    /// Whether `[x; u]` lies inside the box the network's input scaler maps onto
+    /// `[−1, 1]` (its training data's range per input; a constant channel counts as inside
+    /// only at its value). Slices of the wrong length are outside.
+    pub fn in_domain(&self, x: &[f64], u: &[f64]) -> bool {
+        let s = self.net.input_scaler();
+        x.len() == self.n_states
+            && x.len() + u.len() == self.net.n_inputs()
+            && x.iter()
+                .chain(u)
+                .zip(s.centre().iter().zip(s.half_range()))
+                .all(|(v, (c, h))| ((v - c) / h).abs() <= 1.0)
     }
 
     /// The network.
@@ -84,6 +135,7 @@ impl NetCorrection {
         NetView {
             net: &self.net,
             n_states: self.n_states,
+            domain: self.domain,
         }
     }
 
@@ -116,7 +168,16 @@ impl NetCorrection {
         // The forward pass sized only the activations; back-propagation needs the rest.
         ws.prepare(self.net.architecture());
         let n = self.n_states;
+        // Along a clamped input the correction does not change.
+        let hold = self.domain == Domain::Hold;
+        let s = self.net.input_scaler();
+        let (centre, half) = (s.centre(), s.half_range());
+        let clamped = |j: usize| {
+            let v = if j < n { x[j] } else { u[j - n] };
+            hold && ((v - centre[j]) / half[j]).abs() > 1.0
+        };
         self.net.input_gradients(ws, |o, j, v| {
+            let v = if clamped(j) { 0.0 } else { v };
             if j < n {
                 dx[(o, j)] = v;
             } else {
@@ -134,6 +195,7 @@ impl NetCorrection {
 pub(crate) struct NetView<'a> {
     pub(crate) net: &'a Mlp,
     pub(crate) n_states: usize,
+    pub(crate) domain: Domain,
 }
 
 impl NetView<'_> {
@@ -185,6 +247,11 @@ impl NetView<'_> {
         }
         for (((a, v), c), h) in us.iter_mut().zip(u).zip(&centre[n..]).zip(&half[n..]) {
             *a = (v - c) / h;
+        }
+        if self.domain == Domain::Hold {
+            for a in &mut ws.acts[..n + u.len()] {
+                *a = a.clamp(-1.0, 1.0);
+            }
         }
         Ok(())
     }
@@ -283,5 +350,64 @@ mod tests {
                 n_inputs: 3
             })
         ));
+    }
+
+    /// Held: outside the training box the correction equals its value at the box's
+    /// nearest point (each input clamped in original units, `centre ± half-range`), its
+    /// derivative along a clamped input is zero and along the others that of the network
+    /// at the clamped point; inside the box it is the network itself. Old JSON without
+    /// the field reads as extrapolating.
+    #[test]
+    #[allow(
+        clippy::float_cmp,
+        reason = "clamping in original units and in scaled units give the same scaled input"
+    )]
+    fn held_correction_keeps_its_edge_value() {
+        use crate::scaling::Scaler;
+        let s_in = Scaler::fit(&DMatrix::from_row_slice(
+            3,
+            2,
+            &[-1.0, 1.0, 0.0, 2.0, -0.5, 0.5],
+        ))
+        .unwrap();
+        let net = Mlp::new(&Architecture::single(3, 4, 2), 5)
+            .unwrap()
+            .with_scalers(s_in, Scaler::identity(2))
+            .unwrap();
+        let free = NetCorrection::new(net.clone(), 2).unwrap();
+        let held = free.clone().with_domain(Domain::Hold);
+        assert_eq!(held.domain(), Domain::Hold);
+        let (mut a, mut b) = ([0.0; 2], [0.0; 2]);
+        // Inside: identical.
+        free.eval(&[0.3, 1.2], &[0.1], &mut a);
+        held.eval(&[0.3, 1.2], &[0.1], &mut b);
+        assert_eq!(a, b);
+        assert!(held.in_domain(&[0.3, 1.2], &[0.1]));
+        // Outside in x0 (above) and u (below): the value at (1.0, 1.2, −0.5).
+        assert!(!held.in_domain(&[3.0, 1.2], &[-4.0]));
+        held.eval(&[3.0, 1.2], &[-4.0], &mut b);
+        free.eval(&[1.0, 1.2], &[-0.5], &mut a);
+        assert_eq!(a, b);
+        free.eval(&[3.0, 1.2], &[-4.0], &mut a);
+        assert!(a.iter().zip(&b).any(|(p, q)| (p - q).abs() > 1e-6));
+        let mut ws = Workspace::new();
+        let (mut dx, mut du) = (DMatrix::zeros(2, 2), DMatrix::zeros(2, 1));
+        held.jacobians(&[3.0, 1.2], &[-4.0], &mut b, &mut dx, &mut du, &mut ws)
+            .unwrap();
+        let edge = net.input_jacobian(&[1.0, 1.2, -0.5]).unwrap();
+        for o in 0..2 {
+            assert_eq!(dx[(o, 0)], 0.0);
+            assert_eq!(du[(o, 0)], 0.0);
+            assert!((dx[(o, 1)] - edge[(o, 1)]).abs() <= 1e-12 * edge[(o, 1)].abs().max(1.0));
+            assert!(edge[(o, 1)].abs() > 0.0);
+        }
+        // Serde: the field round-trips and old text without it extrapolates.
+        let text = serde_json::to_string(&held).unwrap();
+        assert!(text.contains("\"domain\":\"hold\""), "{text}");
+        let back: NetCorrection = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, held);
+        let old = text.replace(",\"domain\":\"hold\"", "");
+        let old: NetCorrection = serde_json::from_str(&old).unwrap();
+        assert_eq!(old.domain(), Domain::Extrapolate);
     }
 }

@@ -12,7 +12,7 @@ pub mod sweep;
 pub mod trajectory;
 
 pub use config::{Acceleration, Damping, ErrorSpace, LmConfig, ValidationSplit};
-pub use correction::NetCorrection;
+pub use correction::{Domain, NetCorrection};
 pub use error::{NnError, Result};
 pub use lm::{EpochInfo, StopReason, TrainReport, split_indices, train_lm};
 pub use mlp::{Architecture, Mlp, Workspace};

@@ -200,6 +200,17 @@ fn hybrid_output(
     window: usize,
     output: &str,
 ) -> Result<Vec<f64>> {
+    hybrid_output_domain(model_json, csv, choice, window, output).map(|(v, _)| v)
+}
+
+/// [`hybrid_output`] and where the free run took the hybrid's network.
+fn hybrid_output_domain(
+    model_json: &Path,
+    csv: &Path,
+    choice: &InitialChoice,
+    window: usize,
+    output: &str,
+) -> Result<(Vec<f64>, Option<mmenn::predict::NetworkDomainReport>)> {
     let model = mmenn::model::LoadedModel::read(model_json)?;
     let record = read_table(csv)?;
     let opts = mmenn::predict::PredictOptions {
@@ -208,10 +219,11 @@ fn hybrid_output(
         horizon: None,
     };
     let outcome = mmenn::predict::compute_predict(&model, &record, &opts)?;
-    outcome
+    let y = outcome
         .column(output)
         .map(<[f64]>::to_vec)
-        .with_context(|| format!("the prediction has no channel {output}"))
+        .with_context(|| format!("the prediction has no channel {output}"))?;
+    Ok((y, outcome.summary.network_domain))
 }
 
 type Setter = fn(Mode, &mmenn::benchmarks::BenchmarkData) -> Result<Setup>;

@@ -56,7 +56,14 @@ pub(super) fn choose_by_folds(
     };
     if stretches.is_empty() || stretches.iter().any(|r| r.len() < MIN_STRETCH) {
         let last = guard::held_out(data, None, est, x0, opts)?;
-        let (mut report, kept) = guard::choose(spec, candidates, &last, exp.dt(), opts.substeps)?;
+        let (mut report, kept) = guard::choose(
+            spec,
+            candidates,
+            &last,
+            exp.dt(),
+            opts.substeps,
+            opts.network_domain,
+        )?;
         report.held_out = format!(
             "{} ({held} asked for: fewer than 2 stretches or stretches shorter than \
              {MIN_STRETCH} samples of {len})",
@@ -167,8 +174,15 @@ fn fold(
             GuardCandidate::Network => t.before.clone(),
             GuardCandidate::Refined => t.network.clone(),
         };
-        let judged = hybrid_loaded(spec, &net, &start, first.dt(), opts.substeps)
-            .and_then(|(_, loaded)| judge_outputs(&loaded, &segment, w));
+        let judged = hybrid_loaded(
+            spec,
+            &net,
+            &start,
+            first.dt(),
+            opts.substeps,
+            opts.network_domain,
+        )
+        .and_then(|(_, loaded)| judge_outputs(&loaded, &segment, w));
         candidates.push(guard::score(kind, judged));
     }
     Ok(FoldScores {

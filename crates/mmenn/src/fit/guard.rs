@@ -327,10 +327,11 @@ pub(crate) fn choose(
     held: &HeldOut,
     dt: f64,
     substeps: usize,
+    domain: nn::Domain,
 ) -> Result<(GuardReport, Mlp)> {
     let mut scores = Vec::with_capacity(candidates.len());
     for (c, net) in &candidates {
-        let judged = hybrid_loaded(spec, net, &held.x0, dt, substeps)
+        let judged = hybrid_loaded(spec, net, &held.x0, dt, substeps, domain)
             .and_then(|(_, loaded)| judge_outputs(&loaded, &held.data, held.window));
         scores.push(score(*c, judged));
     }
@@ -501,6 +502,7 @@ mod tests {
             &held,
             0.05,
             4,
+            nn::Domain::Extrapolate,
         )
         .unwrap();
         let net = report.score(GuardCandidate::Network).unwrap();
@@ -563,6 +565,7 @@ mod tests {
             &held,
             0.05,
             4,
+            nn::Domain::Extrapolate,
         )
         .unwrap();
         assert_eq!(report.chosen, GuardCandidate::Network, "{}", report.reason);

@@ -123,7 +123,8 @@ pub(super) fn train_network_on_trajectories(
     let before = match val {
         Some((_, v)) => {
             let dt = v.experiments()[0].dt();
-            let (_, loaded) = hybrid_loaded(spec, network, x0, dt, opts.substeps)?;
+            let (_, loaded) =
+                hybrid_loaded(spec, network, x0, dt, opts.substeps, opts.network_domain)?;
             let j = judge_outputs(&loaded, v, opts.x0_window)?;
             Some(
                 j.channels
@@ -138,7 +139,13 @@ pub(super) fn train_network_on_trajectories(
         substeps: opts.substeps,
         ..opts.trajectory
     };
-    let mut model = crate::hybrid::hybrid_model(spec, network.clone(), x0, opts.substeps)?;
+    let mut model = crate::hybrid::hybrid_model(
+        spec,
+        network.clone(),
+        x0,
+        opts.substeps,
+        opts.network_domain,
+    )?;
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
     const TASK: &str = "trajectory training";
     let most = config.max_iterations;

@@ -120,6 +120,9 @@ fn fit_options(eff: &Effort, substeps: usize, window: usize) -> FitOptions {
             max_iterations: eff.steps,
             ..Default::default()
         },
+        // docs/decisions/hybrid-network-domain-hold.md: beyond its training data the
+        // network keeps its edge value; only the physics extrapolates.
+        network_domain: mmenn::nn::Domain::Hold,
         ..FitOptions::default()
     }
 }
@@ -256,14 +259,22 @@ fn hybrid_rows_inner(
         let y = row(e.outputs(), 0);
         let csv = work.join(format!("{}.csv", test.name));
         write_record(&csv, e, &output)?;
-        let sim = super::hybrid_output(&model_json, &csv, &InitialChoice::Fit, window, &output);
+        let sim =
+            super::hybrid_output_domain(&model_json, &csv, &InitialChoice::Fit, window, &output);
         match sim {
-            Ok(v) => {
+            Ok((v, domain)) => {
                 let rmse = rmse_after(&y, &v, window, scale);
+                // docs/decisions/hybrid-network-domain-hold.md, item 2.
+                let outside = domain.map_or(String::new(), |d| {
+                    format!(
+                        ", network outside its training box at {:.1} % of the samples",
+                        100.0 * d.fraction()
+                    )
+                });
                 match rmse {
                     Some(r) => {
                         table.push(&[LABEL, &test.name, &protocol], &[Some(r)]);
-                        results.push(format!("{}: {r:.4} {unit}", test.name));
+                        results.push(format!("{}: {r:.4} {unit}{outside}", test.name));
                     }
                     None => table.push_remark(
                         &[LABEL, &test.name, &protocol],

@@ -290,6 +290,12 @@ pub(crate) struct FitArgs {
     /// trainings).
     #[arg(long, default_value = "last-fifth")]
     pub(crate) guard: mmenn::fit::GuardHeldOut,
+    /// Hold the network at the edge of the box its training pairs spanned: each of its
+    /// inputs (states, inputs) is clamped to its training range, so beyond the data the
+    /// correction keeps its edge value and only the physics extrapolates (saved in
+    /// model.json; `predict` and `simulate` use it).
+    #[arg(long)]
+    pub(crate) hold_network_domain: bool,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
     pub(crate) w: mmenn::estimate::WeightChoice,

@@ -383,6 +383,11 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         train_on_trajectories: args.train_on_trajectories,
         training: args.training,
         guard: args.guard,
+        network_domain: if args.hold_network_domain {
+            mmenn::nn::Domain::Hold
+        } else {
+            mmenn::nn::Domain::Extrapolate
+        },
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.trajectory_window,
             ..Default::default()
@@ -462,6 +467,21 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
     if let Some(steps) = s.substeps {
         println!("  free run: classical RK4, {steps} steps per sample interval");
+    }
+    if let Some(d) = s.network_domain.as_ref().filter(|d| d.outside > 0) {
+        println!(
+            "  network: asked outside the box of its training data at {} of {} samples \
+             ({:.1} %); {}",
+            d.outside,
+            d.samples,
+            100.0 * d.fraction(),
+            match d.domain {
+                mmenn::nn::Domain::Hold => "held at the box's edge there",
+                mmenn::nn::Domain::Extrapolate => {
+                    "extrapolated there (fit --hold-network-domain holds it at the edge)"
+                }
+            }
+        );
     }
     if let Some(k) = &s.k_step {
         print_free_run(
