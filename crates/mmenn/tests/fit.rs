@@ -470,17 +470,7 @@ fn held_network_domain_is_saved_and_reported() {
     let (theta, omega, u) = (col(&pred, "theta"), col(&pred, "omega"), col(&rec, "u"));
     let s = file.network.input_scaler().clone();
     // Samples within rounding of the box's faces may fall either way: bounds.
-    let count = |edge: f64| {
-        (0..theta.len())
-            .filter(|&k| {
-                [theta[k], omega[k], u[k]]
-                    .iter()
-                    .zip(s.centre().iter().zip(s.half_range()))
-                    .any(|(v, (c, h))| ((v - c) / h).abs() > edge)
-            })
-            .count()
-    };
-    let (surely, maybe) = (count(1.0 + 1e-9), count(1.0 - 1e-9));
+    let (surely, maybe) = outside_bounds(&[&theta, &omega, &u], &s);
     assert_eq!(report.samples, theta.len());
     assert!(
         (surely..=maybe).contains(&report.outside),
@@ -508,17 +498,8 @@ fn held_network_domain_is_saved_and_reported() {
     let pred_free =
         mmenn::data_file::read_table(&dir.join("pred-free").join("prediction.csv")).unwrap();
     let (th, om) = (col(&pred_free, "theta"), col(&pred_free, "omega"));
-    let count_free = |edge: f64| {
-        (0..th.len())
-            .filter(|&k| {
-                [th[k], om[k], u[k]]
-                    .iter()
-                    .zip(s.centre().iter().zip(s.half_range()))
-                    .any(|(v, (c, h))| ((v - c) / h).abs() > edge)
-            })
-            .count()
-    };
-    assert!((count_free(1.0 + 1e-9)..=count_free(1.0 - 1e-9)).contains(&r.outside));
+    let (lo, hi) = outside_bounds(&[&th, &om, &u], &s);
+    assert!((lo..=hi).contains(&r.outside));
     assert!(r.outside > 0 && outside > 0);
     let omega_free = col(
         &mmenn::data_file::read_table(&dir.join("pred-free").join("prediction.csv")).unwrap(),
@@ -531,4 +512,20 @@ fn held_network_domain_is_saved_and_reported() {
             .any(|(a, b)| (a - b).abs() > 1e-9)
     );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Samples at which some column lies outside the scaler's box by more than 1e-9 of its
+/// half-range, and by more than −1e-9 (a sample on a face may count either way).
+fn outside_bounds(columns: &[&Vec<f64>], s: &mmenn::nn::Scaler) -> (usize, usize) {
+    let count = |edge: f64| {
+        (0..columns[0].len())
+            .filter(|&k| {
+                columns
+                    .iter()
+                    .zip(s.centre().iter().zip(s.half_range()))
+                    .any(|(col, (c, h))| ((col[k] - c) / h).abs() > edge)
+            })
+            .count()
+    };
+    (count(1.0 + 1e-9), count(1.0 - 1e-9))
 }
