@@ -95,9 +95,20 @@ impl NetworkDomainReport {
     }
 
     /// The report of `model`'s network along the free-run `states` (`n × N`) driven by
-    /// `exp`'s inputs, or `None` for a model without a network.
+    /// `exp`'s inputs, or `None` for a model without a network (a model file, or a hybrid
+    /// whose guard kept physics alone: a network that is zero everywhere).
     pub fn of(model: &LoadedModel, exp: &Experiment, states: &DMatrix<f64>) -> Option<Self> {
         let file = model.hybrid.as_ref()?;
+        let net = &file.network;
+        #[allow(
+            clippy::float_cmp,
+            reason = "the guard's physics alone is exactly zero"
+        )]
+        let zero = net.weights().iter().all(|w| *w == 0.0)
+            && net.output_scaler().centre().iter().all(|c| *c == 0.0);
+        if zero {
+            return None;
+        }
         let corr = nn::NetCorrection::new(file.network.clone(), states.nrows()).ok()?;
         let mut x = vec![0.0; states.nrows()];
         let samples = states.ncols().min(exp.len());

@@ -511,6 +511,26 @@ fn held_network_domain_is_saved_and_reported() {
             .zip(&omega_free)
             .any(|(a, b)| (a - b).abs() > 1e-9)
     );
+    // A network that is zero everywhere (the guard's physics alone) has nothing to report.
+    let net = &free.network;
+    let zero = mmenn::nn::Mlp::from_parts(
+        net.architecture().clone(),
+        vec![0.0; net.n_weights()],
+        net.input_scaler().clone(),
+        mmenn::nn::Scaler::new(vec![0.0; net.n_outputs()], vec![1.0; net.n_outputs()]).unwrap(),
+    )
+    .unwrap();
+    let physics = mmenn::fit::HybridFile {
+        network: zero,
+        ..free
+    };
+    std::fs::write(
+        free_dir.join("model.json"),
+        serde_json::to_string(&physics).unwrap(),
+    )
+    .unwrap();
+    let alone = predict_truth(&free_dir, &test, &dir.join("pred-physics"));
+    assert!(alone.network_domain.is_none());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
