@@ -289,6 +289,11 @@ pub struct FitSummary {
     /// Which of physics alone, the network before and after refinement was kept, judged
     /// free-run on held-out data (never a test record), and whether refinement hurt.
     pub guard: GuardReport,
+    /// The box of the network's training pairs, `(name, low, high)` per network input
+    /// (states, then inputs): where the correction was learnt.
+    pub network_box: Vec<(String, f64, f64)>,
+    /// What the network does outside that box.
+    pub network_domain: nn::Domain,
     /// Files written.
     pub files: Vec<String>,
 }
@@ -554,6 +559,15 @@ pub fn compute_fit(
         validation,
         refinement,
         guard: guard_report,
+        network_box: {
+            let sc = network.input_scaler();
+            network_variables(&spec)
+                .into_iter()
+                .zip(sc.centre().iter().zip(sc.half_range()))
+                .map(|(n, (c, h))| (n, c - h, c + h))
+                .collect()
+        },
+        network_domain: opts.network_domain,
         files: fit_files(&spec, val.is_some()),
     };
     Ok(FitOutcome {

@@ -444,7 +444,7 @@ fn held_network_domain_is_saved_and_reported() {
     let dir = scratch("pend-hold");
     let (train, test) = clean_pendulum(&dir);
     let fit_dir = dir.join("fit");
-    run_fit(
+    let summary = run_fit(
         std::slice::from_ref(&train.data),
         &train.model,
         &[],
@@ -457,6 +457,14 @@ fn held_network_domain_is_saved_and_reported() {
         &fit_dir,
     )
     .unwrap();
+    // The summary names the box (states, then inputs) and what the network does outside.
+    assert_eq!(summary.network_domain, mmenn::nn::Domain::Hold);
+    let names: Vec<&str> = summary.network_box.iter().map(|b| b.0.as_str()).collect();
+    assert_eq!(names, ["theta", "omega", "u"]);
+    assert!(summary.network_box.iter().all(|(_, lo, hi)| lo < hi));
+    let report = std::fs::read_to_string(fit_dir.join("report.md")).unwrap();
+    assert!(report.contains("theta ∈ ["), "{report}");
+    assert!(report.contains("(held)"));
     let json = std::fs::read_to_string(fit_dir.join("model.json")).unwrap();
     let file: mmenn::fit::HybridFile = serde_json::from_str(&json).unwrap();
     assert_eq!(file.domain, mmenn::nn::Domain::Hold);

@@ -228,6 +228,22 @@ fn fit_report(s: &FitSummary) -> String {
         s.training_pairs,
         crate::words::named_values(&s.w_by_correction)
     ));
+    let bounds: Vec<String> = s
+        .network_box
+        .iter()
+        .map(|(n, lo, hi)| format!("{n} ∈ [{lo:.4e}, {hi:.4e}]"))
+        .collect();
+    r.push_str(&format!(
+        "The network learnt the correction on {}; outside that box it {}.\n\n",
+        bounds.join(", "),
+        match s.network_domain {
+            nn::Domain::Hold => "keeps its value at the box's nearest point (held)",
+            nn::Domain::Extrapolate => {
+                "extrapolates (`--hold-network-domain` holds it at the box's edge instead; \
+                 `predict` says how often a free run leaves the box)"
+            }
+        }
+    ));
     r.push_str(
         "*Fit %* = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖): 100 is perfect, 0 is no better than \
          the mean. *R²* = 1 − Σ(y − ŷ)² / Σ(y − mean y)². *RMSE*: root mean square of \
