@@ -94,8 +94,8 @@ impl NetCorrection {
     }
 
     /// Whether `[x; u]` lies inside the box the network's input scaler maps onto
-    /// `[−1, 1]` (its training data's range per input; a constant channel counts as inside
-    /// only at its value). Slices of the wrong length are outside.
+    /// `[−1, 1]` (its training data's range per input; for a constant channel its value
+    /// ± 1, the scaler's unit half-range). Slices of the wrong length are outside.
     pub fn in_domain(&self, x: &[f64], u: &[f64]) -> bool {
         let s = self.net.input_scaler();
         x.len() == self.n_states
