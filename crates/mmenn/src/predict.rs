@@ -94,6 +94,23 @@ impl NetworkDomainReport {
         self.outside as f64 / self.samples.max(1) as f64
     }
 
+    /// One sentence for people: how often, and what the network did there.
+    pub fn sentence(&self) -> String {
+        format!(
+            "the free run asked the network outside the box of its training data at {} of {} \
+             samples ({:.1} %); {}",
+            self.outside,
+            self.samples,
+            100.0 * self.fraction(),
+            match self.domain {
+                nn::Domain::Hold => "held at the box's edge there",
+                nn::Domain::Extrapolate => {
+                    "extrapolated there (fit --hold-network-domain holds it at the edge)"
+                }
+            }
+        )
+    }
+
     /// The report of `model`'s network along the free-run `states` (`n × N`) driven by
     /// `exp`'s inputs, or `None` for a model without a network (a model file, or a hybrid
     /// whose guard kept physics alone: a network that is zero everywhere).
@@ -488,6 +505,9 @@ fn report(s: &PredictSummary) -> String {
         r.push_str("The record has no column of a state or model output to compare with.\n");
     } else {
         r.push_str(&table(&s.free_run.channels));
+    }
+    if let Some(d) = &s.network_domain {
+        r.push_str(&format!("\nNetwork: {}.\n", d.sentence()));
     }
     if let Some(k) = &s.k_step {
         r.push_str(&format!(

@@ -471,6 +471,14 @@ fn held_network_domain_is_saved_and_reported() {
     let held = predict_truth(&fit_dir, &test, &dir.join("pred-hold"));
     let report = held.network_domain.expect("a hybrid's report");
     assert_eq!(report.domain, mmenn::nn::Domain::Hold);
+    let md = std::fs::read_to_string(dir.join("pred-hold").join("report.md")).unwrap();
+    assert!(
+        md.contains(&format!(
+            "at {} of {} samples",
+            report.outside, report.samples
+        )) && md.contains("held at the box's edge"),
+        "{md}"
+    );
     // Brute force: every sample's [x; u] against the saved scaler's box.
     let pred = mmenn::data_file::read_table(&dir.join("pred-hold").join("prediction.csv")).unwrap();
     let rec = mmenn::data_file::read_table(&test.truth).unwrap();

@@ -469,19 +469,7 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
         println!("  free run: classical RK4, {steps} steps per sample interval");
     }
     if let Some(d) = s.network_domain.as_ref().filter(|d| d.outside > 0) {
-        println!(
-            "  network: asked outside the box of its training data at {} of {} samples \
-             ({:.1} %); {}",
-            d.outside,
-            d.samples,
-            100.0 * d.fraction(),
-            match d.domain {
-                mmenn::nn::Domain::Hold => "held at the box's edge there",
-                mmenn::nn::Domain::Extrapolate => {
-                    "extrapolated there (fit --hold-network-domain holds it at the edge)"
-                }
-            }
-        );
+        println!("  network: {}", d.sentence());
     }
     if let Some(k) = &s.k_step {
         print_free_run(
