@@ -760,3 +760,29 @@ fn output_folders_are_all_or_nothing() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `--hold-network-domain` reaches the saved model (fit and compare share the flag's
+/// meaning); without it the network extrapolates.
+#[test]
+fn cli_hold_network_domain_is_saved() {
+    let dir = scratch("hold");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    for (flag, want) in [
+        (Some("--hold-network-domain"), mmenn::nn::Domain::Hold),
+        (None, mmenn::nn::Domain::Extrapolate),
+    ] {
+        let out = format!("o-{want:?}");
+        let mut args = vec![
+            "--quiet", "fit", "--data", "d.csv", "--model", "m.toml", "--hidden", "2", "--inits",
+            "1", "--w", "100", "--out", &out,
+        ];
+        args.extend(flag);
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 0, "{err}");
+        let text = std::fs::read_to_string(dir.join(&out).join("model.json")).unwrap();
+        let file = mmenn::fit::HybridFile::parse(Path::new("model.json"), &text).unwrap();
+        assert_eq!(file.domain, want);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -151,6 +151,10 @@ pub(crate) struct CompareArgs {
     /// (as `fit --guard`).
     #[arg(long, default_value = "last-fifth")]
     pub(crate) guard: mmenn::fit::GuardHeldOut,
+    /// Hold MME/NN's network at the edge of its training box (as `fit
+    /// --hold-network-domain`).
+    #[arg(long)]
+    pub(crate) hold_network_domain: bool,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,

@@ -365,6 +365,15 @@ fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
     }
 }
 
+/// The network's behaviour outside its training box from `--hold-network-domain`.
+fn domain(hold: bool) -> mmenn::nn::Domain {
+    if hold {
+        mmenn::nn::Domain::Hold
+    } else {
+        mmenn::nn::Domain::Extrapolate
+    }
+}
+
 #[allow(clippy::print_stdout)]
 fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     let opts = mmenn::fit::FitOptions {
@@ -383,11 +392,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         train_on_trajectories: args.train_on_trajectories,
         training: args.training,
         guard: args.guard,
-        network_domain: if args.hold_network_domain {
-            mmenn::nn::Domain::Hold
-        } else {
-            mmenn::nn::Domain::Extrapolate
-        },
+        network_domain: domain(args.hold_network_domain),
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.trajectory_window,
             ..Default::default()
@@ -501,6 +506,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             seed: a.seed,
             training: a.training,
             guard: a.guard,
+            network_domain: domain(a.hold_network_domain),
             ..Default::default()
         },
         narx_lags: a.narx_lags,
