@@ -42,7 +42,7 @@ pub use trajectory::{TrajectoryChoice, TrajectorySummary};
 mod choices;
 mod d_figures;
 mod folds;
-mod guard;
+pub(crate) mod guard;
 mod output;
 mod trajectory;
 

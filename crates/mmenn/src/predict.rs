@@ -116,14 +116,7 @@ impl NetworkDomainReport {
     /// whose guard kept physics alone: a network that is zero everywhere).
     pub fn of(model: &LoadedModel, exp: &Experiment, states: &DMatrix<f64>) -> Option<Self> {
         let file = model.hybrid.as_ref()?;
-        let net = &file.network;
-        #[allow(
-            clippy::float_cmp,
-            reason = "the guard's physics alone is exactly zero"
-        )]
-        let zero = net.weights().iter().all(|w| *w == 0.0)
-            && net.output_scaler().centre().iter().all(|c| *c == 0.0);
-        if zero {
+        if crate::fit::guard::is_zero_network(&file.network) {
             return None;
         }
         let corr = nn::NetCorrection::new(file.network.clone(), states.nrows()).ok()?;

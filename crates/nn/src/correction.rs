@@ -97,13 +97,18 @@ impl NetCorrection {
     /// `[−1, 1]` (its training data's range per input; for a constant channel its value
     /// ± 1, the scaler's unit half-range). Slices of the wrong length are outside.
     pub fn in_domain(&self, x: &[f64], u: &[f64]) -> bool {
-        let s = self.net.input_scaler();
         x.len() == self.n_states
             && x.len() + u.len() == self.net.n_inputs()
             && x.iter()
                 .chain(u)
-                .zip(s.centre().iter().zip(s.half_range()))
-                .all(|(v, (c, h))| ((v - c) / h).abs() <= 1.0)
+                .enumerate()
+                .all(|(j, &v)| !self.outside(j, v))
+    }
+
+    /// Whether value `v` of network input `j` lies outside its training range.
+    fn outside(&self, j: usize, v: f64) -> bool {
+        let s = self.net.input_scaler();
+        ((v - s.centre()[j]) / s.half_range()[j]).abs() > 1.0
     }
 
     /// The network.
@@ -170,12 +175,7 @@ impl NetCorrection {
         let n = self.n_states;
         // Along a clamped input the correction does not change.
         let hold = self.domain == Domain::Hold;
-        let s = self.net.input_scaler();
-        let (centre, half) = (s.centre(), s.half_range());
-        let clamped = |j: usize| {
-            let v = if j < n { x[j] } else { u[j - n] };
-            hold && ((v - centre[j]) / half[j]).abs() > 1.0
-        };
+        let clamped = |j: usize| hold && self.outside(j, if j < n { x[j] } else { u[j - n] });
         self.net.input_gradients(ws, |o, j, v| {
             let v = if clamped(j) { 0.0 } else { v };
             if j < n {

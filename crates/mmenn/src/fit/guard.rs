@@ -282,6 +282,15 @@ pub(crate) fn zero_network(like: &Mlp) -> Result<Mlp> {
     )?)
 }
 
+/// Whether `net` is [`zero_network`]'s kind: the correction is zero everywhere (a hybrid
+/// whose guard kept physics alone).
+pub(crate) fn is_zero_network(net: &Mlp) -> bool {
+    #[allow(clippy::float_cmp, reason = "zero_network writes exact zeros")]
+    let zero = net.weights().iter().all(|w| *w == 0.0)
+        && net.output_scaler().centre().iter().all(|c| *c == 0.0);
+    zero
+}
+
 pub(super) fn score(candidate: GuardCandidate, judged: Result<Judgement>) -> CandidateScore {
     match judged {
         Ok(j) => {
