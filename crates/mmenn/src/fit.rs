@@ -33,7 +33,9 @@ use crate::model_file::{ModelSpec, format_model};
 pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
-pub use choices::{HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkSelection, Training};
+pub use choices::{
+    HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkInputs, NetworkSelection, Training,
+};
 pub use guard::{CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
 pub use output::write_fit;
 use trajectory::train_network_on_trajectories;
@@ -87,6 +89,10 @@ pub struct FitOptions {
     /// this fit builds, judges and saves. Default [`nn::Domain::Extrapolate`] (the thesis
     /// method; `--hold-network-domain` on the command line for [`nn::Domain::Hold`]).
     pub network_domain: nn::Domain,
+    /// What the network reads: `(x̂, u)` or the states alone. Default
+    /// [`NetworkInputs::StatesAndInputs`] (the thesis; `--network-inputs states` on the
+    /// command line for the states alone).
+    pub network_inputs: NetworkInputs,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
@@ -154,6 +160,7 @@ impl Default for FitOptions {
             ensemble: NetworkEnsemble::Single,
             guard: GuardHeldOut::LastFifth,
             network_domain: nn::Domain::Extrapolate,
+            network_inputs: NetworkInputs::StatesAndInputs,
         }
     }
 }
@@ -164,18 +171,29 @@ pub fn training_pairs(
     data: &Dataset,
     trim_fraction: f64,
 ) -> (DMatrix<f64>, DMatrix<f64>) {
-    training_pairs_without(est, data, trim_fraction, None)
+    training_pairs_without(
+        est,
+        data,
+        trim_fraction,
+        None,
+        NetworkInputs::StatesAndInputs,
+    )
 }
 
-/// [`training_pairs`] without the samples `skip` of the first record.
+/// Training pairs `([x̂; u], d̂)` (or `(x̂, d̂)` for a states-only network) without the
+/// samples `skip` of the first record.
 fn training_pairs_without(
     est: &MmeEstimate,
     data: &Dataset,
     trim_fraction: f64,
     skip: Option<&Range<usize>>,
+    inputs: NetworkInputs,
 ) -> (DMatrix<f64>, DMatrix<f64>) {
     let n = est.state_names.len();
-    let m = data.input_channels().len();
+    let m = match inputs {
+        NetworkInputs::StatesAndInputs => data.input_channels().len(),
+        NetworkInputs::States => 0,
+    };
     let q = est.correction_names.len();
     let mut cols_x = Vec::new();
     let mut cols_d = Vec::new();
@@ -186,7 +204,7 @@ fn training_pairs_without(
         let skipped = |k: &usize| i == 0 && skip.is_some_and(|r| r.contains(k));
         for k in (cut..len.saturating_sub(cut)).filter(|k| !skipped(k)) {
             cols_x.extend(e.states.column(k).iter().copied());
-            cols_x.extend(exp.input(k).iter().copied());
+            cols_x.extend(exp.input(k).iter().take(m).copied());
             cols_d.extend(d.column(k).iter().copied());
         }
     }
@@ -294,6 +312,8 @@ pub struct FitSummary {
     pub network_box: Vec<(String, f64, f64)>,
     /// What the network does outside that box.
     pub network_domain: nn::Domain,
+    /// What the network reads.
+    pub network_inputs: NetworkInputs,
     /// Files written.
     pub files: Vec<String>,
 }
@@ -365,19 +385,20 @@ pub struct FitOutcome {
     pub d_train: DMatrix<f64>,
     /// The network's output at the training pairs (`q × pairs`).
     pub d_network: DMatrix<f64>,
-    /// The network's inputs at the training pairs (`(n + m) × pairs`: x̂ then u).
+    /// The network's inputs at the training pairs (`(n + m) × pairs`: x̂ then u; `n ×
+    /// pairs` for a states-only network).
     pub x_train: DMatrix<f64>,
 }
 
 /// The files [`write_fit`] writes, in order.
-fn fit_files(spec: &ModelSpec, validation: bool) -> Vec<String> {
+fn fit_files(spec: &ModelSpec, validation: bool, inputs: NetworkInputs) -> Vec<String> {
     let mut files = vec!["compare_train.svg".to_string()];
     if validation {
         files.push("compare_validation.svg".into());
     }
     for name in spec.linear.correction_names() {
         files.push(format!("nn_d_{name}.svg"));
-        for var in network_variables(spec) {
+        for var in network_variables(spec, inputs) {
             files.push(format!("nn_d_{name}_vs_{var}.svg"));
         }
     }
@@ -429,7 +450,10 @@ pub fn compute_fit(
     }
     let lin = spec.linear.clone();
     let est = &result.estimate;
-    let (x_train, d_train) = training_pairs(est, data, opts.trim_fraction);
+    let pairs = |est: &MmeEstimate, data: &Dataset| {
+        training_pairs_without(est, data, opts.trim_fraction, None, opts.network_inputs)
+    };
+    let (x_train, d_train) = pairs(est, data);
 
     // The sweep's test set: MME on the validation data at the training W and noise, or the
     // last 20 % of the training pairs when there is no validation data.
@@ -439,7 +463,7 @@ pub fn compute_fit(
             vconf.w = mme_core::WeightSpec::Matrix(est.w.clone());
             vconf.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
             let vres = estimate_spec(&spec, v, &vconf)?;
-            let (xv, dv) = training_pairs(&vres.estimate, v, opts.trim_fraction);
+            let (xv, dv) = pairs(&vres.estimate, v);
             (
                 (x_train.clone(), d_train.clone()),
                 (xv, dv),
@@ -561,14 +585,15 @@ pub fn compute_fit(
         guard: guard_report,
         network_box: {
             let sc = network.input_scaler();
-            network_variables(&spec)
+            network_variables(&spec, opts.network_inputs)
                 .into_iter()
                 .zip(sc.centre().iter().zip(sc.half_range()))
                 .map(|(n, (c, h))| (n, c - h, c + h))
                 .collect()
         },
         network_domain: opts.network_domain,
-        files: fit_files(&spec, val.is_some()),
+        network_inputs: opts.network_inputs,
+        files: fit_files(&spec, val.is_some(), opts.network_inputs),
     };
     Ok(FitOutcome {
         summary,
@@ -733,12 +758,17 @@ fn train_networks(
     })
 }
 
-/// The network's inputs by name: every state, then every input.
-fn network_variables(spec: &ModelSpec) -> Vec<String> {
+/// The network's inputs by name: every state, then every input (none for a states-only
+/// network).
+fn network_variables(spec: &ModelSpec, inputs: NetworkInputs) -> Vec<String> {
+    let seen: &[String] = match inputs {
+        NetworkInputs::StatesAndInputs => spec.linear.input_names(),
+        NetworkInputs::States => &[],
+    };
     spec.linear
         .state_names()
         .iter()
-        .chain(spec.linear.input_names())
+        .chain(seen)
         .cloned()
         .collect()
 }

@@ -128,7 +128,9 @@ pub fn hybrid_model(
 ) -> Result<HybridModel> {
     let lin = &spec.linear;
     let base = spec.term_model().map_err(model_problem)?;
-    let corr = NetCorrection::new(network, lin.n_states())?.with_domain(domain);
+    // A network with as many inputs as the model has states reads the states alone.
+    let corr =
+        NetCorrection::for_model(network, lin.n_states(), lin.n_inputs())?.with_domain(domain);
     let mut model = CorrectedModel::new(
         base,
         corr,

@@ -119,7 +119,9 @@ impl NetworkDomainReport {
         if crate::fit::guard::is_zero_network(&file.network) {
             return None;
         }
-        let corr = nn::NetCorrection::new(file.network.clone(), states.nrows()).ok()?;
+        let corr =
+            nn::NetCorrection::for_model(file.network.clone(), states.nrows(), exp.n_inputs())
+                .ok()?;
         let mut x = vec![0.0; states.nrows()];
         let samples = states.ncols().min(exp.len());
         let outside = (0..samples)

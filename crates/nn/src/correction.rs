@@ -1,6 +1,7 @@
 //! A trained network used as the model-error term of a hybrid model: [`NetCorrection`]
-//! implements `sysid_core::Correction` with network inputs `[x, u]` and outputs `d`, and
-//! gives the Jacobians `∂d/∂x`, `∂d/∂u` for linearisation.
+//! implements `sysid_core::Correction` with network inputs `[x, u]` (or `x` alone, for a
+//! network trained on the states only: it ignores the model's inputs) and outputs `d`,
+//! and gives the Jacobians `∂d/∂x`, `∂d/∂u` for linearisation.
 //!
 //! Outside the box its training pairs spanned (the input scaler's `[−1, 1]` per input),
 //! a network extrapolates however its weights happen to: [`Domain::Hold`] clamps every
@@ -17,8 +18,10 @@ use sysid_core::Correction;
 use crate::error::{NnError, Result};
 use crate::mlp::{Mlp, Workspace};
 
-/// A network `d = NN([x; u])` read as a correction of a model with `n_states` states:
-/// network inputs `0..n_states` are the states, the rest are the model inputs.
+/// A network `d = NN([x; u])` read as a correction of a model with `n_states` states and
+/// `n_model_inputs` inputs: network inputs `0..n_states` are the states, the rest (if the
+/// network has any) are the model inputs; a network with exactly `n_states` inputs sees
+/// the states alone and ignores the model's inputs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "NetCorrectionRaw")]
 pub struct NetCorrection {
@@ -26,6 +29,7 @@ pub struct NetCorrection {
     n_states: usize,
     #[serde(default)]
     domain: Domain,
+    n_model_inputs: usize,
 }
 
 /// What a [`NetCorrection`] does with inputs outside the box its training data spanned
@@ -47,12 +51,19 @@ struct NetCorrectionRaw {
     n_states: usize,
     #[serde(default)]
     domain: Domain,
+    /// Absent in files written before states-only networks: the network saw every input.
+    #[serde(default)]
+    n_model_inputs: Option<usize>,
 }
 
 impl TryFrom<NetCorrectionRaw> for NetCorrection {
     type Error = NnError;
     fn try_from(raw: NetCorrectionRaw) -> Result<Self> {
-        Ok(NetCorrection::new(raw.net, raw.n_states)?.with_domain(raw.domain))
+        let corr = match raw.n_model_inputs {
+            Some(m) => NetCorrection::for_model(raw.net, raw.n_states, m)?,
+            None => NetCorrection::new(raw.net, raw.n_states)?,
+        };
+        Ok(corr.with_domain(raw.domain))
     }
 }
 
@@ -75,11 +86,40 @@ impl NetCorrection {
                 n_inputs: net.n_inputs(),
             });
         }
+        let n_model_inputs = net.n_inputs() - n_states;
         Ok(Self {
             net,
             n_states,
             domain: Domain::Extrapolate,
+            n_model_inputs,
         })
+    }
+
+    /// Wrap `net` as the correction of a model with `n_states` states and `n_model_inputs`
+    /// inputs: a network with `n_states + n_model_inputs` inputs sees `[x; u]` (as
+    /// [`NetCorrection::new`]), one with `n_states` inputs sees the states alone.
+    ///
+    /// Errors: any other input count.
+    pub fn for_model(net: Mlp, n_states: usize, n_model_inputs: usize) -> Result<Self> {
+        let n = net.n_inputs();
+        if n != n_states && n != n_states + n_model_inputs {
+            return Err(NnError::CorrectionInputs {
+                n_states,
+                n_model_inputs,
+                n_inputs: n,
+            });
+        }
+        Ok(Self {
+            net,
+            n_states,
+            domain: Domain::Extrapolate,
+            n_model_inputs,
+        })
+    }
+
+    /// Whether the network sees the model's inputs (false: the states alone).
+    pub fn sees_inputs(&self) -> bool {
+        self.net.n_inputs() == self.n_states + self.n_model_inputs
     }
 
     /// The same correction with the given behaviour outside the training box.
@@ -93,14 +133,16 @@ impl NetCorrection {
         self.domain
     }
 
-    /// Whether `[x; u]` lies inside the box the network's input scaler maps onto
-    /// `[−1, 1]` (its training data's range per input; for a constant channel its value
-    /// ± 1, the scaler's unit half-range). Slices of the wrong length are outside.
+    /// Whether the network's inputs at `(x, u)` lie inside the box the network's input
+    /// scaler maps onto `[−1, 1]` (its training data's range per input; for a constant
+    /// channel its value ± 1, the scaler's unit half-range). A states-only network looks
+    /// at `x` alone. Slices of the wrong length are outside.
     pub fn in_domain(&self, x: &[f64], u: &[f64]) -> bool {
+        let seen = if self.sees_inputs() { u } else { &[] };
         x.len() == self.n_states
-            && x.len() + u.len() == self.net.n_inputs()
+            && u.len() == self.n_model_inputs
             && x.iter()
-                .chain(u)
+                .chain(seen)
                 .enumerate()
                 .all(|(j, &v)| !self.outside(j, v))
     }
@@ -140,6 +182,7 @@ impl NetCorrection {
         NetView {
             net: &self.net,
             n_states: self.n_states,
+            n_model_inputs: self.n_model_inputs,
             domain: self.domain,
         }
     }
@@ -176,6 +219,8 @@ impl NetCorrection {
         // Along a clamped input the correction does not change.
         let hold = self.domain == Domain::Hold;
         let clamped = |j: usize| hold && self.outside(j, if j < n { x[j] } else { u[j - n] });
+        // A states-only network does not depend on the inputs.
+        du.fill(0.0);
         self.net.input_gradients(ws, |o, j, v| {
             let v = if clamped(j) { 0.0 } else { v };
             if j < n {
@@ -195,6 +240,7 @@ impl NetCorrection {
 pub(crate) struct NetView<'a> {
     pub(crate) net: &'a Mlp,
     pub(crate) n_states: usize,
+    pub(crate) n_model_inputs: usize,
     pub(crate) domain: Domain,
 }
 
@@ -223,11 +269,11 @@ impl NetView<'_> {
                 expected: self.n_states,
             });
         }
-        if u.len() != self.net.n_inputs() - self.n_states {
+        if u.len() != self.n_model_inputs {
             return Err(NnError::Length {
                 what: "correction inputs",
                 found: u.len(),
-                expected: self.net.n_inputs() - self.n_states,
+                expected: self.n_model_inputs,
             });
         }
         if d_len != self.net.n_outputs() {
@@ -240,8 +286,11 @@ impl NetView<'_> {
         ws.prepare_forward(self.net.architecture());
         let s = self.net.input_scaler();
         let n = self.n_states;
+        // The network's own inputs: the states, then the model inputs if it sees them (a
+        // states-only network's scaler has no entries for them).
+        let ni = self.net.n_inputs();
         let (centre, half) = (s.centre(), s.half_range());
-        let (xs, us) = ws.acts[..n + u.len()].split_at_mut(n);
+        let (xs, us) = ws.acts[..ni].split_at_mut(n);
         for (((a, v), c), h) in xs.iter_mut().zip(x).zip(&centre[..n]).zip(&half[..n]) {
             *a = (v - c) / h;
         }
@@ -249,7 +298,7 @@ impl NetView<'_> {
             *a = (v - c) / h;
         }
         if self.domain == Domain::Hold {
-            for a in &mut ws.acts[..n + u.len()] {
+            for a in &mut ws.acts[..ni] {
                 *a = a.clamp(-1.0, 1.0);
             }
         }
@@ -263,7 +312,7 @@ impl Correction for NetView<'_> {
     }
 
     fn n_inputs(&self) -> usize {
-        self.net.n_inputs() - self.n_states
+        self.n_model_inputs
     }
 
     fn n_outputs(&self) -> usize {
@@ -409,5 +458,78 @@ mod tests {
         let old = text.replace(",\"domain\":\"hold\"", "");
         let old: NetCorrection = serde_json::from_str(&old).unwrap();
         assert_eq!(old.domain(), Domain::Extrapolate);
+    }
+
+    /// A network with as many inputs as the model has states sees the states alone: its
+    /// value is the network's on `x` whatever `u` is, `∂d/∂u` is zero and `∂d/∂x` the
+    /// network's; it reports the model's input count; other input counts are refused;
+    /// held, only the states are clamped; the model's input count round-trips through
+    /// JSON, and text without it reads as a network on `[x; u]`.
+    #[test]
+    #[allow(
+        clippy::float_cmp,
+        reason = "same operations in the same order give identical bits"
+    )]
+    fn states_only_network_ignores_the_inputs() {
+        let net = Mlp::new(&Architecture::single(2, 4, 1), 3).unwrap();
+        let corr = NetCorrection::for_model(net.clone(), 2, 3).unwrap();
+        assert!(!corr.sees_inputs());
+        assert_eq!(
+            (corr.n_states(), corr.n_inputs(), corr.n_outputs()),
+            (2, 3, 1)
+        );
+        let mut y = [0.0];
+        net.forward(&[0.3, -0.2], &mut y, &mut Workspace::new())
+            .unwrap();
+        for u in [[0.0, 0.0, 0.0], [9.0, -4.0, 1e3]] {
+            let mut d = [f64::NAN];
+            corr.eval(&[0.3, -0.2], &u, &mut d);
+            assert_eq!(d, y);
+        }
+        let mut d = [0.0];
+        corr.eval(&[0.3, -0.2], &[1.0], &mut d);
+        assert!(d[0].is_nan(), "wrong input length must not evaluate");
+        let full = net.input_jacobian(&[0.3, -0.2]).unwrap();
+        let (mut dx, mut du) = (DMatrix::zeros(1, 2), DMatrix::from_element(1, 3, 7.0));
+        corr.jacobians(
+            &[0.3, -0.2],
+            &[5.0, 5.0, 5.0],
+            &mut d,
+            &mut dx,
+            &mut du,
+            &mut Workspace::new(),
+        )
+        .unwrap();
+        assert_eq!(dx, full);
+        assert!(du.iter().all(|&v| v == 0.0));
+        // The states and inputs variant of the same model is accepted too; others are not.
+        let both = Mlp::new(&Architecture::single(5, 4, 1), 3).unwrap();
+        assert!(NetCorrection::for_model(both, 2, 3).unwrap().sees_inputs());
+        let odd = Mlp::new(&Architecture::single(4, 4, 1), 3).unwrap();
+        assert!(matches!(
+            NetCorrection::for_model(odd, 2, 3),
+            Err(NnError::CorrectionInputs {
+                n_states: 2,
+                n_model_inputs: 3,
+                n_inputs: 4
+            })
+        ));
+        // In the box whatever u is (scaler of a fresh network: ±1 around 0).
+        let held = corr.clone().with_domain(Domain::Hold);
+        assert!(held.in_domain(&[0.3, -0.2], &[1e3, -1e3, 0.0]));
+        assert!(!held.in_domain(&[3.0, -0.2], &[0.0, 0.0, 0.0]));
+        assert!(!held.in_domain(&[0.3, -0.2], &[0.0]));
+        let text = serde_json::to_string(&corr).unwrap();
+        assert!(text.contains("\"n_model_inputs\":3"), "{text}");
+        let back: NetCorrection = serde_json::from_str(&text).unwrap();
+        assert_eq!(back, corr);
+        let both = NetCorrection::new(net, 1).unwrap();
+        let old = serde_json::to_string(&both)
+            .unwrap()
+            .replace(",\"n_model_inputs\":1", "");
+        assert!(!old.contains("n_model_inputs"));
+        let old: NetCorrection = serde_json::from_str(&old).unwrap();
+        assert_eq!(old, both);
+        assert!(old.sees_inputs());
     }
 }

@@ -105,6 +105,21 @@ pub enum NnError {
         /// Network inputs.
         n_inputs: usize,
     },
+    /// A correction network's input count is neither the model's states nor its states
+    /// and inputs.
+    #[error(
+        "a correction of a model with {n_states} states and {n_model_inputs} inputs needs a \
+         network of {n_states} inputs (states alone) or of the states and inputs, but it has \
+         {n_inputs}"
+    )]
+    CorrectionInputs {
+        /// States of the model.
+        n_states: usize,
+        /// Inputs of the model.
+        n_model_inputs: usize,
+        /// Network inputs.
+        n_inputs: usize,
+    },
     /// The hybrid model with the initial network diverges on a shooting window, so
     /// trajectory training has no finite objective to descend from.
     #[error(

@@ -121,3 +121,30 @@ pub enum NetworkEnsemble {
     /// a single restart carries on short records.
     Band,
 }
+
+impl std::str::FromStr for NetworkInputs {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "states-and-inputs" => Ok(Self::StatesAndInputs),
+            "states" => Ok(Self::States),
+            _ => Err(format!(
+                "'{s}' is neither \"states-and-inputs\" nor \"states\""
+            )),
+        }
+    }
+}
+
+/// What the network reads: `(x̂, u)` (the thesis) or the states `x̂` alone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NetworkInputs {
+    /// The states and the model's inputs (thesis ch. 4; the default).
+    #[default]
+    StatesAndInputs,
+    /// The states alone: for an assumed model that already carries the input's path (a
+    /// calibrated drive gain), the missing effect is a function of the state, and a record
+    /// with a wider input than the training one cannot push the network outside the box
+    /// of its training pairs. `model.json` records it through the network's input count.
+    States,
+}

@@ -127,7 +127,13 @@ fn fold(
     opts: &FitOptions,
 ) -> Result<FoldScores> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
-    let (x, d) = training_pairs_without(est, data, opts.trim_fraction, Some(&stretch));
+    let (x, d) = training_pairs_without(
+        est,
+        data,
+        opts.trim_fraction,
+        Some(&stretch),
+        opts.network_inputs,
+    );
     let (fit, test) = split_last_fifth(&x, &d);
     // Shooting records: the first record's pieces before and after the stretch, the other
     // records whole.

@@ -7,7 +7,7 @@ use nn::SweepRow;
 use sysid_core::Experiment;
 
 use super::{
-    FitOutcome, FitSummary, NetworkSelection, Training, d_figures, network_variables, row,
+    FitOutcome, FitSummary, NetworkInputs, NetworkSelection, Training, d_figures, network_variables, row,
 };
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::write_csv;
@@ -27,6 +27,10 @@ pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
         compare_figure(spec, exp, j, "validation").write(&out.join("compare_validation.svg"))?;
     }
     // d̂ and the network's fit of it on the training record.
+    let net = match o.summary.network_inputs {
+        NetworkInputs::StatesAndInputs => "NN(x̂, u)",
+        NetworkInputs::States => "NN(x̂)",
+    };
     for (i, name) in spec.linear.correction_names().iter().enumerate() {
         let idx: Vec<f64> = (0..o.d_train.ncols()).map(|k| k as f64).collect();
         let fig = Figure {
@@ -41,9 +45,9 @@ pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
                 Series::line(
                     match sysid_core::channel_metrics(&row(&o.d_train, i), &row(&o.d_network, i)) {
                         Ok(m) if m.fit_percent.is_finite() => {
-                            format!("NN(x̂, u) (fit {:.1} % to d̂)", m.fit_percent)
+                            format!("{net} (fit {:.1} % to d̂)", m.fit_percent)
                         }
-                        _ => "NN(x̂, u)".to_string(),
+                        _ => net.to_string(),
                     },
                     idx,
                     row(&o.d_network, i),
@@ -57,7 +61,7 @@ pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
             &row(&o.d_train, i),
             &row(&o.d_network, i),
             &o.x_train,
-            &network_variables(spec),
+            &network_variables(spec, o.summary.network_inputs),
             spec,
             out,
         )?;
@@ -220,12 +224,16 @@ fn fit_report(s: &FitSummary) -> String {
     r.push_str(&format!(
         "Network: {} hidden tanh units, picked from the sizing sweep by {selection}; trained \
          by {training}. Train MSE of d̂ {:.3e}, test MSE {:.3e} (test set: {}). {} training \
-         pairs (x̂, u) → d̂. MME W by corrected state: {}.\n\n",
+         pairs {} → d̂. MME W by corrected state: {}.\n\n",
         s.hidden,
         s.chosen.train_mse,
         s.chosen.test_mse,
         s.test_source,
         s.training_pairs,
+        match s.network_inputs {
+            NetworkInputs::StatesAndInputs => "(x̂, u)",
+            NetworkInputs::States => "x̂ (the states alone: `--network-inputs states`)",
+        },
         crate::words::named_values(&s.w_by_correction)
     ));
     let bounds: Vec<String> = s

@@ -405,22 +405,38 @@ fn rayon_threads() -> usize {
     rayon::current_num_threads()
 }
 
-/// Cascaded Tanks: the hybrid's guard on the grey-box bases named in `TANKS_BASES`
-/// (`|`-separated candidate names; default the two of docs/decisions/tanks-kfold-guard-rule.md)
-/// with the guard `TANKS_GUARD` (`last-fifth` or `K-fold`; default the reproduced one) and
-/// the network variant `TANKS_VARIANT` (band, freerun, thesis, window256, one;
-/// docs/decisions/tanks-hybrid-variants-kfold.md).
+/// The hybrid's guard on the grey-box bases named in `TANKS_BASES` (`|`-separated
+/// candidate names; default on Cascaded Tanks the two of
+/// docs/decisions/tanks-kfold-guard-rule.md, elsewhere every candidate) of the benchmark
+/// `HYBRID_BENCH` (`tanks`, the default, or `emps`), with the guard `TANKS_GUARD`
+/// (`last-fifth` or `K-fold`; default the reproduced one), the network variant
+/// `TANKS_VARIANT` (band, freerun, thesis, window256, one;
+/// docs/decisions/tanks-hybrid-variants-kfold.md) and the network inputs `NET_INPUTS`
+/// (`states-and-inputs` or `states`; docs/decisions/emps-states-only-network.md).
 /// Calibrates each on the training record and fits the hybrid; no test record is run.
 #[cfg(test)]
 #[allow(clippy::print_stdout)]
 #[test]
 #[ignore]
 fn explore_tanks_hybrid_base() {
-    let b = Benchmark::CascadedTanks;
+    let b = match std::env::var("HYBRID_BENCH").as_deref() {
+        Ok("emps") => Benchmark::Emps,
+        Ok("tanks") | Err(_) => Benchmark::CascadedTanks,
+        Ok(other) => panic!("unknown HYBRID_BENCH {other}"),
+    };
     let dir = std::path::Path::new("/work/shared/data").join(b.folder());
     let data = mmenn::benchmarks::load(b, &dir).unwrap();
-    let bases = std::env::var("TANKS_BASES").unwrap_or_else(|_| {
-        "+ linear term in the lower outflow|+ linear term in the lower outflow, pump lag 4 s".into()
+    let (_, candidates) = super::grey_rows::grey_candidates(&data, Mode::Full).unwrap();
+    let bases = std::env::var("TANKS_BASES").unwrap_or_else(|_| match b {
+        Benchmark::CascadedTanks => {
+            "+ linear term in the lower outflow|+ linear term in the lower outflow, pump lag 4 s"
+                .into()
+        }
+        _ => candidates
+            .iter()
+            .map(|(n, _)| n.as_str())
+            .collect::<Vec<_>>()
+            .join("|"),
     });
     let mut eff = effort(b, Mode::Full);
     if let Ok(g) = std::env::var("TANKS_GUARD") {
@@ -428,7 +444,6 @@ fn explore_tanks_hybrid_base() {
     }
     let window = b.init_window();
     let est = &data.estimation.experiments()[0];
-    let (_, candidates) = super::grey_rows::grey_candidates(&data, Mode::Full).unwrap();
     for name in bases.split('|') {
         let (_, gspec) = candidates.iter().find(|(n, _)| n == name).expect(name);
         let clock = Instant::now();
@@ -452,6 +467,9 @@ fn explore_tanks_hybrid_base() {
             Ok("") | Err(_) => {}
             Ok(other) => panic!("unknown TANKS_VARIANT {other}"),
         }
+        if let Ok(i) = std::env::var("NET_INPUTS") {
+            opts.network_inputs = i.parse().unwrap();
+        }
         // The channels as the reproduced run's CSV names them.
         let output = spec.linear.output_names()[0].clone();
         let record = mmenn::sysid_core::Dataset::new(
@@ -465,9 +483,10 @@ fn explore_tanks_hybrid_base() {
                 .unwrap();
         let g = &fit.summary.guard;
         println!(
-            "== {name} (grey training {:.4} V; guard {}; {:.1} s)",
+            "== {name} (grey training {:.4e}; guard {}; inputs {:?}; {:.1} s)",
             gfit.train_rmse,
             eff.guard,
+            opts.network_inputs,
             clock.elapsed().as_secs_f64()
         );
         println!("{}", g.markdown());

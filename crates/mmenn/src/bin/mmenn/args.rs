@@ -155,6 +155,10 @@ pub(crate) struct CompareArgs {
     /// --hold-network-domain`).
     #[arg(long)]
     pub(crate) hold_network_domain: bool,
+    /// What MME/NN's network reads: states-and-inputs or states (as `fit
+    /// --network-inputs`).
+    #[arg(long, default_value = "states-and-inputs")]
+    pub(crate) network_inputs: mmenn::fit::NetworkInputs,
     /// Seed of every random choice.
     #[arg(long, default_value_t = 1)]
     pub(crate) seed: u64,
@@ -300,6 +304,12 @@ pub(crate) struct FitArgs {
     /// model.json; `predict` and `simulate` use it).
     #[arg(long)]
     pub(crate) hold_network_domain: bool,
+    /// What the network reads: states-and-inputs (x̂, u; the thesis) or states (x̂ alone,
+    /// for a model that already carries the input's path: a wider input than the training
+    /// one cannot push the network outside its training box). model.json records it
+    /// through the network's input count.
+    #[arg(long, default_value = "states-and-inputs")]
+    pub(crate) network_inputs: mmenn::fit::NetworkInputs,
     /// Correction weight W for MME: "auto" or a positive number.
     #[arg(long, default_value = "auto")]
     pub(crate) w: mmenn::estimate::WeightChoice,

@@ -393,6 +393,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         training: args.training,
         guard: args.guard,
         network_domain: domain(args.hold_network_domain),
+        network_inputs: args.network_inputs,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.trajectory_window,
             ..Default::default()
@@ -507,6 +508,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             training: a.training,
             guard: a.guard,
             network_domain: domain(a.hold_network_domain),
+            network_inputs: a.network_inputs,
             ..Default::default()
         },
         narx_lags: a.narx_lags,
