@@ -474,7 +474,7 @@ fn explore_tanks_hybrid_base() {
         let output = spec.linear.output_names()[0].clone();
         let record = mmenn::sysid_core::Dataset::new(
             vec![mmenn::sysid_core::Channel::new("u")],
-            vec![mmenn::sysid_core::Channel::new(output)],
+            vec![mmenn::sysid_core::Channel::new(output.clone())],
             vec![est.clone()],
         )
         .unwrap();
@@ -490,5 +490,28 @@ fn explore_tanks_hybrid_base() {
             clock.elapsed().as_secs_f64()
         );
         println!("{}", g.markdown());
+        // `HYBRID_TEST=1`: the test records too (only after a rule's choice is committed).
+        if std::env::var("HYBRID_TEST").is_ok_and(|v| v == "1") {
+            let (scale, unit) = b.reporting_unit();
+            let dir = std::env::temp_dir().join(format!("mmenn-explore-{}", b.folder()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let json = dir.join("model.json");
+            std::fs::write(&json, serde_json::to_string(&fit.model).unwrap()).unwrap();
+            for test in &data.tests {
+                let e = &test.data.experiments()[0];
+                let csv = dir.join(format!("{}.csv", test.name));
+                write_record(&csv, e, &output).unwrap();
+                let (v, d) =
+                    super::hybrid_output_domain(&json, &csv, &InitialChoice::Fit, window, &output)
+                        .unwrap();
+                let y = row(e.outputs(), 0);
+                let r = rmse_after(&y, &v, window, scale);
+                println!(
+                    "test {}: {r:?} {unit}, network outside its box at {:.1} %",
+                    test.name,
+                    d.map_or(0.0, |d| 100.0 * d.fraction())
+                );
+            }
+        }
     }
 }
