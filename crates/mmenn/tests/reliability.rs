@@ -761,6 +761,49 @@ fn output_folders_are_all_or_nothing() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `--network-inputs states` saves a network on the states alone (as many inputs as the
+/// model has states); the default reads the input too; a misspelt value is refused.
+#[test]
+fn cli_network_inputs_reach_the_saved_network() {
+    let dir = scratch("netin");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    for (value, want) in [(Some("states"), 2), (None, 3)] {
+        let out = format!("o-{want}");
+        let mut args = vec![
+            "--quiet", "fit", "--data", "d.csv", "--model", "m.toml", "--hidden", "2", "--inits",
+            "1", "--w", "100", "--out", &out,
+        ];
+        if let Some(v) = value {
+            args.extend(["--network-inputs", v]);
+        }
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 0, "{err}");
+        let text = std::fs::read_to_string(dir.join(&out).join("model.json")).unwrap();
+        let file = mmenn::fit::HybridFile::parse(Path::new("model.json"), &text).unwrap();
+        assert_eq!(file.network.n_inputs(), want);
+    }
+    let (code, err) = mmenn(
+        &dir,
+        &[
+            "--quiet",
+            "fit",
+            "--data",
+            "d.csv",
+            "--model",
+            "m.toml",
+            "--network-inputs",
+            "inputs",
+            "--out",
+            "bad",
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("states-and-inputs"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `--hold-network-domain` reaches the saved model (fit and compare share the flag's
 /// meaning); without it the network extrapolates.
 #[test]

@@ -7,7 +7,8 @@ use nn::SweepRow;
 use sysid_core::Experiment;
 
 use super::{
-    FitOutcome, FitSummary, NetworkInputs, NetworkSelection, Training, d_figures, network_variables, row,
+    FitOutcome, FitSummary, NetworkInputs, NetworkSelection, Training, d_figures,
+    network_variables, row,
 };
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::data_file::write_csv;
