@@ -5,7 +5,8 @@
 //! holdout (calibrate on the first 80 %, score the last 20 %) sub hz;
 //! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
-//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos holdout; `GREY_SB` keys q dd vv
+//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos holdout ref (the reference
+//! IDIM-LS coefficients uncalibrated); `GREY_SB` keys q dd vv
 //! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
 //! `GREY_DUMP=/tmp/prefix` writes the training and first test run as CSV. E.g.
 //! `GREY_TANKS="pump0=1 lin=1 c=1" cargo test --release -p xtask explore_tanks --
@@ -135,8 +136,10 @@ fn explore_emps() {
         let mut substeps = 1;
         let mut full = false;
         let mut holdout = false;
+        let mut reference = false;
         for (k, v) in kv(item) {
             match k.as_str() {
+                "ref" => reference = v != 0.0,
                 "eps" => o.eps = v,
                 "asym" => o.asymmetric = v != 0.0,
                 "g" => o.start.get_or_insert([0.0; 4])[0] = v,
@@ -154,6 +157,10 @@ fn explore_emps() {
         spec.integrator = Integrator::Rk4 { substeps };
         if full {
             spec.horizons = vec![1.0];
+        }
+        if reference {
+            // The published IDIM-LS coefficients as they are: only the state is fitted.
+            spec.free.clear();
         }
         if holdout {
             held_out(Benchmark::Emps, item.trim(), &spec);
