@@ -170,7 +170,14 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              5.97 mm), whose input has 5-V steps (the force pulses, below) that the training \
              input never has: the free run asks the network outside the box of its training \
              pairs at 28 % of the test samples; extrapolating there it scored 7.52 mm, held at \
-             the box's edge 7.20 mm (docs/decisions/hybrid-network-domain-hold.md). On the official test record the test error of the grey box (5.97 mm) \
+             the box's edge 7.20 mm (docs/decisions/hybrid-network-domain-hold.md). The input \
+             is not what the network fails on: a network on the states alone, which no input \
+             can push outside its box, lost on the guard (pooled 1.72 against 1.48 mm) and on \
+             the test record (7.89 mm, its free run outside the box at 33 % of the samples as \
+             the simulated position drifts; docs/decisions/emps-states-only-network.md). The \
+             published reference model with its own coefficients scores 8.39 mm (its row), so \
+             calibration removes 29 % of the physics' test error and the network none. On the \
+             official test record the test error of the grey box (5.97 mm) \
              is almost all slow drift: its 1-s moving average carries 5.76 mm RMS and the rest \
              0.45 mm; it does not depend on speed (5.8–6.2 mm RMS at every |v| band from rest \
              to 0.2 m/s), moves in steps during the strokes and stays between them (segment \
