@@ -1,29 +1,30 @@
 //! The K-fold guard ([`GuardHeldOut::Folds`], and [`GuardHeldOut::LastFifthRetrained`] as
 //! its one-stretch case): the first training record is cut into K
-//! contiguous stretches; for each, the networks are trained again without it (its `d̂`
-//! pairs and its samples in the shooting windows left out; the free-run selection does
-//! not score it) and physics alone, the network and the refined network are run free over
-//! it from a state fitted to its first samples, started from MME's `x̂` there. A
-//! candidate's score pools its K squared errors: per channel `√(mean_k RMSE_k²)` over
-//! `√(mean_k σ_k²)` (σ_k: the stretch's output spread), averaged over channels — one
-//! stretch gives the last-fifth guard's normalised error. MME's `x̂`, `d̂` come from the
-//! whole record (a smoother: the samples next to a stretch carry some of its information).
+//! contiguous stretches; for each, MME runs again on the record without it (the pieces
+//! before and after it as separate records, at the whole record's `W` and noise variance:
+//! a smoother's `x̂`, `d̂` next to a stretch would otherwise carry information from inside
+//! it; docs/decisions/guard-leak-free-mme.md), the networks are trained on that estimate,
+//! and physics alone, the network and the refined network are run free over the stretch
+//! from a state fitted to its first `w` samples, started from MME's `x̂` on those `w`
+//! samples alone. A candidate's score pools its K squared errors: per channel
+//! `√(mean_k RMSE_k²)` over `√(mean_k σ_k²)` (σ_k: the stretch's output spread), averaged
+//! over channels — one stretch gives the last-fifth guard's normalised error.
 
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use nalgebra::DMatrix;
 use nn::{Mlp, ShootingRecord};
 use rayon::prelude::*;
-use sysid_core::{Dataset, Experiment, MmeEstimate};
+use sysid_core::{Dataset, MmeEstimate};
 
 use super::guard::{self, CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
 use super::{
-    FitOptions, TrainingSet, hybrid_loaded, judge_outputs, split_last_fifth, train_networks,
-    training_pairs_without,
+    FitOptions, Trained, TrainingSet, hybrid_loaded, judge_outputs, split_last_fifth,
+    train_networks, training_pairs_without,
 };
 use crate::error::{MmennError, Result};
+use crate::estimate::{estimate_spec, mme_config};
 use crate::model_file::ModelSpec;
 use crate::progress::{NoProgress, Progress, ProgressSink};
 
@@ -103,9 +104,10 @@ pub(super) fn choose_by_folds(
     } else {
         format!(
             "{folds} contiguous stretches of the first training record ({len} samples; for \
-             each, the network sweep, selection and trajectory training ran again without \
-             it), each run free from a state fitted to its first {w} samples from MME's x̂ \
-             there; scores pool the {folds} stretches' squared errors"
+             each, MME, the network sweep, selection and trajectory training ran again \
+             without it), each run free from a state fitted to its first {w} samples, started \
+             from MME on those samples alone; scores pool the {folds} stretches' squared \
+             errors"
         )
     };
     Ok(guard::decide(scores, candidates, description, per_fold))
@@ -116,7 +118,7 @@ fn window(stretch: usize, opts: &FitOptions) -> usize {
     opts.x0_window.min(stretch / 2).max(1)
 }
 
-/// One stretch: train without it, judge every kind over it.
+/// One stretch: MME and the networks without it, every kind judged over it.
 fn fold(
     spec: &ModelSpec,
     est: &MmeEstimate,
@@ -127,51 +129,11 @@ fn fold(
     opts: &FitOptions,
 ) -> Result<FoldScores> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
-    let (x, d) = training_pairs_without(
-        est,
-        data,
-        opts.trim_fraction,
-        Some(&stretch),
-        opts.network_inputs,
-    );
-    let (fit, test) = split_last_fifth(&x, &d);
-    // Shooting records: the first record's pieces before and after the stretch, the other
-    // records whole.
+    let (t, start) = train_without(spec, est, data, x0, stretch.clone(), opts)?;
     let first = &data.experiments()[0];
-    let states = &est.experiments[0].states;
-    let mut pieces: Vec<(Experiment, DMatrix<f64>)> = Vec::new();
-    for r in [0..stretch.start, stretch.end..first.len()] {
-        if r.len() >= 2 {
-            pieces.push((
-                first
-                    .window(r.start, r.end)
-                    .map_err(core("cutting a K-fold guard piece"))?,
-                states.columns(r.start, r.len()).into_owned(),
-            ));
-        }
-    }
-    let mut shooting: Vec<ShootingRecord<'_>> = pieces
-        .iter()
-        .map(|(experiment, states)| ShootingRecord { experiment, states })
-        .collect();
-    shooting.extend(data.experiments().iter().zip(&est.experiments).skip(1).map(
-        |(experiment, e)| ShootingRecord {
-            experiment,
-            states: &e.states,
-        },
-    ));
-    let set = TrainingSet {
-        fit,
-        test,
-        data,
-        skip: Some(stretch.clone()),
-        shooting,
-    };
-    let t = train_networks(spec, &set, None, x0, opts, &NoProgress)?;
     let segment = data
         .window(0, stretch.start, stretch.end)
         .map_err(core("cutting a K-fold guard stretch"))?;
-    let start: Vec<f64> = states.column(stretch.start).iter().copied().collect();
     let w = window(stretch.len(), opts);
     let mut candidates = Vec::with_capacity(kinds.len());
     for &kind in kinds {
@@ -195,6 +157,99 @@ fn fold(
         samples: (stretch.start, stretch.end),
         candidates,
     })
+}
+
+/// The networks trained without `stretch` (MME, pairs, shooting windows and the free-run
+/// selection all on the record without it) and the state the stretch's free run starts
+/// from (MME on its first `w` samples alone). Nothing else of the stretch is read.
+fn train_without(
+    spec: &ModelSpec,
+    est: &MmeEstimate,
+    data: &Dataset,
+    x0: &[f64],
+    stretch: Range<usize>,
+    opts: &FitOptions,
+) -> Result<(Trained, Vec<f64>)> {
+    let core = |context: &'static str| move |source| MmennError::Core { context, source };
+    // MME at the whole record's W and noise variance (the W search is not repeated).
+    let mut config = mme_config(spec, &opts.estimate);
+    config.w = mme_core::WeightSpec::Matrix(est.w.clone());
+    config.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
+    // The record without the stretch: the first record's pieces before and after it (each
+    // long enough for MME's ends to be trimmed), then the other records whole.
+    let first = &data.experiments()[0];
+    let mut experiments = Vec::new();
+    for r in [0..stretch.start, stretch.end..first.len()] {
+        if r.len() >= MIN_STRETCH {
+            experiments.push(
+                first
+                    .window(r.start, r.end)
+                    .map_err(core("cutting a K-fold guard piece"))?,
+            );
+        }
+    }
+    experiments.extend(data.experiments().iter().skip(1).cloned());
+    let rest = Dataset::new(
+        data.input_channels().to_vec(),
+        data.output_channels().to_vec(),
+        experiments,
+    )
+    .map_err(core("the training records without a K-fold guard stretch"))?;
+    let rest_est = estimate_spec(spec, &rest, &config)?.estimate;
+    let (x, d) = training_pairs_without(
+        &rest_est,
+        &rest,
+        opts.trim_fraction,
+        None,
+        opts.network_inputs,
+    );
+    let (fit, test) = split_last_fifth(&x, &d);
+    let shooting: Vec<ShootingRecord<'_>> = rest
+        .experiments()
+        .iter()
+        .zip(&rest_est.experiments)
+        .map(|(experiment, e)| ShootingRecord {
+            experiment,
+            states: &e.states,
+        })
+        .collect();
+    let rest_x0: Vec<f64> = rest_est.experiments[0]
+        .states
+        .column(0)
+        .iter()
+        .copied()
+        .collect();
+    let set = TrainingSet {
+        fit,
+        test,
+        data: &rest,
+        skip: None,
+        shooting,
+    };
+    let t = train_networks(spec, &set, None, &rest_x0, opts, &NoProgress)?;
+    let w = window(stretch.len(), opts);
+    // The starting guess from the samples the protocol lets a model see: MME on the
+    // stretch's first w samples alone (the whole-record x0 if that short run fails).
+    let start: Vec<f64> = data
+        .window(
+            0,
+            stretch.start,
+            stretch.start + w.max(2).min(stretch.len()),
+        )
+        .map_err(core("cutting a K-fold guard window"))
+        .and_then(|first_w| estimate_spec(spec, &first_w, &config))
+        .map_or_else(
+            |_| x0.to_vec(),
+            |out| {
+                out.estimate.experiments[0]
+                    .states
+                    .column(0)
+                    .iter()
+                    .copied()
+                    .collect()
+            },
+        );
+    Ok((t, start))
 }
 
 /// A kind's score over every stretch: per channel the root of the mean squared error and
@@ -250,5 +305,96 @@ fn pooled<'a>(
         rmse,
         fit_percent,
         failure: (!error.is_finite()).then(|| "non-finite pooled free-run error".to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    /// What a fold trains and where its free run starts depend on the held-out stretch
+    /// only through its first `w` samples: changing every later sample of the stretch
+    /// leaves the networks (before and after trajectory training) and the starting state
+    /// identical to the bit, with MME's `W` and noise variance held. The whole-record
+    /// smoother, which the guard used before docs/decisions/guard-leak-free-mme.md, does
+    /// see the change right after the stretch (checked, so the test can tell the two apart).
+    /// Records written by the independent Python/scipy generator (`fixtures/discovery_suite`).
+    #[test]
+    fn a_stretch_reaches_its_fold_only_through_its_window() {
+        let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/discovery_suite/cases/msd_cubic_hard");
+        let mut spec = crate::model_file::read_model(&case.join("model.toml")).unwrap();
+        // MME's hyperparameters held, as the guard holds them (the file's variance is
+        // estimated from the data otherwise).
+        spec.noise_variance = crate::model_file::NoiseVariance::Given(vec![2e-5]);
+        let (data, _) =
+            crate::data_file::read_with_validation(&[case.join("est.csv")], &[], &spec).unwrap();
+        let opts = FitOptions {
+            estimate: crate::estimate::EstimateOptions {
+                w: crate::estimate::WeightChoice::Value(1e3),
+                ..Default::default()
+            },
+            max_hidden: 2,
+            inits: 1,
+            train_on_trajectories: super::super::TrajectoryChoice::Trajectory,
+            trajectory: nn::TrajectoryConfig {
+                window: 100,
+                max_iterations: 2,
+                ..Default::default()
+            },
+            ..FitOptions::default()
+        };
+        let len = data.experiments()[0].len();
+        let stretch = (len / 5)..(2 * len / 5);
+        let w = window(stretch.len(), &opts);
+        // The same record with every sample of the stretch after its window changed.
+        let exp = &data.experiments()[0];
+        let mut outputs = exp.outputs().clone();
+        for k in (stretch.start + w)..stretch.end {
+            outputs[(0, k)] += 0.05 * (k as f64 * 0.37).sin();
+        }
+        let changed_exp =
+            sysid_core::Experiment::new(exp.t0(), exp.dt(), exp.inputs().clone(), outputs)
+                .unwrap()
+                .with_intersample(exp.intersample());
+        let changed = Dataset::new(
+            data.input_channels().to_vec(),
+            data.output_channels().to_vec(),
+            vec![changed_exp],
+        )
+        .unwrap();
+        let config = mme_config(&spec, &opts.estimate);
+        let run = |d: &Dataset| {
+            let est = estimate_spec(&spec, d, &config).unwrap().estimate;
+            let x0: Vec<f64> = est.experiments[0]
+                .states
+                .column(0)
+                .iter()
+                .copied()
+                .collect();
+            let (t, start) = train_without(&spec, &est, d, &x0, stretch.clone(), &opts).unwrap();
+            (est, t, start)
+        };
+        let (est_a, a, start_a) = run(&data);
+        let (est_b, b, start_b) = run(&changed);
+        assert_eq!(est_a.w, est_b.w);
+        assert_eq!(est_a.noise_variance, est_b.noise_variance);
+        assert_eq!(a.before, b.before);
+        assert_eq!(a.network, b.network);
+        assert_eq!(start_a, start_b);
+        assert!(a.refinement.is_some());
+        // The whole-record smoother's states just after the stretch (training pairs of the
+        // leaky guard) did move.
+        let k = stretch.end;
+        let moved = (0..2)
+            .map(|i| {
+                (est_a.experiments[0].states[(i, k)] - est_b.experiments[0].states[(i, k)]).abs()
+            })
+            .fold(0.0, f64::max);
+        assert!(
+            moved > 0.0,
+            "the whole-record smoother did not see the change"
+        );
     }
 }
