@@ -1,9 +1,11 @@
 //! The K-fold guard ([`GuardHeldOut::Folds`], and [`GuardHeldOut::LastFifthRetrained`] as
 //! its one-stretch case): the first training record is cut into K
-//! contiguous stretches; for each, MME runs again on the record without it (the pieces
-//! before and after it as separate records, at the whole record's `W` and noise variance:
-//! a smoother's `x̂`, `d̂` next to a stretch would otherwise carry information from inside
-//! it; docs/decisions/guard-leak-free-mme.md), the networks are trained on that estimate,
+//! contiguous stretches; for each, MME runs again on the pieces before and after it and
+//! on the other records, each on its own (at the whole record's `W` and noise variance: a
+//! smoother's `x̂`, `d̂` next to a stretch would otherwise carry information from inside
+//! it; docs/decisions/guard-leak-free-mme.md; a piece MME cannot observe on its own is left
+//! out of that fold and named in [`FoldScores::left_out`]), the networks are trained on
+//! that estimate,
 //! and physics alone, the network and the refined network are run free over the stretch
 //! from a state fitted to its first `w` samples, started from MME's `x̂` on those `w`
 //! samples alone. A candidate's score pools its K squared errors: per channel
@@ -129,7 +131,7 @@ fn fold(
     opts: &FitOptions,
 ) -> Result<FoldScores> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
-    let (t, start) = train_without(spec, est, data, x0, stretch.clone(), opts)?;
+    let (t, start, left_out) = train_without(spec, est, data, x0, stretch.clone(), opts)?;
     let first = &data.experiments()[0];
     let segment = data
         .window(0, stretch.start, stretch.end)
@@ -156,11 +158,13 @@ fn fold(
     Ok(FoldScores {
         samples: (stretch.start, stretch.end),
         candidates,
+        left_out,
     })
 }
 
-/// The networks trained without `stretch` (MME, pairs, shooting windows and the free-run
-/// selection all on the record without it) and the state the stretch's free run starts
+/// The networks trained without `stretch` (MME on each piece and record on its own; pairs,
+/// shooting windows and the free-run selection on those), what was left out because MME
+/// could not estimate it on its own (a piece, or its first samples), and the state the stretch's free run starts
 /// from (MME on its first `w` samples alone). Nothing else of the stretch is read.
 fn train_without(
     spec: &ModelSpec,
@@ -169,33 +173,93 @@ fn train_without(
     x0: &[f64],
     stretch: Range<usize>,
     opts: &FitOptions,
-) -> Result<(Trained, Vec<f64>)> {
+) -> Result<(Trained, Vec<f64>, Vec<String>)> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
     // MME at the whole record's W and noise variance (the W search is not repeated).
     let mut config = mme_config(spec, &opts.estimate);
     config.w = mme_core::WeightSpec::Matrix(est.w.clone());
     config.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
-    // The record without the stretch: the first record's pieces before and after it (each
-    // long enough for MME's ends to be trimmed), then the other records whole.
+    // The records without the stretch: the first record's pieces before and after it, then
+    // the other records, each estimated by MME on its own (so no estimate reads the
+    // stretch). A piece MME cannot estimate on its own (too short to observe the state)
+    // is left out of this fold's training and named in its scores.
     let first = &data.experiments()[0];
-    let mut experiments = Vec::new();
+    let mut records = Vec::new();
     for r in [0..stretch.start, stretch.end..first.len()] {
         if r.len() >= MIN_STRETCH {
-            experiments.push(
-                first
-                    .window(r.start, r.end)
-                    .map_err(core("cutting a K-fold guard piece"))?,
-            );
+            let piece = first
+                .window(r.start, r.end)
+                .map_err(core("cutting a K-fold guard piece"))?;
+            records.push((format!("samples {}..{}", r.start, r.end), piece));
         }
     }
-    experiments.extend(data.experiments().iter().skip(1).cloned());
+    for (i, e) in data.experiments().iter().enumerate().skip(1) {
+        records.push((format!("record {}", i + 1), e.clone()));
+    }
+    let mut kept = Vec::new();
+    let mut rest_est: Option<MmeEstimate> = None;
+    let mut left_out = Vec::new();
+    for (name, record) in records {
+        // A state that decays within a sample or two (a fast lag) is barely seen by the
+        // outputs from where a piece starts, and MME may find that start unobservable
+        // (Cascaded Tanks' pump lag: pieces starting at samples 204–210 are, at 215 not);
+        // the piece then starts 1, 2, 4, … samples later, at most the protocol's
+        // state-initialisation window `w` (those samples are only dropped, nothing of the
+        // stretch is added).
+        let mut outcome = Err(String::new());
+        let latest = opts.x0_window.min(record.len().saturating_sub(MIN_STRETCH));
+        let skips = std::iter::once(0).chain(
+            std::iter::successors(Some(1usize), |s| s.checked_mul(2)).take_while(|&s| s <= latest),
+        );
+        for skip in skips {
+            let piece = record
+                .window(skip, record.len())
+                .map_err(core("cutting a K-fold guard piece"))?;
+            let one = Dataset::new(
+                data.input_channels().to_vec(),
+                data.output_channels().to_vec(),
+                vec![piece],
+            )
+            .map_err(core("the training records without a K-fold guard stretch"))?;
+            match estimate_spec(spec, &one, &config) {
+                Ok(out) => {
+                    outcome = Ok((skip, one, out.estimate));
+                    break;
+                }
+                Err(e) => outcome = Err(e.to_string()),
+            }
+        }
+        match outcome {
+            Ok((skip, one, e)) => {
+                if skip > 0 {
+                    left_out.push(format!(
+                        "the first {skip} sample(s) of {name} (MME could not observe the \
+                         state where it started)"
+                    ));
+                }
+                match rest_est.as_mut() {
+                    None => rest_est = Some(e),
+                    Some(r) => r.experiments.extend(e.experiments),
+                }
+                kept.extend(one.experiments().iter().cloned());
+            }
+            Err(why) => left_out.push(format!("{name} (MME: {why})")),
+        }
+    }
+    let rest_est = rest_est.ok_or_else(|| MmennError::Core {
+        context: "MME on the training records without a K-fold guard stretch",
+        source: sysid_core::CoreError::Diverged {
+            t: first.t0(),
+            state: 0,
+            value: f64::NAN,
+        },
+    })?;
     let rest = Dataset::new(
         data.input_channels().to_vec(),
         data.output_channels().to_vec(),
-        experiments,
+        kept,
     )
     .map_err(core("the training records without a K-fold guard stretch"))?;
-    let rest_est = estimate_spec(spec, &rest, &config)?.estimate;
     let (x, d) = training_pairs_without(
         &rest_est,
         &rest,
@@ -249,7 +313,7 @@ fn train_without(
                     .collect()
             },
         );
-    Ok((t, start))
+    Ok((t, start, left_out))
 }
 
 /// A kind's score over every stretch: per channel the root of the mean squared error and
@@ -373,7 +437,9 @@ mod tests {
                 .iter()
                 .copied()
                 .collect();
-            let (t, start) = train_without(&spec, &est, d, &x0, stretch.clone(), &opts).unwrap();
+            let (t, start, left_out) =
+                train_without(&spec, &est, d, &x0, stretch.clone(), &opts).unwrap();
+            assert!(left_out.is_empty(), "{left_out:?}");
             (est, t, start)
         };
         let (est_a, a, start_a) = run(&data);

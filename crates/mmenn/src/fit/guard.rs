@@ -139,6 +139,11 @@ pub struct FoldScores {
     /// Each candidate's score on the stretch, in the order of
     /// [`GuardReport::candidates`].
     pub candidates: Vec<CandidateScore>,
+    /// Training samples left out of this stretch's networks because MME could not
+    /// estimate them on their own (a piece, or its first samples; with why); empty when
+    /// none were.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub left_out: Vec<String>,
 }
 
 impl GuardReport {
@@ -199,6 +204,15 @@ impl GuardReport {
                     s.push_str(&format!(" {cell} |"));
                 }
                 s.push('\n');
+            }
+            for f in self.folds.iter().filter(|f| !f.left_out.is_empty()) {
+                s.push_str(&format!(
+                    "\nStretch {}..{}: left out of its networks' training because MME could \
+                     not estimate it on its own: {}.\n",
+                    f.samples.0,
+                    f.samples.1,
+                    f.left_out.join("; ")
+                ));
             }
         }
         s
