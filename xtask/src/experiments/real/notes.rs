@@ -76,11 +76,11 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              0.2421 → 0.2348 V; a pump flow quadratic in the voltage failed both); it lowered \
              the grey box's test RMSE from 0.2441 to 0.2326 V. The hybrid keeps the physics \
              alone, so it scores what the grey box scores: its guard runs every candidate \
-             free over five 204-sample stretches of the training record with the networks \
-             trained again without each (docs/decisions/tanks-kfold-guard-rule.md, adopted \
-             before its test number was read), and a network trained without a stretch is \
-             worse there than the physics (pooled 0.1865 V against 0.1713 V; on the last \
-             stretch 0.235 against 0.189 V). The hybrids this table reported before (0.1800 V \
+             free over five 204-sample stretches of the training record with MME and the \
+             networks run again without each (docs/decisions/tanks-kfold-guard-rule.md, \
+             adopted before its test number was read; docs/decisions/guard-leak-free-mme.md), \
+             and a network trained without a stretch is worse there than the physics (pooled \
+             0.1858 V against 0.1713 V; on the last stretch 0.218 against 0.189 V). The hybrids this table reported before (0.1800 V \
              on the grey box without the lag, 0.1931 V with it; seeds 1–7 gave 0.1786–0.1818 V) \
              were kept by a guard on the last fifth alone whose network had been chosen by \
              that fifth's d̂ pairs and trained on its trajectories; it scored them 0.1600 and \
@@ -165,14 +165,16 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              the same measured start (2.50 mm with its network extrapolating beyond its \
              training box; 2.45 mm from MME's x̂(t0) = (0.072 mm, 4.4 mm/s) until \
              docs/decisions/emps-kfold-guard-and-hybrid-start.md). Its network's gain holds on \
-             training stretches it was not trained on (5-fold guard, pooled 1.48 mm against \
-             the physics' 2.84 mm) but not on the official test record (7.20 against \
+             training stretches it was not trained on (5-fold guard, pooled 1.79 mm against \
+             the physics' 2.84 mm; 1.48 mm before the guard's MME left each stretch out, \
+             docs/decisions/guard-leak-free-mme.md) but not on the official test record (7.20 against \
              5.97 mm), whose input has 5-V steps (the force pulses, below) that the training \
              input never has: the free run asks the network outside the box of its training \
              pairs at 28 % of the test samples; extrapolating there it scored 7.52 mm, held at \
              the box's edge 7.20 mm (docs/decisions/hybrid-network-domain-hold.md). The input \
              is not what the network fails on: a network on the states alone, which no input \
-             can push outside its box, lost on the guard (pooled 1.72 against 1.48 mm) and on \
+             can push outside its box, lost on the guard (pooled 1.72 against 1.48 mm, both before \
+             the guard's MME left each stretch out) and on \
              the test record (7.89 mm, its free run outside the box at 33 % of the samples as \
              the simulated position drifts; docs/decisions/emps-states-only-network.md). The \
              published reference model with its own coefficients scores 8.39 mm (its row), so \
