@@ -98,9 +98,9 @@ pub(super) fn choose_by_folds(
     let description = if held == GuardHeldOut::LastFifthRetrained {
         let r = &stretches[0];
         format!(
-            "the last fifth of the first training record (samples {}..{}; the network sweep, \
-             selection and trajectory training ran again without it), run free from a state \
-             fitted to its first {w} samples from MME's x̂ there",
+            "the last fifth of the first training record (samples {}..{}; MME, the network \
+             sweep, selection and trajectory training ran again without it), run free from a \
+             state fitted to its first {w} samples, started from MME on those samples alone",
             r.start, r.end
         )
     } else {
@@ -163,9 +163,10 @@ fn fold(
 }
 
 /// The networks trained without `stretch` (MME on each piece and record on its own; pairs,
-/// shooting windows and the free-run selection on those), what was left out because MME
-/// could not estimate it on its own (a piece, or its first samples), and the state the stretch's free run starts
-/// from (MME on its first `w` samples alone). Nothing else of the stretch is read.
+/// shooting windows and the free-run selection on those), the state the stretch's free
+/// run starts from (MME on its first `w` samples alone), and what was left out because MME
+/// could not estimate it on its own (a piece, or its first samples). Nothing else of the
+/// stretch is read.
 fn train_without(
     spec: &ModelSpec,
     est: &MmeEstimate,
@@ -199,14 +200,15 @@ fn train_without(
     let mut kept = Vec::new();
     let mut rest_est: Option<MmeEstimate> = None;
     let mut left_out = Vec::new();
+    let mut last_error = None;
     for (name, record) in records {
         // A state that decays within a sample or two (a fast lag) is barely seen by the
         // outputs from where a piece starts, and MME may find that start unobservable
-        // (Cascaded Tanks' pump lag: pieces starting at samples 204–210 are, at 215 not);
+        // (Cascaded Tanks' pump lag: pieces starting at samples 204–210 fail, at 215 not);
         // the piece then starts 1, 2, 4, … samples later, at most the protocol's
         // state-initialisation window `w` (those samples are only dropped, nothing of the
         // stretch is added).
-        let mut outcome = Err(String::new());
+        let mut outcome = Err(None);
         let latest = opts.x0_window.min(record.len().saturating_sub(MIN_STRETCH));
         let skips = std::iter::once(0).chain(
             std::iter::successors(Some(1usize), |s| s.checked_mul(2)).take_while(|&s| s <= latest),
@@ -226,7 +228,7 @@ fn train_without(
                     outcome = Ok((skip, one, out.estimate));
                     break;
                 }
-                Err(e) => outcome = Err(e.to_string()),
+                Err(e) => outcome = Err(Some(e)),
             }
         }
         match outcome {
@@ -243,17 +245,26 @@ fn train_without(
                 }
                 kept.extend(one.experiments().iter().cloned());
             }
-            Err(why) => left_out.push(format!("{name} (MME: {why})")),
+            Err(why) => {
+                if let Some(e) = &why {
+                    left_out.push(format!("{name} (MME: {e})"));
+                }
+                last_error = why;
+            }
         }
     }
-    let rest_est = rest_est.ok_or_else(|| MmennError::Core {
-        context: "MME on the training records without a K-fold guard stretch",
-        source: sysid_core::CoreError::Diverged {
-            t: first.t0(),
-            state: 0,
-            value: f64::NAN,
-        },
-    })?;
+    // No record left: MME's own reason for the last one.
+    let rest_est = match (rest_est, last_error) {
+        (Some(e), _) => e,
+        (None, Some(e)) => return Err(e),
+        (None, None) => {
+            return Err(MmennError::Nn(nn::NnError::TooFewSamples {
+                what: "training records without a K-fold guard stretch",
+                found: 0,
+                needed: 1,
+            }));
+        }
+    };
     let rest = Dataset::new(
         data.input_channels().to_vec(),
         data.output_channels().to_vec(),
