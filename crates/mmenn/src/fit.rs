@@ -263,6 +263,17 @@ pub(crate) fn judge_outputs(
     )
 }
 
+/// MME's `x̂` at the first sample of the first record: where free runs of the training
+/// record start.
+fn first_state(est: &MmeEstimate) -> Vec<f64> {
+    est.experiments[0]
+        .states
+        .column(0)
+        .iter()
+        .copied()
+        .collect()
+}
+
 fn row(m: &DMatrix<f64>, i: usize) -> Vec<f64> {
     m.row(i).iter().copied().collect()
 }
@@ -481,12 +492,7 @@ pub fn compute_fit(
             )
         }
     };
-    let x0: Vec<f64> = est.experiments[0]
-        .states
-        .column(0)
-        .iter()
-        .copied()
-        .collect();
+    let x0 = first_state(est);
     let val_pair = val_est.as_ref().zip(val.as_ref());
     let whole = TrainingSet {
         fit: fit_pairs,

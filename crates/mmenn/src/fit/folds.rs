@@ -22,7 +22,7 @@ use sysid_core::{Dataset, MmeEstimate};
 
 use super::guard::{self, CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
 use super::{
-    FitOptions, Trained, TrainingSet, hybrid_loaded, judge_outputs, split_last_fifth,
+    FitOptions, Trained, TrainingSet, first_state, hybrid_loaded, judge_outputs, split_last_fifth,
     train_networks, training_pairs_without,
 };
 use crate::error::{MmennError, Result};
@@ -288,12 +288,7 @@ fn train_without(
             states: &e.states,
         })
         .collect();
-    let rest_x0: Vec<f64> = rest_est.experiments[0]
-        .states
-        .column(0)
-        .iter()
-        .copied()
-        .collect();
+    let rest_x0 = first_state(&rest_est);
     let set = TrainingSet {
         fit,
         test,
@@ -442,12 +437,7 @@ mod tests {
         let config = mme_config(&spec, &opts.estimate);
         let run = |d: &Dataset| {
             let est = estimate_spec(&spec, d, &config).unwrap().estimate;
-            let x0: Vec<f64> = est.experiments[0]
-                .states
-                .column(0)
-                .iter()
-                .copied()
-                .collect();
+            let x0 = super::super::first_state(&est);
             let (t, start, left_out) =
                 train_without(&spec, &est, d, &x0, stretch.clone(), &opts).unwrap();
             assert!(left_out.is_empty(), "{left_out:?}");
