@@ -288,6 +288,20 @@ pub enum MmennError {
         /// The terms, as `effect = coefficient·(term)`.
         terms: String,
     },
+    /// MME could not determine a record's initial state: names the state where the
+    /// factorisation failed and what usually helps.
+    #[error(
+        "MME: {source}; the first state not determined by the measurements given the ones \
+         before it is '{state}'. A state the outputs see only briefly from the record's first \
+         sample (a fast lag, a state the first samples do not excite) does this: starting the \
+         record a few samples later, or a model without that state, usually helps"
+    )]
+    MmeUnobservable {
+        /// The estimator's error.
+        source: mme_core::MmeError,
+        /// The state's name.
+        state: String,
+    },
     /// A network could not be built or trained.
     #[error("network: {0}")]
     Nn(#[from] nn::NnError),

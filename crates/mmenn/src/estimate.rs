@@ -130,7 +130,8 @@ pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Re
             .map_err(|e| name_terms(spec, e));
     }
     if spec.terms.is_empty() {
-        return Ok(mme_core::estimate_with_report(&spec.linear, data, config)?);
+        return mme_core::estimate_with_report(&spec.linear, data, config)
+            .map_err(|e| name_terms(spec, e));
     }
     let model = nonlinear_model(spec)?;
     mme_core::estimate_nonlinear_with_report(&model, data, config).map_err(|e| name_terms(spec, e))
@@ -166,8 +167,18 @@ pub fn estimate_term_model(
         .map_err(|e| with_terms(&described, e))
 }
 
-/// A non-finite model error with the named terms of the equation it names attached.
+/// An MME error with names attached: an unobservable initial state with its state's name
+/// and what helps; a non-finite model error with the named terms of the equation it names.
 pub(crate) fn name_terms(spec: &ModelSpec, e: mme_core::MmeError) -> MmennError {
+    // The pivot of an unobservable initial state is a state index (no pivoting).
+    if let mme_core::MmeError::NotObservable { pivot, .. } = &e
+        && let Some(state) = spec.linear.state_names().get(*pivot)
+    {
+        return MmennError::MmeUnobservable {
+            state: state.clone(),
+            source: e,
+        };
+    }
     let described: Vec<(String, Option<String>, String)> = spec
         .terms
         .iter()
@@ -554,5 +565,45 @@ mod tests {
         fallback.method = mme_core::NoiseMethod::DifferenceBased;
         let w = noise_warnings(&names, &fallback);
         assert!(w.len() == 1 && w[0].starts_with("y, z:"), "{w:?}");
+    }
+
+    /// A state no output can see (`z` is driven by the input and feeds nothing) leaves the
+    /// initial state undetermined: the error names that state, with what helps; the
+    /// states before it are determined (the pivot is `z`'s index).
+    #[test]
+    fn unobservable_initial_state_is_named() {
+        let spec = crate::model_file::parse_model(
+            std::path::Path::new("m.toml"),
+            "states = [\"x\", \"z\"]\ninputs = [\"u\"]\n\
+             A = [[-1.0, 0.0], [0.0, -2.0]]\nB = [[1.0], [1.0]]\n\
+             measured = [\"x\"]\ncorrected = [\"x\"]\nnoise_variance = [1e-4]\n",
+        )
+        .unwrap();
+        let n = 50;
+        let u = nalgebra::DMatrix::from_fn(1, n, |_, k| (k as f64 * 0.3).sin());
+        let y = nalgebra::DMatrix::from_fn(1, n, |_, k| (k as f64 * 0.2).cos());
+        let data = sysid_core::Dataset::new(
+            vec![sysid_core::Channel::new("u")],
+            vec![sysid_core::Channel::new("x")],
+            vec![sysid_core::Experiment::new(0.0, 0.1, u, y).unwrap()],
+        )
+        .unwrap();
+        let config = mme_config(
+            &spec,
+            &EstimateOptions {
+                w: WeightChoice::Value(10.0),
+                ..Default::default()
+            },
+        );
+        let err = estimate_spec(&spec, &data, &config).unwrap_err();
+        assert!(
+            matches!(&err, MmennError::MmeUnobservable { state, .. } if state == "z"),
+            "{err}"
+        );
+        let text = err.to_string();
+        assert!(
+            text.contains("'z'") && text.contains("a few samples later"),
+            "{text}"
+        );
     }
 }
