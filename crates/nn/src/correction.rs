@@ -80,19 +80,13 @@ impl NetCorrection {
     ///
     /// Errors: `n_states` larger than the network's input count.
     pub fn new(net: Mlp, n_states: usize) -> Result<Self> {
-        if n_states > net.n_inputs() {
+        let Some(n_model_inputs) = net.n_inputs().checked_sub(n_states) else {
             return Err(NnError::CorrectionSplit {
                 n_states,
                 n_inputs: net.n_inputs(),
             });
-        }
-        let n_model_inputs = net.n_inputs() - n_states;
-        Ok(Self {
-            net,
-            n_states,
-            domain: Domain::Extrapolate,
-            n_model_inputs,
-        })
+        };
+        Self::for_model(net, n_states, n_model_inputs)
     }
 
     /// Wrap `net` as the correction of a model with `n_states` states and `n_model_inputs`
