@@ -10,9 +10,11 @@ pub mod linear_ss;
 mod lsq;
 pub mod narx;
 pub mod narx_model;
+mod narx_sim;
 pub mod oe;
 pub mod oe_model;
 mod oe_sim;
+pub mod poly_narx;
 pub mod projection;
 pub mod regressors;
 pub mod residuals;
@@ -42,6 +44,7 @@ pub use oe::{
     InitialStateTreatment, OeConfig, OeFit, ParameterEstimate, Stability, StabilityVerdict, fit_oe,
 };
 pub use oe_model::{OeModel, X0Policy};
+pub use poly_narx::{PolyNarxConfig, PolyNarxFit, PolyNarxModel, fit_poly_narx};
 pub use projection::RegressorProjection;
 pub use regressors::NarxOrders;
 pub use residuals::{

@@ -306,7 +306,7 @@ pub fn fit_narx(data: &Dataset, config: &NarxConfig) -> Result<NarxFit> {
 }
 
 /// Per output, `centre ± factor·half-range` of the measured data.
-fn divergence_limits(data: &Dataset, factor: f64) -> Result<Vec<(f64, f64)>> {
+pub(crate) fn divergence_limits(data: &Dataset, factor: f64) -> Result<Vec<(f64, f64)>> {
     let p = data.output_channels().len();
     let mut lo = vec![f64::INFINITY; p];
     let mut hi = vec![f64::NEG_INFINITY; p];

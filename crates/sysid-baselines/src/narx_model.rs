@@ -2,14 +2,14 @@
 //! own outputs fed back after an initial window of measured samples) and k-step
 //! prediction (measured outputs up to `k` steps back), with divergence detection.
 
-use nalgebra::DMatrix;
 use nn::{Mlp, Workspace};
 use serde::{Deserialize, Serialize};
-use sysid_core::{Experiment, Horizon, Model, Prediction};
+use sysid_core::{Experiment, Model, Prediction};
 
 use crate::error::{BaselineError, Result};
+use crate::narx_sim::{self, OneStep};
 use crate::projection::RegressorProjection;
-use crate::regressors::{NarxOrders, fill_regressor};
+use crate::regressors::NarxOrders;
 
 /// A NARX model `y(k) = F(y(k−1…k−na), u(k−nk…k−nk−nb+1))` with `F` an [`Mlp`]
 /// (reading the regressor's principal components when a projection is set).
@@ -148,112 +148,55 @@ impl NarxModel {
     pub fn limits(&self) -> &[(f64, f64)] {
         &self.limits
     }
+}
 
-    fn check(&self, experiment: &Experiment) -> Result<()> {
-        if experiment.n_inputs() != self.input_names.len() {
-            return Err(BaselineError::Dimension {
-                what: "input channels of the experiment vs the NARX model",
-                found: experiment.n_inputs(),
-                expected: self.input_names.len(),
-            });
-        }
-        if experiment.n_outputs() != self.output_names.len() {
-            return Err(BaselineError::Dimension {
-                what: "output channels of the experiment vs the NARX model",
-                found: experiment.n_outputs(),
-                expected: self.output_names.len(),
-            });
-        }
-        let lag = self.orders.max_lag();
-        if experiment.len() <= lag {
-            return Err(BaselineError::LagsExceedData {
-                what: "NARX regressor window",
-                experiment: 0,
-                needed: lag + 1,
-                available: experiment.len(),
-            });
-        }
-        Ok(())
+/// The network's scratch: the projected regressor and the forward pass's workspace.
+pub(crate) struct NetScratch {
+    tmp: Vec<f64>,
+    z: Vec<f64>,
+    ws: Workspace,
+}
+
+impl OneStep for NarxModel {
+    type Scratch = NetScratch;
+
+    fn orders(&self) -> NarxOrders {
+        self.orders
     }
 
-    /// First sample `s ≥ max_lag` whose `na` preceding outputs are all measured: the
-    /// free run starts there.
-    fn first_complete_window(&self, experiment: &Experiment) -> Result<usize> {
-        let lag = self.orders.max_lag();
-        let na = self.orders.na;
-        let y = experiment.outputs();
-        (lag..experiment.len())
-            .find(|&s| (s - na..s).all(|j| y.column(j).iter().all(|v| !v.is_nan())))
-            .ok_or(BaselineError::NoInitialWindow {
-                experiment: 0,
-                window: na,
-            })
+    fn input_names(&self) -> &[String] {
+        &self.input_names
     }
 
-    /// One network step at sample `k` reading outputs through `y`; checks the limits.
-    fn step(
-        &self,
-        y: impl Fn(usize, usize) -> f64,
-        u: &DMatrix<f64>,
-        k: usize,
-        bufs: &mut Buffers,
-    ) -> Result<()> {
-        let dims = (self.output_names.len(), self.input_names.len());
-        fill_regressor(y, |c, j| u[(c, j)], dims, k, &self.orders, &mut bufs.reg);
-        match &self.projection {
-            Some(proj) => {
-                proj.apply(&bufs.reg, &mut bufs.tmp, &mut bufs.z);
-                self.net.forward(&bufs.z, &mut bufs.out, &mut bufs.ws)?;
-            }
-            None => self.net.forward(&bufs.reg, &mut bufs.out, &mut bufs.ws)?,
-        }
-        let out = &bufs.out;
-        for (i, v) in out.iter().enumerate() {
-            let (lo, hi) = self.limits[i];
-            if !(v.is_finite() && *v >= lo && *v <= hi) {
-                return Err(BaselineError::Diverged {
-                    sample: k,
-                    channel: self.output_names[i].clone(),
-                    value: *v,
-                });
-            }
-        }
-        Ok(())
+    fn output_names(&self) -> &[String] {
+        &self.output_names
     }
 
-    fn buffers(&self) -> Buffers {
-        let p = self.output_names.len();
-        let len = self.orders.regressor_len(p, self.input_names.len());
-        Buffers {
-            reg: vec![0.0; len],
+    fn limits(&self) -> &[(f64, f64)] {
+        &self.limits
+    }
+
+    fn scratch(&self) -> NetScratch {
+        let len = self
+            .orders
+            .regressor_len(self.output_names.len(), self.input_names.len());
+        NetScratch {
             tmp: vec![0.0; len],
             z: vec![0.0; self.net.n_inputs()],
-            out: vec![0.0; p],
             ws: Workspace::new(),
         }
     }
 
-    /// Outputs with samples `s..end` replaced by the free run from `s` (measured values
-    /// elsewhere).
-    fn free_run(&self, experiment: &Experiment, s: usize, end: usize) -> Result<DMatrix<f64>> {
-        let mut buf = experiment.outputs().clone();
-        let mut bufs = self.buffers();
-        let u = experiment.inputs();
-        for k in s..end {
-            self.step(|c, j| buf[(c, j)], u, k, &mut bufs)?;
-            buf.column_mut(k).copy_from_slice(&bufs.out);
+    fn map(&self, reg: &[f64], s: &mut NetScratch, out: &mut [f64]) -> Result<()> {
+        match &self.projection {
+            Some(proj) => {
+                proj.apply(reg, &mut s.tmp, &mut s.z);
+                self.net.forward(&s.z, out, &mut s.ws)?;
+            }
+            None => self.net.forward(reg, out, &mut s.ws)?,
         }
-        Ok(buf)
+        Ok(())
     }
-}
-
-/// Scratch space of one simulation.
-struct Buffers {
-    reg: Vec<f64>,
-    tmp: Vec<f64>,
-    z: Vec<f64>,
-    out: Vec<f64>,
-    ws: Workspace,
 }
 
 impl Model for NarxModel {
@@ -269,15 +212,7 @@ impl Model for NarxModel {
     /// counts differing from the model's, a record no longer than the lag window, no
     /// complete initial window, divergence (an output leaving its limits).
     fn simulate(&self, experiment: &Experiment) -> Result<Prediction> {
-        self.check(experiment)?;
-        let s = self.first_complete_window(experiment)?;
-        let mut outputs = self.free_run(experiment, s, experiment.len())?;
-        outputs.columns_mut(0, s).fill(f64::NAN);
-        Ok(Prediction {
-            horizon: Horizon::FreeRun,
-            outputs,
-            initial_samples: s,
-        })
+        narx_sim::simulate(self, experiment)
     }
 
     /// k-step prediction: the output at `t` is the model iterated `k` times from the
@@ -286,58 +221,6 @@ impl Model for NarxModel {
     /// first `k − 1` samples after the start, its free run). `initial_samples = s + k − 1`
     /// with `s` as in [`Model::simulate`]; earlier columns are NaN.
     fn predict(&self, experiment: &Experiment, k: usize) -> Result<Prediction> {
-        crate::error::check_horizon(k)?;
-        self.check(experiment)?;
-        let s = self.first_complete_window(experiment)?;
-        let len = experiment.len();
-        let skip = s + k - 1;
-        if skip >= len {
-            return Err(BaselineError::LagsExceedData {
-                what: "NARX initial window plus prediction horizon",
-                experiment: 0,
-                needed: skip + 1,
-                available: len,
-            });
-        }
-        let measured = experiment.outputs();
-        let p = self.output_names.len();
-        // Best available value of each sample: the measurement, else a prediction.
-        let mut best = self.free_run(experiment, s, skip)?;
-        for j in s..len {
-            for c in 0..p {
-                if !measured[(c, j)].is_nan() {
-                    best[(c, j)] = measured[(c, j)];
-                }
-            }
-        }
-        let mut outputs = DMatrix::from_element(p, len, f64::NAN);
-        let mut bufs = self.buffers();
-        let mut temp = DMatrix::zeros(p, k);
-        let u = experiment.inputs();
-        for t in skip..len {
-            let o = t + 1 - k;
-            for step in 0..k {
-                let read = |c: usize, j: usize| {
-                    if j >= o {
-                        temp[(c, j - o)]
-                    } else {
-                        best[(c, j)]
-                    }
-                };
-                self.step(read, u, o + step, &mut bufs)?;
-                temp.column_mut(step).copy_from_slice(&bufs.out);
-            }
-            outputs.column_mut(t).copy_from(&temp.column(k - 1));
-            for c in 0..p {
-                if best[(c, t)].is_nan() {
-                    best[(c, t)] = temp[(c, k - 1)];
-                }
-            }
-        }
-        Ok(Prediction {
-            horizon: Horizon::Steps(k),
-            outputs,
-            initial_samples: skip,
-        })
+        narx_sim::predict(self, experiment, k)
     }
 }

@@ -17,5 +17,7 @@ mod foh;
 mod narx;
 #[path = "cases/oe.rs"]
 mod oe;
+#[path = "cases/poly_narx.rs"]
+mod poly_narx;
 #[path = "cases/subspace.rs"]
 mod subspace;
