@@ -144,6 +144,32 @@ pub(crate) fn minimise<P: LeastSquares>(
         _ => return Err(diverged(&format!("initial {what}"))),
     };
     scale_and_rank(&j0, names)?;
+    solve(problem, theta0, r0.len(), what, settings)
+}
+
+/// [`minimise`] without the rank test: for linear-in-parameters models whose terms may be
+/// nearly collinear on the data, where the damping carries the step (the minimum-norm
+/// start already holds the undetermined directions at zero).
+pub(crate) fn minimise_damped<P: LeastSquares>(
+    problem: &P,
+    theta0: &[f64],
+    what: &str,
+    settings: Settings,
+) -> Result<Outcome> {
+    let rows = match problem.residuals(theta0, false)? {
+        Some((r, _)) => r.len(),
+        None => return Err(diverged(&format!("initial {what}"))),
+    };
+    solve(problem, theta0, rows, what, settings)
+}
+
+fn solve<P: LeastSquares>(
+    problem: &P,
+    theta0: &[f64],
+    rows: usize,
+    what: &str,
+    settings: Settings,
+) -> Result<Outcome> {
     let exact = settings.exact_rtol * settings.data_norm;
     let lm = LmSettings {
         max_iterations: usize::try_from(settings.max_iterations).unwrap_or(usize::MAX),
@@ -155,7 +181,7 @@ pub(crate) fn minimise<P: LeastSquares>(
     };
     let mut adapter = Adapter {
         inner: problem,
-        rows: r0.len(),
+        rows,
     };
     let solution = levenberg_marquardt(&mut adapter, theta0, &lm)?;
     if solution.report.termination == Termination::Diverged {

@@ -69,7 +69,7 @@ pub(crate) fn check<M: OneStep>(m: &M, experiment: &Experiment) -> Result<()> {
 
 /// First sample `s ≥ max_lag` whose `na` preceding outputs are all measured: the free
 /// run starts there.
-fn first_complete_window<M: OneStep>(m: &M, experiment: &Experiment) -> Result<usize> {
+pub(crate) fn first_complete_window<M: OneStep>(m: &M, experiment: &Experiment) -> Result<usize> {
     let o = m.orders();
     let (lag, na) = (o.max_lag(), o.na);
     let y = experiment.outputs();

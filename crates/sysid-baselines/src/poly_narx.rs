@@ -9,11 +9,12 @@
 //! reports its rank). Nothing here is random. The free run and k-step prediction are
 //! those of the network NARX (`narx_sim`).
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use sysid_core::{Dataset, Experiment, Model, Prediction};
 
 use crate::error::{BaselineError, Result, check_config};
+use crate::lsq::{self, LeastSquares, Linearised};
 use crate::narx::divergence_limits;
 use crate::narx_sim::{self, OneStep};
 use crate::regressors::{NarxOrders, training_rows};
@@ -37,6 +38,25 @@ pub struct PolyNarxConfig {
     /// A simulated output more than this many half-ranges of the training data away from
     /// the data's centre counts as diverged. Default 100.
     pub divergence_factor: f64,
+    /// What the coefficients minimise. Default [`Focus::Prediction`].
+    pub focus: Focus,
+}
+
+/// What the coefficients minimise (the "focus" of MATLAB's `nlarx`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Focus {
+    /// One-step prediction error: one linear least-squares solve.
+    Prediction,
+    /// Free-run simulation error over every training record (each run from its first
+    /// measured delay window, outputs weighted by their standard deviations), from the
+    /// one-step solution: Levenberg–Marquardt with exact sensitivities of the recursion,
+    /// at most `max_iterations` Jacobians. A one-step solution whose free run leaves the
+    /// divergence limits cannot start it: the fit fails with the divergence.
+    Simulation {
+        /// Jacobian evaluations at most (≥ 1).
+        max_iterations: usize,
+    },
 }
 
 impl Default for PolyNarxConfig {
@@ -46,6 +66,7 @@ impl Default for PolyNarxConfig {
             degree: 3,
             nonlinear_lags: 2,
             divergence_factor: 100.0,
+            focus: Focus::Prediction,
         }
     }
 }
@@ -71,7 +92,16 @@ impl PolyNarxConfig {
             self.divergence_factor,
             "must be finite and > 1",
             self.divergence_factor.is_finite() && self.divergence_factor > 1.0,
-        )
+        )?;
+        if let Focus::Simulation { max_iterations } = self.focus {
+            check_config(
+                "focus.max_iterations",
+                max_iterations as f64,
+                "must be ≥ 1",
+                max_iterations >= 1,
+            )?;
+        }
+        Ok(())
     }
 }
 
@@ -358,8 +388,22 @@ pub struct PolyNarxFit {
     /// Numerical rank of the regressor matrix (equal to the number of terms when every
     /// term is determined by the data).
     pub rank: usize,
-    /// One-step root-mean-square error per output on the training rows.
+    /// One-step root-mean-square error per output on the training rows (of the one-step
+    /// solution).
     pub one_step_rmse: Vec<f64>,
+    /// The simulation-error refinement, when [`Focus::Simulation`] asked for it.
+    pub refinement: Option<Refinement>,
+}
+
+/// What the simulation-error refinement did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refinement {
+    /// Jacobian evaluations.
+    pub iterations: usize,
+    /// Free-run RMSE per output over the training records, from the one-step solution.
+    pub start_rmse: Vec<f64>,
+    /// The same after the refinement.
+    pub final_rmse: Vec<f64>,
 }
 
 /// Fit a polynomial NARX model by one-step least squares on every experiment of `data`.
@@ -412,7 +456,7 @@ pub fn fit_poly_narx(data: &Dataset, config: &PolyNarxConfig) -> Result<PolyNarx
     let one_step_rmse = (0..p)
         .map(|c| (resid.column(c).norm_squared() / n as f64).sqrt())
         .collect();
-    let model = PolyNarxModel {
+    let mut model = PolyNarxModel {
         orders: o,
         centre,
         scale,
@@ -423,12 +467,17 @@ pub fn fit_poly_narx(data: &Dataset, config: &PolyNarxConfig) -> Result<PolyNarx
         limits: divergence_limits(data, config.divergence_factor)?,
     };
     model.validate()?;
+    let refinement = match config.focus {
+        Focus::Prediction => None,
+        Focus::Simulation { max_iterations } => Some(refine(&mut model, data, max_iterations)?),
+    };
     Ok(PolyNarxFit {
         model,
         rows: n,
         skipped_rows: rows.skipped,
         rank,
         one_step_rmse,
+        refinement,
     })
 }
 
@@ -460,6 +509,234 @@ fn least_squares(phi: DMatrix<f64>, y: &DMatrix<f64>) -> Result<(DMatrix<f64>, u
             needed: t,
         })?;
     Ok((theta, rank))
+}
+
+/// The derivative of each term with respect to each output-lag variable it holds:
+/// `(variable, multiplicity, the term with one factor of it removed)`.
+type TermDerivatives = Vec<Vec<(usize, f64, Vec<usize>)>>;
+
+fn term_derivatives(terms: &[Vec<usize>], n_output_vars: usize) -> TermDerivatives {
+    terms
+        .iter()
+        .map(|vars| {
+            let mut out: Vec<(usize, f64, Vec<usize>)> = Vec::new();
+            for (i, &v) in vars.iter().enumerate() {
+                if v >= n_output_vars || (i > 0 && vars[i - 1] == v) {
+                    continue;
+                }
+                let mult = vars.iter().filter(|&&w| w == v).count() as f64;
+                let mut rest = vars.clone();
+                rest.remove(i);
+                out.push((v, mult, rest));
+            }
+            out
+        })
+        .collect()
+}
+
+/// The free-run (simulation) error of a polynomial NARX structure as a function of its
+/// coefficients (row-major `p × terms`).
+struct SimulationError<'a> {
+    model: &'a PolyNarxModel,
+    data: &'a Dataset,
+    /// 1 / standard deviation of each output over the training records.
+    weight: Vec<f64>,
+    derivatives: TermDerivatives,
+}
+
+impl SimulationError<'_> {
+    /// Residuals `w·(ŷ − y)` of every measured sample after each record's start, with
+    /// their Jacobian when asked; `None` when a free run leaves the limits.
+    fn run(&self, theta: &[f64], jacobian: bool) -> Result<Option<Linearised>> {
+        let m = self.model;
+        let o = m.orders;
+        let (p, q) = (m.output_names.len(), m.input_names.len());
+        let t_count = m.terms.len();
+        let n_par = p * t_count;
+        let len = o.regressor_len(p, q);
+        let n_out_vars = p * o.na;
+        let ring_len = o.na + 1;
+        let mut reg = vec![0.0; len];
+        let mut z = vec![0.0; len];
+        let mut phi = vec![0.0; t_count];
+        let mut grad = vec![0.0; p * n_out_vars];
+        let mut row = vec![0.0; n_par];
+        let mut ring = vec![0.0; if jacobian { ring_len * p * n_par } else { 0 }];
+        let mut res = Vec::new();
+        let mut jac = Vec::new();
+        for exp in self.data.experiments() {
+            narx_sim::check(m, exp)?;
+            let s = narx_sim::first_complete_window(m, exp)?;
+            let mut yhat = exp.outputs().clone();
+            let (u, y) = (exp.inputs(), exp.outputs());
+            ring.fill(0.0);
+            for k in s..exp.len() {
+                crate::regressors::fill_regressor(
+                    |c, j| yhat[(c, j)],
+                    |c, j| u[(c, j)],
+                    (p, q),
+                    k,
+                    &o,
+                    &mut reg,
+                );
+                for i in 0..len {
+                    z[i] = (reg[i] - m.centre[i]) / m.scale[i];
+                }
+                for (f, vars) in phi.iter_mut().zip(&m.terms) {
+                    *f = vars.iter().map(|&i| z[i]).product();
+                }
+                for c in 0..p {
+                    let th = &theta[c * t_count..(c + 1) * t_count];
+                    let v: f64 = th.iter().zip(&phi).map(|(a, b)| a * b).sum();
+                    let (lo, hi) = m.limits[c];
+                    if !(v.is_finite() && v >= lo && v <= hi) {
+                        return Ok(None);
+                    }
+                    yhat[(c, k)] = v;
+                }
+                if jacobian {
+                    grad.fill(0.0);
+                    for c in 0..p {
+                        let th = &theta[c * t_count..(c + 1) * t_count];
+                        for (t, ders) in self.derivatives.iter().enumerate() {
+                            for (v, mult, rest) in ders {
+                                let d: f64 = rest.iter().map(|&i| z[i]).product();
+                                grad[c * n_out_vars + v] += th[t] * mult * d;
+                            }
+                        }
+                    }
+                    let slot = (k % ring_len) * p * n_par;
+                    for c in 0..p {
+                        row.fill(0.0);
+                        row[c * t_count..(c + 1) * t_count].copy_from_slice(&phi);
+                        for v in 0..n_out_vars {
+                            let g = grad[c * n_out_vars + v] / m.scale[v];
+                            if g == 0.0 {
+                                continue;
+                            }
+                            let (ch, lag) = (v / o.na, v % o.na + 1);
+                            let from = ((k - lag) % ring_len) * p * n_par + ch * n_par;
+                            for (r, s_old) in row.iter_mut().zip(&ring[from..from + n_par]) {
+                                *r += g * s_old;
+                            }
+                        }
+                        ring[slot + c * n_par..slot + (c + 1) * n_par].copy_from_slice(&row);
+                    }
+                }
+                for c in 0..p {
+                    if y[(c, k)].is_nan() {
+                        continue;
+                    }
+                    let w = self.weight[c];
+                    res.push(w * (yhat[(c, k)] - y[(c, k)]));
+                    if jacobian {
+                        let slot = (k % ring_len) * p * n_par + c * n_par;
+                        jac.extend(ring[slot..slot + n_par].iter().map(|v| w * v));
+                    }
+                }
+            }
+        }
+        let rows = res.len();
+        let j = jacobian.then(|| DMatrix::from_row_slice(rows, n_par, &jac));
+        Ok(Some((DVector::from_vec(res), j)))
+    }
+
+    /// Free-run RMSE per output (unweighted) at `theta`.
+    fn rmse(&self, theta: &[f64]) -> Result<Vec<f64>> {
+        let p = self.weight.len();
+        let Some((r, _)) = self.run(theta, false)? else {
+            return Err(BaselineError::Diverged {
+                sample: 0,
+                channel: "polynomial NARX free run over the training records".into(),
+                value: f64::INFINITY,
+            });
+        };
+        // Residuals are interleaved by output only where every output is measured; the
+        // pooled RMSE per output is computed over the samples of that output.
+        let mut sse = vec![0.0; p];
+        let mut n = vec![0usize; p];
+        let mut idx = 0;
+        for exp in self.data.experiments() {
+            let s = narx_sim::first_complete_window(self.model, exp)?;
+            for k in s..exp.len() {
+                for c in 0..p {
+                    if !exp.outputs()[(c, k)].is_nan() {
+                        let e = r[idx] / self.weight[c];
+                        sse[c] += e * e;
+                        n[c] += 1;
+                        idx += 1;
+                    }
+                }
+            }
+        }
+        Ok((0..p)
+            .map(|c| (sse[c] / n[c].max(1) as f64).sqrt())
+            .collect())
+    }
+}
+
+impl LeastSquares for SimulationError<'_> {
+    fn residuals(&self, theta: &[f64], jacobian: bool) -> Result<Option<Linearised>> {
+        self.run(theta, jacobian)
+    }
+}
+
+/// Refine `model`'s coefficients by free-run error over `data` (see [`Focus::Simulation`]).
+fn refine(model: &mut PolyNarxModel, data: &Dataset, max_iterations: usize) -> Result<Refinement> {
+    // The start must run free over every record (its divergence, with the sample, is the
+    // error).
+    for exp in data.experiments() {
+        narx_sim::simulate(model, exp)?;
+    }
+    let p = model.output_names.len();
+    let mut weight = Vec::with_capacity(p);
+    for c in 0..p {
+        let vals: Vec<f64> = data
+            .experiments()
+            .iter()
+            .flat_map(|e| e.outputs().row(c).iter().copied().collect::<Vec<_>>())
+            .filter(|v| !v.is_nan())
+            .collect();
+        let mean = vals.iter().sum::<f64>() / vals.len().max(1) as f64;
+        let var = vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / vals.len().max(1) as f64;
+        weight.push(if var > 0.0 { 1.0 / var.sqrt() } else { 1.0 });
+    }
+    let theta0: Vec<f64> = (0..p)
+        .flat_map(|c| {
+            model
+                .coefficients
+                .row(c)
+                .iter()
+                .copied()
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let problem = SimulationError {
+        model,
+        data,
+        weight,
+        derivatives: term_derivatives(&model.terms, p * model.orders.na),
+    };
+    let start_rmse = problem.rmse(&theta0)?;
+    let settings = lsq::Settings {
+        max_iterations: max_iterations as u64,
+        gtol: 0.0,
+        ftol: 1e-10,
+        exact_rtol: 0.0,
+        data_norm: 0.0,
+        scaling: sysid_core::Scaling::Current,
+    };
+    let outcome = lsq::minimise_damped(&problem, &theta0, "polynomial NARX", settings)?;
+    let final_rmse = problem.rmse(&outcome.theta)?;
+    let t = model.terms.len();
+    let coefficients = DMatrix::from_row_slice(p, t, &outcome.theta);
+    model.coefficients = coefficients;
+    model.validate()?;
+    Ok(Refinement {
+        iterations: outcome.report.iterations.len(),
+        start_rmse,
+        final_rmse,
+    })
 }
 
 #[cfg(test)]
@@ -537,5 +814,63 @@ mod tests {
         assert!(matches!(e, BaselineError::TooFewRows { .. }), "{e}");
         let d = dataset(vec![0.0; 40], vec![f64::NAN; 40]);
         assert!(fit_poly_narx(&d, &PolyNarxConfig::default()).is_err());
+    }
+
+    /// The exact sensitivities of the free run against central differences.
+    #[test]
+    fn simulation_jacobian_matches_finite_differences() {
+        let n = 120;
+        let u: Vec<f64> = (0..n)
+            .map(|k| (0.21 * k as f64).sin() + 0.3 * (0.05 * k as f64).cos())
+            .collect();
+        let mut y = vec![0.0; n];
+        for k in 2..n {
+            y[k] = 1.2 * y[k - 1] - 0.5 * y[k - 2] + 0.3 * u[k - 1] - 0.1 * y[k - 1].powi(3)
+                + 0.05 * y[k - 2] * y[k - 1] * u[k - 1];
+        }
+        let data = dataset(u, y);
+        let fit = fit_poly_narx(
+            &data,
+            &PolyNarxConfig {
+                orders: NarxOrders {
+                    na: 2,
+                    nb: 2,
+                    nk: 1,
+                },
+                degree: 3,
+                nonlinear_lags: 2,
+                ..PolyNarxConfig::default()
+            },
+        )
+        .unwrap();
+        let model = &fit.model;
+        let problem = SimulationError {
+            model,
+            data: &data,
+            weight: vec![2.0],
+            derivatives: term_derivatives(&model.terms, model.orders.na),
+        };
+        // Move away from the exact solution so every sensitivity is exercised.
+        let theta: Vec<f64> = model
+            .coefficients
+            .iter()
+            .enumerate()
+            .map(|(i, v)| v * 0.97 + 1e-3 * (i as f64 % 3.0))
+            .collect();
+        let (_, j) = problem.run(&theta, true).unwrap().unwrap();
+        let j = j.unwrap();
+        let h = 1e-6;
+        let mut worst: f64 = 0.0;
+        for col in 0..theta.len() {
+            let (mut a, mut b) = (theta.clone(), theta.clone());
+            a[col] += h;
+            b[col] -= h;
+            let (ra, _) = problem.run(&a, false).unwrap().unwrap();
+            let (rb, _) = problem.run(&b, false).unwrap().unwrap();
+            let fd = (ra - rb) / (2.0 * h);
+            let scale = fd.amax().max(1e-3);
+            worst = worst.max((j.column(col) - fd).amax() / scale);
+        }
+        assert!(worst < 1e-6, "largest relative Jacobian error {worst:e}");
     }
 }

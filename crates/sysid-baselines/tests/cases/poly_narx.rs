@@ -177,3 +177,49 @@ fn on_an_independent_duffing_record_the_cubic_terms_halve_the_free_run_error() {
     // Measured on 2026-11-27 (VM `vm`): linear 1.50e-1, cubic 4.00e-3.
     assert!(cubic <= 0.5 * linear, "linear {linear:e}, cubic {cubic:e}");
 }
+
+/// Output-error noise biases the one-step fit; the simulation-error refinement (rule fixed
+/// before its first run) must not score worse on the independent Duffing record's
+/// validation free run, and must lower the free-run error on its own training record.
+#[test]
+fn simulation_focus_refines_the_free_run_on_the_independent_duffing_record() {
+    let (u, y, dt) = read_case("duffing_hardening", "est.csv");
+    let (uv, yv, _) = read_case("duffing_hardening", "val.csv");
+    let train = dataset(&u, &y, dt);
+    let val = dataset(&uv, &yv, dt);
+    let config = PolyNarxConfig {
+        orders: NarxOrders {
+            na: 3,
+            nb: 3,
+            nk: 1,
+        },
+        degree: 3,
+        nonlinear_lags: 2,
+        ..PolyNarxConfig::default()
+    };
+    let val_rmse = |m: &sysid_baselines::PolyNarxModel| {
+        let sim = m.simulate(&val.experiments()[0]).unwrap();
+        let s = sim.initial_samples;
+        ((s..yv.len())
+            .map(|k| (sim.outputs[(0, k)] - yv[k]).powi(2))
+            .sum::<f64>()
+            / (yv.len() - s) as f64)
+            .sqrt()
+    };
+    let one_step = fit_poly_narx(&train, &config).unwrap();
+    let refined = fit_poly_narx(
+        &train,
+        &PolyNarxConfig {
+            focus: sysid_baselines::poly_narx::Focus::Simulation { max_iterations: 20 },
+            ..config
+        },
+    )
+    .unwrap();
+    let r = refined.refinement.as_ref().unwrap();
+    assert!(r.final_rmse[0] <= r.start_rmse[0], "{r:?}");
+    let (a, b) = (val_rmse(&one_step.model), val_rmse(&refined.model));
+    assert!(
+        b <= a * 1.0001,
+        "validation free run: one-step {a:e}, refined {b:e}"
+    );
+}
