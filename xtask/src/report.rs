@@ -10,7 +10,7 @@ use serde::Serialize;
 use crate::JobTime;
 use crate::experiments::Mode;
 use crate::stamp::Stamp;
-use crate::table::{Table, format_value};
+use crate::table::{Row, Table, format_value};
 
 /// What a run did, written as `run.json`.
 #[derive(Debug, Clone, Serialize)]
@@ -374,8 +374,8 @@ fn real(tables: &[Table], out: &mut String) {
          (each row's protocol and the published numbers are in the tables and their notes; \
          N/A: not run on that record):\n\n\
          | benchmark | record | unit | linear SS (MOESP + free-run OE) | physics-first grey box | \
-         MME/NN on the grey box | NARX | published linear | best published |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+         MME/NN on the grey box | NARX | polynomial NARX | published linear | best published |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
     );
     for id in ids {
         let Some(t) = find(tables, id) else { continue };
@@ -394,20 +394,30 @@ fn real(tables: &[Table], out: &mut String) {
                         .filter(|r| r.key[0].starts_with(prefix) && &r.key[1] == record)
                 };
                 // Where a benchmark has several variants of a model, the one its table
-                // marks as chosen on training data.
-                rows()
+                // marks as chosen on training data; a failed model shows as failed.
+                let row = rows()
                     .find(|r| r.key[0].ends_with(crate::experiments::real::LINEAR_BASELINE))
-                    .or_else(|| rows().next())
-                    .and_then(|r| r.values[0])
+                    .or_else(|| rows().next());
+                match row {
+                    Some(Row {
+                        values,
+                        remark: Some(why),
+                        ..
+                    }) if values[0].is_none() => {
+                        why.split(" (").next().unwrap_or("failed").to_string()
+                    }
+                    r => fmt(r.and_then(|r| r.values[0])),
+                }
             };
             let (linear, best) = crate::experiments::real::anchors(id, record);
             out.push_str(&format!(
-                "| {} | {record} | {unit} | {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {record} | {unit} | {} | {} | {} | {} | {} | {} | {} |\n",
                 id.trim_start_matches("real_"),
-                fmt(pick("linear SS, MOESP + free-run OE")),
-                fmt(pick("physics-first grey box (")),
-                fmt(pick("MME/NN on the grey box")),
-                fmt(pick("NARX")),
+                pick("linear SS, MOESP + free-run OE"),
+                pick("physics-first grey box ("),
+                pick("MME/NN on the grey box"),
+                pick("NARX"),
+                pick("polynomial NARX"),
                 linear.map_or("—".into(), |v| format!("{v}")),
                 best.map_or("—".into(), |(v, who)| format!("{v} ({who})")),
             ));
