@@ -223,3 +223,40 @@ fn simulation_focus_refines_the_free_run_on_the_independent_duffing_record() {
         "validation free run: one-step {a:e}, refined {b:e}"
     );
 }
+
+/// A saved model reads back to the same free run; a file whose coefficients do not match
+/// its terms is refused with the dimension named.
+#[test]
+fn a_saved_model_reads_back_and_a_malformed_one_is_refused() {
+    let u = input(300, 0.0);
+    let y = truth(&u);
+    let data = dataset(&u, &y, 1.0);
+    let fit = fit_poly_narx(
+        &data,
+        &PolyNarxConfig {
+            orders: NarxOrders {
+                na: 2,
+                nb: 1,
+                nk: 1,
+            },
+            ..PolyNarxConfig::default()
+        },
+    )
+    .unwrap();
+    let text = serde_json::to_string(&fit.model).unwrap();
+    let back: sysid_baselines::PolyNarxModel = serde_json::from_str(&text).unwrap();
+    let e = &data.experiments()[0];
+    let (a, b) = (fit.model.simulate(e).unwrap(), back.simulate(e).unwrap());
+    assert_eq!(a.initial_samples, b.initial_samples);
+    let s = a.initial_samples;
+    assert_eq!(a.outputs.columns(s, 300 - s), b.outputs.columns(s, 300 - s));
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["terms"].as_array_mut().unwrap().pop();
+    let err = serde_json::from_value::<sysid_baselines::PolyNarxModel>(value)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("coefficient columns vs polynomial terms"),
+        "{err}"
+    );
+}
