@@ -95,12 +95,30 @@ pub(super) fn choose_by_folds(
         .map(|(i, &c)| pooled(c, per_fold.iter().map(|f| &f.candidates[i])))
         .collect();
     let w = window(stretches[0].len(), opts);
+    // Stretches whose first window MME could not estimate, and where they started instead.
+    let fallbacks: Vec<String> = per_fold
+        .iter()
+        .filter_map(|f| {
+            let g = f.start_guess.as_deref()?;
+            let from = g.split("starts from ").nth(1).unwrap_or(g);
+            Some(format!("{}..{} from {from}", f.samples.0, f.samples.1))
+        })
+        .collect();
+    let fallback_note = if fallbacks.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (where that MME failed, the guess instead: {})",
+            fallbacks.join("; ")
+        )
+    };
     let description = if held == GuardHeldOut::LastFifthRetrained {
         let r = &stretches[0];
         format!(
             "the last fifth of the first training record (samples {}..{}; MME, the network \
              sweep, selection and trajectory training ran again without it), run free from a \
-             state fitted to its first {w} samples, started from MME on those samples alone",
+             state fitted to its first {w} samples, started from MME on those samples \
+             alone{fallback_note}",
             r.start, r.end
         )
     } else {
@@ -108,8 +126,8 @@ pub(super) fn choose_by_folds(
             "{folds} contiguous stretches of the first training record ({len} samples; for \
              each, MME, the network sweep, selection and trajectory training ran again \
              without it), each run free from a state fitted to its first {w} samples, started \
-             from MME on those samples alone; scores pool the {folds} stretches' squared \
-             errors"
+             from MME on those samples alone{fallback_note}; scores pool the {folds} \
+             stretches' squared errors"
         )
     };
     Ok(guard::decide(scores, candidates, description, per_fold))
@@ -131,7 +149,8 @@ fn fold(
     opts: &FitOptions,
 ) -> Result<FoldScores> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
-    let (t, start, left_out) = train_without(spec, est, data, x0, stretch.clone(), opts)?;
+    let (t, start, left_out, start_guess) =
+        train_without(spec, est, data, x0, stretch.clone(), opts)?;
     let first = &data.experiments()[0];
     let segment = data
         .window(0, stretch.start, stretch.end)
@@ -159,6 +178,7 @@ fn fold(
         samples: (stretch.start, stretch.end),
         candidates,
         left_out,
+        start_guess,
     })
 }
 
@@ -174,7 +194,7 @@ fn train_without(
     x0: &[f64],
     stretch: Range<usize>,
     opts: &FitOptions,
-) -> Result<(Trained, Vec<f64>, Vec<String>)> {
+) -> Result<(Trained, Vec<f64>, Vec<String>, Option<String>)> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
     // MME at the whole record's W and noise variance (the W search is not repeated).
     let mut config = mme_config(spec, &opts.estimate);
@@ -198,10 +218,13 @@ fn train_without(
         records.push((format!("record {}", i + 1), e.clone()));
     }
     let mut kept = Vec::new();
+    // MME's last state of the piece before the stretch and first state of the piece after
+    // it: leak-free starting guesses when MME cannot estimate the stretch's first window.
+    let (mut before_last, mut after_first): (Option<Vec<f64>>, Option<Vec<f64>>) = (None, None);
     let mut rest_est: Option<MmeEstimate> = None;
     let mut left_out = Vec::new();
     let mut last_error = None;
-    for (name, record) in records {
+    for (index, (name, record)) in records.into_iter().enumerate() {
         // A state that decays within a sample or two (a fast lag) is barely seen by the
         // outputs from where a piece starts, and MME may find that start unobservable
         // (Cascaded Tanks' pump lag: pieces starting at samples 204–210 fail, at 215 not);
@@ -233,6 +256,13 @@ fn train_without(
         }
         match outcome {
             Ok((skip, one, e)) => {
+                let states = &e.experiments[0].states;
+                let column = |j: usize| states.column(j).iter().copied().collect::<Vec<f64>>();
+                if index == 0 && name.starts_with("samples 0..") && stretch.start > 0 {
+                    before_last = Some(column(states.ncols() - 1));
+                } else if name == format!("samples {}..{}", stretch.end, first.len()) {
+                    after_first = Some(column(0));
+                }
                 if skip > 0 {
                     left_out.push(format!(
                         "the first {skip} sample(s) of {name} (MME could not observe the \
@@ -299,27 +329,62 @@ fn train_without(
     let t = train_networks(spec, &set, None, &rest_x0, opts, &NoProgress)?;
     let w = window(stretch.len(), opts);
     // The starting guess from the samples the protocol lets a model see: MME on the
-    // stretch's first w samples alone (the whole-record x0 if that short run fails).
-    let start: Vec<f64> = data
+    // stretch's first w samples alone. When that short run fails (a state its outputs
+    // barely see), MME's last state of the piece before the stretch (one sample earlier),
+    // else its first state of the piece after it (a later time), else the whole record's
+    // x̂(t0), which read the stretch; the fold's report says which.
+    let window_start = data
         .window(
             0,
             stretch.start,
             stretch.start + w.max(2).min(stretch.len()),
         )
         .map_err(core("cutting a K-fold guard window"))
-        .and_then(|first_w| estimate_spec(spec, &first_w, &config))
-        .map_or_else(
-            |_| x0.to_vec(),
-            |out| {
-                out.estimate.experiments[0]
-                    .states
-                    .column(0)
-                    .iter()
-                    .copied()
-                    .collect()
-            },
-        );
-    Ok((t, start, left_out))
+        .and_then(|first_w| estimate_spec(spec, &first_w, &config));
+    let (start, guess) = match window_start {
+        Ok(out) => (
+            out.estimate.experiments[0]
+                .states
+                .column(0)
+                .iter()
+                .copied()
+                .collect(),
+            None,
+        ),
+        Err(why) => {
+            let (state, from) = fallback_start(before_last, after_first, x0);
+            (
+                state,
+                Some(format!(
+                    "MME on its first {w} samples failed ({why}); its free run starts from \
+                     {from}"
+                )),
+            )
+        }
+    };
+    Ok((t, start, left_out, guess))
+}
+
+/// The free run's starting guess when MME cannot estimate a stretch's first window: the
+/// piece before's last state (one sample earlier), else the piece after's first state (a
+/// later time), else the whole record's `x̂(t0)` (whose MME read the stretch); with what
+/// it is.
+fn fallback_start(
+    before_last: Option<Vec<f64>>,
+    after_first: Option<Vec<f64>>,
+    x0: &[f64],
+) -> (Vec<f64>, &'static str) {
+    match (before_last, after_first) {
+        (Some(b), _) => (
+            b,
+            "MME's last state of the piece before it, one sample earlier",
+        ),
+        (None, Some(a)) => (a, "MME's first state of the piece after it, a later time"),
+        (None, None) => (
+            x0.to_vec(),
+            "the whole record's x̂(t0), whose MME read the stretch",
+        ),
+    }
 }
 
 /// A kind's score over every stretch: per channel the root of the mean squared error and
@@ -438,9 +503,10 @@ mod tests {
         let run = |d: &Dataset| {
             let est = estimate_spec(&spec, d, &config).unwrap().estimate;
             let x0 = super::super::first_state(&est);
-            let (t, start, left_out) =
+            let (t, start, left_out, guess) =
                 train_without(&spec, &est, d, &x0, stretch.clone(), &opts).unwrap();
             assert!(left_out.is_empty(), "{left_out:?}");
+            assert!(guess.is_none(), "{guess:?}");
             (est, t, start)
         };
         let (est_a, a, start_a) = run(&data);
@@ -462,6 +528,20 @@ mod tests {
         assert!(
             moved > 0.0,
             "the whole-record smoother did not see the change"
+        );
+    }
+
+    #[test]
+    fn a_failed_window_falls_back_to_the_neighbouring_pieces_before_the_leaky_state() {
+        let x0 = [9.0, 9.0];
+        let (s, why) = fallback_start(Some(vec![1.0, 2.0]), Some(vec![3.0, 4.0]), &x0);
+        assert_eq!((s, why.contains("before")), (vec![1.0, 2.0], true));
+        let (s, why) = fallback_start(None, Some(vec![3.0, 4.0]), &x0);
+        assert_eq!((s, why.contains("after")), (vec![3.0, 4.0], true));
+        let (s, why) = fallback_start(None, None, &x0);
+        assert_eq!(
+            (s, why.contains("read the stretch")),
+            (vec![9.0, 9.0], true)
         );
     }
 }

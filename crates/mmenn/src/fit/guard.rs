@@ -144,6 +144,10 @@ pub struct FoldScores {
     /// none were.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub left_out: Vec<String>,
+    /// When MME could not estimate the state on the stretch's first window alone: why,
+    /// and what the free run started from instead; `None` when it could.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub start_guess: Option<String>,
 }
 
 impl GuardReport {
@@ -213,6 +217,14 @@ impl GuardReport {
                     f.samples.1,
                     f.left_out.join("; ")
                 ));
+            }
+            for f in &self.folds {
+                if let Some(g) = &f.start_guess {
+                    s.push_str(&format!(
+                        "\nStretch {}..{}: {g}.\n",
+                        f.samples.0, f.samples.1
+                    ));
+                }
             }
         }
         s
