@@ -1,5 +1,6 @@
 //! `compare` as a library call, in memory: the assumed model, a linear output-error fit,
-//! NARX and MME/NN on the cubic mass–spring–damper, judged free-run on a test record.
+//! NARX, polynomial NARX and MME/NN on the cubic mass–spring–damper, judged free-run on a
+//! test record.
 //!
 //! `cargo run --release -p mmenn --example compare`
 

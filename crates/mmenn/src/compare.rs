@@ -1,8 +1,11 @@
-//! `mmenn compare`: the assumed model, a linear output-error model, a NARX network and the
-//! MME/NN hybrid model judged the same way on the same data (thesis ch. 5): free-run
-//! simulation, fit %, R², RMSE and error variance per channel, on estimation and
-//! validation data; compare plots with fit % in the legend, residual correlation plots
-//! with 99 % bands, and `compare.json`.
+//! `mmenn compare`: the assumed model, a linear output-error model, a NARX network, a
+//! polynomial NARX model ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
+//! [`PolyNarxChoice::degree`] of the newest lags, one-step least squares, refined by
+//! free-run error with [`Focus::Simulation`]; off with
+//! `poly_narx: None`) and the MME/NN hybrid model judged the same way on the same data
+//! (thesis ch. 5): free-run simulation, fit %, R², RMSE and error variance per channel, on
+//! estimation and validation data; compare plots with fit % in the legend, residual
+//! correlation plots with 99 % bands, and `compare.json`.
 //!
 //! `--model` is any model mmenn writes ([`crate::model::LoadedModel`]). When it is more
 //! than the linear assumed model (it has `[[terms]]`, e.g. a discovered model, or it is a
@@ -14,21 +17,25 @@
 //! Every state-space row (assumed model, given model, linear OE, MME/NN) is judged by the
 //! one free-run judge of `sysid-core` on the first record of each dataset: initial state
 //! fitted to the first `x0_window` samples, every sample scored; each table's title states
-//! the record length and the window. NARX starts from its first measured delay window,
-//! which it does not score. [`compute_compare`] returns everything as values;
-//! [`write_compare`] writes the files.
+//! the record length and the window. NARX and polynomial NARX start from their first
+//! measured delay window, which they do not score. A polynomial NARX model whose free run
+//! leaves its divergence limits on a dataset has no row in that dataset's table (a
+//! [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on. [`compute_compare`]
+//! returns everything as values; [`write_compare`] writes the files.
 
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
+pub use sysid_baselines::poly_narx::Focus;
 use sysid_baselines::{
-    EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel, ResidualAnalysis,
-    ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe, predictions, residual_analysis,
-    suggest_lags,
+    EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel, PolyNarxConfig,
+    PolyNarxModel, ResidualAnalysis, ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe,
+    fit_poly_narx, predictions, residual_analysis, suggest_lags,
 };
 use sysid_core::{
-    Dataset, Experiment, Horizon, InitialRule, JudgeOptions, Judgement, LinearModel, Observation,
+    Dataset, Experiment, Horizon, InitialRule, JudgeOptions, Judgement, LinearModel, Model,
+    Observation,
 };
 
 use crate::atomic::{ensure_dir, write_atomic};
@@ -45,13 +52,81 @@ const EVALUATION: &str = "figures and report";
 /// Row label of the model given with `--model` when it is more than its linear part.
 pub const GIVEN_MODEL_ROW: &str = "given model";
 
-/// A model that could not be fitted: it has no row of numbers.
+/// Row label of the polynomial NARX model.
+pub const POLY_NARX_ROW: &str = "polynomial NARX";
+
+/// Where a model fell out of the comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FailedAt {
+    /// Its fit failed: no row in any table.
+    Fit,
+    /// It was fitted, but its free run failed on one dataset (e.g. left its divergence
+    /// limits): no row in that dataset's table.
+    FreeRun,
+}
+
+impl std::fmt::Display for FailedAt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FailedAt::Fit => "not fitted",
+            FailedAt::FreeRun => "free run failed",
+        })
+    }
+}
+
+/// A model that could not be fitted, or whose free run failed: it has no row of numbers.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Failure {
     /// Row label.
     pub model: String,
     /// Why.
     pub reason: String,
+    /// Where it failed.
+    pub at: FailedAt,
+}
+
+/// The polynomial NARX row of `compare`: its delays are the NARX network's
+/// ([`CompareSummary::narx_orders`]); coefficients by one-step least squares, optionally
+/// refined by free-run error ([`sysid_baselines::fit_poly_narx`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct PolyNarxChoice {
+    /// Highest total degree of a monomial, 1 to 5 (1: a linear ARX model with a
+    /// constant). Default 3.
+    pub degree: usize,
+    /// How many of the newest output lags and input taps (each channel) enter the
+    /// monomials of degree ≥ 2 (at most the delays). Default 2.
+    pub nonlinear_lags: usize,
+    /// One-step least squares alone ([`Focus::Prediction`], the default, as MATLAB's
+    /// `nlarx`), or refined by free-run error over the estimation data
+    /// ([`Focus::Simulation`]).
+    pub focus: Focus,
+}
+
+impl Default for PolyNarxChoice {
+    fn default() -> Self {
+        Self {
+            degree: 3,
+            nonlinear_lags: 2,
+            focus: Focus::Prediction,
+        }
+    }
+}
+
+/// The polynomial NARX model of a comparison, in `compare.json` and the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PolyNarxStructure {
+    /// The settings asked for.
+    #[serde(flatten)]
+    pub choice: PolyNarxChoice,
+    /// Delays (the NARX network's).
+    pub orders: NarxOrders,
+    /// Terms of the fitted model, constant included (`None`: not fitted).
+    pub terms: Option<usize>,
+    /// Numerical rank of its regressor matrix (equal to `terms` when the data determine
+    /// every term).
+    pub rank: Option<usize>,
 }
 
 /// Options of [`run_compare`].
@@ -67,6 +142,8 @@ pub struct CompareOptions {
     /// Free parameters of the output-error model (`"A[i,j]"`, `"B[i,j]"`); `None` = every
     /// entry of the corrected rows of A and B (the equations MME corrects).
     pub oe_free: Option<Vec<String>>,
+    /// The polynomial NARX row (same delays as NARX); `None` = no such row.
+    pub poly_narx: Option<PolyNarxChoice>,
 }
 
 impl Default for CompareOptions {
@@ -76,6 +153,7 @@ impl Default for CompareOptions {
             narx_lags: None,
             max_narx_lag: 10,
             oe_free: None,
+            poly_narx: Some(PolyNarxChoice::default()),
         }
     }
 }
@@ -89,6 +167,8 @@ pub struct CompareSummary {
     pub validation: Option<EvaluationTable>,
     /// NARX delays used (na = nb) and how they were chosen.
     pub narx_orders: NarxOrders,
+    /// The polynomial NARX model (same delays), when asked for.
+    pub poly_narx: Option<PolyNarxStructure>,
     /// Output-error parameters with ±1σ.
     pub oe_parameters: Vec<sysid_baselines::ParameterEstimate>,
     /// Why the output-error fit failed, when it did (it then has no row).
@@ -147,6 +227,35 @@ struct Judged {
     runs: Vec<(String, DMatrix<f64>)>,
     /// The hybrid model with the initial state its judgement found (residual analysis).
     hybrid: HybridModel,
+    /// Models whose free run failed on this dataset (no row).
+    failures: Vec<Failure>,
+}
+
+/// A delay-line model (NARX, polynomial NARX) free-run on every record of `data`: its
+/// evaluation and its predicted outputs on the first record.
+fn judge_delay_line<M: Model>(
+    model: &M,
+    data: &Dataset,
+) -> Result<(sysid_baselines::Evaluation, DMatrix<f64>)> {
+    let ev = evaluate(model, data, Horizon::FreeRun)?;
+    let mut p = predictions(model, data, Horizon::FreeRun)?;
+    Ok((ev, p.swap_remove(0).outputs))
+}
+
+/// An error and each cause its message does not already hold, joined by ": " (e.g. a
+/// model's failure on a record and the divergence that caused it).
+fn with_causes(e: &dyn std::error::Error) -> String {
+    let mut msg = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let part = c.to_string();
+        if !msg.contains(&part) {
+            msg.push_str(": ");
+            msg.push_str(&part);
+        }
+        cause = c.source();
+    }
+    msg
 }
 
 /// The models of one comparison (a baseline that could not be fitted is `None`).
@@ -154,14 +263,16 @@ struct Models<'a> {
     assumed: &'a LinearModel,
     oe: Option<&'a OeModel>,
     narx: Option<&'a NarxModel>,
+    poly: Option<&'a PolyNarxModel>,
     given: Option<&'a LoadedModel>,
     hybrid: &'a LoadedModel,
     window: usize,
 }
 
-fn judge_all(title: &str, data: &Dataset, models: &Models<'_>) -> Result<Judged> {
+fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> Result<Judged> {
     let mut table = EvaluationTable::new(title, Horizon::FreeRun);
     let mut runs = Vec::new();
+    let mut failures = Vec::new();
     let names = data.output_names();
     let mut push = |label: &str, j: &Judgement, runs: &mut Vec<(String, DMatrix<f64>)>| {
         runs.push((label.to_string(), j.outputs.clone()));
@@ -185,10 +296,24 @@ fn judge_all(title: &str, data: &Dataset, models: &Models<'_>) -> Result<Judged>
         push("linear OE", &j, &mut runs)?;
     }
     if let Some(narx) = models.narx {
-        let ev = evaluate(narx, data, Horizon::FreeRun)?;
-        let mut p = predictions(narx, data, Horizon::FreeRun)?;
-        runs.push(("NARX".to_string(), p.swap_remove(0).outputs));
+        let (ev, run) = judge_delay_line(narx, data)?;
+        runs.push(("NARX".to_string(), run));
         table.push("NARX", ev)?;
+    }
+    // A polynomial's free run can leave its limits on data the fit did not see: that
+    // model has no row here, and the comparison goes on.
+    if let Some(poly) = models.poly {
+        match judge_delay_line(poly, data) {
+            Ok((ev, run)) => {
+                runs.push((POLY_NARX_ROW.to_string(), run));
+                table.push(POLY_NARX_ROW, ev)?;
+            }
+            Err(e) => failures.push(Failure {
+                model: POLY_NARX_ROW.into(),
+                reason: format!("free run on the {which} data: {}", with_causes(&e)),
+                at: FailedAt::FreeRun,
+            }),
+        }
     }
     let j = judge_outputs(models.hybrid, data, models.window)?;
     let mut hybrid = match &models.hybrid.hybrid {
@@ -202,6 +327,7 @@ fn judge_all(title: &str, data: &Dataset, models: &Models<'_>) -> Result<Judged>
         table,
         runs,
         hybrid,
+        failures,
     })
 }
 
@@ -456,6 +582,7 @@ pub fn compute_compare_with_progress(
                 failures.push(Failure {
                     model: "linear OE".into(),
                     reason: e.to_string(),
+                    at: FailedAt::Fit,
                 });
                 (None, Vec::new(), Some(e.to_string()))
             }
@@ -496,9 +623,55 @@ pub fn compute_compare_with_progress(
             failures.push(Failure {
                 model: "NARX".into(),
                 reason: e.to_string(),
+                at: FailedAt::Fit,
             });
             None
         }
+    };
+    let poly_narx = opts.poly_narx.map(|choice| {
+        let fitted = stage(progress, "polynomial NARX fit", || {
+            fit_poly_narx(
+                data,
+                &PolyNarxConfig {
+                    orders,
+                    degree: choice.degree,
+                    nonlinear_lags: choice.nonlinear_lags,
+                    focus: choice.focus,
+                    ..PolyNarxConfig::default()
+                },
+            )
+        });
+        match fitted {
+            Ok(f) => (
+                PolyNarxStructure {
+                    choice,
+                    orders,
+                    terms: Some(f.model.n_terms()),
+                    rank: Some(f.rank),
+                },
+                Some(f.model),
+            ),
+            Err(e) => {
+                failures.push(Failure {
+                    model: POLY_NARX_ROW.into(),
+                    reason: e.to_string(),
+                    at: FailedAt::Fit,
+                });
+                (
+                    PolyNarxStructure {
+                        choice,
+                        orders,
+                        terms: None,
+                        rank: None,
+                    },
+                    None,
+                )
+            }
+        }
+    });
+    let (poly_structure, poly) = match poly_narx {
+        Some((s, m)) => (Some(s), m),
+        None => (None, None),
     };
     let fit = compute_fit(data, &spec, val.as_ref(), &opts.fit, progress)?;
     let hybrid = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), fit.model.clone())?;
@@ -506,6 +679,7 @@ pub fn compute_compare_with_progress(
         assumed: &lin,
         oe: oe_model.as_ref(),
         narx: narx.as_ref(),
+        poly: poly.as_ref(),
         given,
         hybrid: &hybrid,
         window,
@@ -518,18 +692,29 @@ pub fn compute_compare_with_progress(
             window.min(exp.len())
         )
     };
-    let est = judge_all(&scope("estimation", data), data, &models)?;
-    let (validation, validation_runs, hybrid_res, res_data) = match &val {
+    let est = judge_all("estimation", &scope("estimation", data), data, &models)?;
+    let est_poly_failed = !est.failures.is_empty();
+    failures.extend(est.failures);
+    let (validation, validation_runs, hybrid_res, res_data, poly_res) = match &val {
         Some(v) => {
-            let j = judge_all(&scope("validation", v), v, &models)?;
+            let j = judge_all("validation", &scope("validation", v), v, &models)?;
+            let poly_res = poly.as_ref().filter(|_| j.failures.is_empty());
+            failures.extend(j.failures);
             (
                 Some(j.table),
                 Some((v.experiments()[0].clone(), j.runs)),
                 j.hybrid,
                 v,
+                poly_res,
             )
         }
-        None => (None, None, est.hybrid.clone(), data),
+        None => (
+            None,
+            None,
+            est.hybrid.clone(),
+            data,
+            poly.as_ref().filter(|_| !est_poly_failed),
+        ),
     };
     let rc = ResidualConfig::default();
     let mut assumed_oe = OeModel::new(lin.clone());
@@ -548,6 +733,13 @@ pub fn compute_compare_with_progress(
         residuals.push((
             "NARX".to_string(),
             residual_analysis(narx, res_data, 0, Horizon::FreeRun, &rc)?,
+        ));
+    }
+    // Its free run on `res_data` succeeded (the judge ran it on every record).
+    if let Some(poly) = poly_res {
+        residuals.push((
+            POLY_NARX_ROW.to_string(),
+            residual_analysis(poly, res_data, 0, Horizon::FreeRun, &rc)?,
         ));
     }
     residuals.push((
@@ -592,13 +784,21 @@ pub fn compute_compare_with_progress(
         ));
     }
     initialisation.push(("linear OE".to_string(), judge_rule.clone()));
+    let delay_window = orders.na.max(orders.nb + orders.nk - 1);
     initialisation.push((
         "NARX".to_string(),
         format!(
-            "the first {} measured samples seed the delay line and are skipped (NARX predicts only measured channels)",
-            orders.na.max(orders.nb + orders.nk - 1)
+            "the first {delay_window} measured samples seed the delay line and are skipped (NARX predicts only measured channels)"
         ),
     ));
+    if opts.poly_narx.is_some() {
+        initialisation.push((
+            POLY_NARX_ROW.to_string(),
+            format!(
+                "as NARX (the same delays): starts from its first measured delay window; the first {delay_window} measured samples seed the delay line and are skipped"
+            ),
+        ));
+    }
     initialisation.push((
         "MME/NN".to_string(),
         format!("{judge_rule}; MME's x̂(t0) of the training record (stored in mme_nn/model.json) is a second start of the fit"),
@@ -606,7 +806,7 @@ pub fn compute_compare_with_progress(
     initialisation.push((
         "residual analysis".to_string(),
         format!(
-            "the assumed model and linear OE start from a least-squares state over the first {} samples, which the residuals skip; NARX as above; MME/NN from its judged initial state",
+            "the assumed model and linear OE start from a least-squares state over the first {} samples, which the residuals skip; NARX and polynomial NARX as above; MME/NN from its judged initial state",
             window.max(10 * lin.n_states())
         ),
     ));
@@ -631,6 +831,7 @@ pub fn compute_compare_with_progress(
         estimation: est.table,
         validation,
         narx_orders: orders,
+        poly_narx: poly_structure,
         oe_parameters,
         oe_error,
         failures,
@@ -700,9 +901,14 @@ fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {
         }
     }
     for f in failures {
+        // A free-run failure on the other dataset leaves this table's row in place.
+        if t.rows().iter().any(|r| r.label == f.model) {
+            continue;
+        }
         s.push_str(&format!(
-            "| {} | — | not fitted: {} | | | |\n",
+            "| {} | — | {}: {} | | | |\n",
             f.model,
+            f.at,
             f.reason.replace('|', "/").replace('\n', " ")
         ));
     }
@@ -719,9 +925,9 @@ fn compare_report(s: &CompareSummary) -> String {
         r.push_str(&table_md(v, &s.failures));
     }
     if !s.failures.is_empty() {
-        r.push_str("\n## Models that could not be fitted\n\n");
+        r.push_str("\n## Models without numbers\n\n");
         for f in &s.failures {
-            r.push_str(&format!("- **{}**: {}\n", f.model, f.reason));
+            r.push_str(&format!("- **{}** ({}): {}\n", f.model, f.at, f.reason));
         }
     }
     r.push_str("\n## Initial conditions\n\n");
@@ -729,9 +935,30 @@ fn compare_report(s: &CompareSummary) -> String {
         r.push_str(&format!("- **{m}**: {how}\n"));
     }
     r.push_str(&format!(
-        "\nNARX delays: na = {}, nb = {}, nk = {}.\n\nOutput-error parameters (±1σ):\n\n",
+        "\nNARX delays: na = {}, nb = {}, nk = {}.\n\n",
         s.narx_orders.na, s.narx_orders.nb, s.narx_orders.nk
     ));
+    match &s.poly_narx {
+        Some(p) => {
+            r.push_str(&format!(
+                "Polynomial NARX: the same delays, monomials of total degree up to {} in the newest {} output lags and input taps (scaled by the training record), coefficients by one-step least squares{}",
+                p.choice.degree,
+                p.choice.nonlinear_lags,
+                match p.choice.focus {
+                    Focus::Prediction => String::new(),
+                    Focus::Simulation { max_iterations } => format!(
+                        ", then by free-run error over the estimation data (at most {max_iterations} Levenberg–Marquardt iterations)"
+                    ),
+                }
+            ));
+            match (p.terms, p.rank) {
+                (Some(t), Some(k)) => r.push_str(&format!("; {t} terms, rank {k}.\n\n")),
+                _ => r.push_str(" (not fitted).\n\n"),
+            }
+        }
+        None => r.push_str("Polynomial NARX: off.\n\n"),
+    }
+    r.push_str("Output-error parameters (±1σ):\n\n");
     if s.oe_parameters.is_empty() {
         r.push_str("- none (the output-error model was not fitted)\n");
     }

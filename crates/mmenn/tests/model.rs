@@ -133,8 +133,11 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
     );
     // A baseline that cannot be fitted (a free parameter outside the model) has no row of
     // numbers, and the report and summary say so with the reason.
+    // (Without the polynomial NARX row: on this short record its free run leaves its
+    // limits on the test record, a second failure this check is not about.)
     let bad = CompareOptions {
         oe_free: Some(vec!["A[9,9]".into()]),
+        poly_narx: None,
         ..opts.clone()
     };
     let c = run_compare(

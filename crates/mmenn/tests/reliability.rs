@@ -829,3 +829,162 @@ fn cli_hold_network_domain_is_saved() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `compare` on the oscillation record with small settings and one extra flag; its
+/// `compare.json`.
+fn compare_json_with(dir: &Path, out: &str, flag: &str, value: &str) -> serde_json::Value {
+    let args = [
+        "--quiet",
+        "compare",
+        "--data",
+        "d.csv",
+        "--model",
+        "m.toml",
+        "--max-hidden",
+        "1",
+        "--inits",
+        "1",
+        "--narx-lags",
+        "2",
+        flag,
+        value,
+        "--out",
+        out,
+    ];
+    let (code, err) = mmenn(dir, &args, &[]);
+    assert_eq!(code, 0, "{err}");
+    let text = std::fs::read_to_string(dir.join(out).join("compare.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// `compare --poly-degree N` reaches the polynomial NARX row (`compare.json` records the
+/// degree, the tables have the row); `--poly-degree 0` removes the row (no failure either).
+#[test]
+fn cli_poly_degree_reaches_compare_and_zero_removes_the_row() {
+    let dir = scratch("poly-degree");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    for (degree, row) in [("2", true), ("0", false)] {
+        let json = compare_json_with(&dir, &format!("o-{degree}"), "--poly-degree", degree);
+        let labels: Vec<&str> = json["estimation"]["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|r| r["label"].as_str())
+            .collect();
+        assert_eq!(labels.contains(&"polynomial NARX"), row, "{labels:?}");
+        let failures = json["failures"].as_array().unwrap();
+        assert!(failures.is_empty(), "{failures:?}");
+        if row {
+            assert_eq!(json["poly_narx"]["degree"], 2, "{}", json["poly_narx"]);
+            assert_eq!(json["poly_narx"]["orders"]["na"], 2);
+        } else {
+            assert!(json["poly_narx"].is_null(), "{}", json["poly_narx"]);
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A `--poly-degree` outside 0..=5, or not a number, is a command-line error (exit 2)
+/// naming the flag and the accepted values, before any file is read; a misspelt flag
+/// is refused naming the right one.
+#[test]
+fn cli_poly_degree_out_of_range_or_misspelt_is_refused() {
+    let dir = scratch("poly-degree-bad");
+    let base = [
+        "compare",
+        "--data",
+        "missing.csv",
+        "--model",
+        "m.toml",
+        "--out",
+        "o",
+        "--poly-degree",
+    ];
+    for bad in ["6", "three", "-1", "2.5", ""] {
+        let args: Vec<&str> = base.iter().copied().chain([bad]).collect();
+        let (code, err) = mmenn(&dir, &args, &[]);
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(err.contains("--poly-degree"), "{bad}: {err}");
+        assert!(
+            err.contains("0 (no polynomial NARX row) or 1 to 5"),
+            "{bad}: {err}"
+        );
+    }
+    // A misspelt flag: clap names the one that exists.
+    let mut args: Vec<&str> = base[..base.len() - 1].to_vec();
+    args.extend(["--poly-degre", "2"]);
+    let (code, err) = mmenn(&dir, &args, &[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("'--poly-degree'"), "{err}");
+    // A valid degree gets as far as reading the missing model file (exit 1).
+    let args: Vec<&str> = base.iter().copied().chain(["5"]).collect();
+    let (code, err) = mmenn(&dir, &args, &[]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("m.toml"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `--poly-focus simulation` refines the polynomial NARX by free-run error and
+/// `compare.json` records it, with an estimation free-run fit no worse than the one-step
+/// solution's; anything but `prediction` or `simulation` is refused naming the flag.
+#[test]
+fn cli_poly_focus_reaches_compare_and_a_bad_value_is_refused() {
+    let dir = scratch("poly-focus");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    let mut fit = Vec::new();
+    for focus in ["prediction", "simulation"] {
+        let json = compare_json_with(&dir, &format!("o-{focus}"), "--poly-focus", focus);
+        let row = json["estimation"]["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["label"] == "polynomial NARX")
+            .unwrap_or_else(|| panic!("no polynomial NARX row: {}", json["estimation"]))
+            .clone();
+        fit.push(
+            row["evaluation"]["channels"][0]["metrics"]["fit_percent"]
+                .as_f64()
+                .unwrap(),
+        );
+        if focus == "simulation" {
+            assert_eq!(
+                json["poly_narx"]["focus"]["simulation"]["max_iterations"], 30,
+                "{}",
+                json["poly_narx"]
+            );
+        } else {
+            assert_eq!(
+                json["poly_narx"]["focus"], "prediction",
+                "{}",
+                json["poly_narx"]
+            );
+        }
+    }
+    assert!(
+        fit[1] >= fit[0] - 1e-9,
+        "fit % prediction {}, simulation {}",
+        fit[0],
+        fit[1]
+    );
+    let (code, err) = mmenn(
+        &dir,
+        &[
+            "compare",
+            "--data",
+            "d.csv",
+            "--model",
+            "m.toml",
+            "--poly-focus",
+            "sim",
+        ],
+        &[],
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("--poly-focus") && err.contains("prediction or simulation"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

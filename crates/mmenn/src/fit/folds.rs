@@ -182,6 +182,10 @@ fn fold(
     })
 }
 
+/// What [`train_without`] gives: the networks, the stretch's starting state, what was left
+/// out of the training, and how the start was found when MME on its first window failed.
+type Without = (Trained, Vec<f64>, Vec<String>, Option<String>);
+
 /// The networks trained without `stretch` (MME on each piece and record on its own; pairs,
 /// shooting windows and the free-run selection on those), the state the stretch's free
 /// run starts from (MME on its first `w` samples alone), and what was left out because MME
@@ -194,7 +198,7 @@ fn train_without(
     x0: &[f64],
     stretch: Range<usize>,
     opts: &FitOptions,
-) -> Result<(Trained, Vec<f64>, Vec<String>, Option<String>)> {
+) -> Result<Without> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
     // MME at the whole record's W and noise variance (the W search is not repeated).
     let mut config = mme_config(spec, &opts.estimate);

@@ -91,6 +91,26 @@ fn predict_substeps(text: &str) -> std::result::Result<mmenn::sysid_core::Subste
     free_run_substeps_from(text, 4)
 }
 
+/// `compare --poly-degree`: 0 (no polynomial NARX row) or a degree, 1 to 5.
+fn poly_degree(text: &str) -> std::result::Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(v) if v <= 5 => Ok(v),
+        Ok(v) => Err(format!("degree {v}: 0 (no polynomial NARX row) or 1 to 5")),
+        Err(e) => Err(format!(
+            "'{text}' is not a whole number ({e}): 0 (no polynomial NARX row) or 1 to 5"
+        )),
+    }
+}
+
+/// `compare --poly-focus`: `prediction` or `simulation`.
+fn poly_focus(text: &str) -> std::result::Result<mmenn::compare::Focus, String> {
+    match text.trim() {
+        "prediction" => Ok(mmenn::compare::Focus::Prediction),
+        "simulation" => Ok(mmenn::compare::Focus::Simulation { max_iterations: 30 }),
+        other => Err(format!("'{other}': prediction or simulation")),
+    }
+}
+
 /// A fraction in [0, 1).
 fn fraction(text: &str) -> std::result::Result<f64, String> {
     match text.trim().parse::<f64>() {
@@ -115,7 +135,8 @@ pub(crate) enum Command {
     /// Grey-box estimation: the free [parameters] of a physical model file and each
     /// record's start state by free-run output error, with ±σ and correlations.
     Greyest(GreyestArgs),
-    /// Compare the assumed model, linear OE, NARX and MME/NN on the same data (free-run).
+    /// Compare the assumed model, linear OE, NARX, polynomial NARX and MME/NN on the same
+    /// data (free-run).
     Compare(CompareArgs),
     /// Find where model and data disagree, name the missing effect, add it, show the gap shrink.
     Discover(DiscoverArgs),
@@ -138,6 +159,22 @@ pub(crate) struct CompareArgs {
     /// NARX delays (default: suggested from PACF/XCF).
     #[arg(long)]
     pub(crate) narx_lags: Option<usize>,
+    /// Polynomial NARX row (the NARX delays; monomials of the newest 2 output lags and
+    /// input taps; see --poly-focus): highest total degree, 1 to 5 (1: linear ARX),
+    /// or 0 for no polynomial NARX row.
+    #[arg(
+        long,
+        value_name = "N",
+        default_value_t = 3,
+        value_parser = poly_degree,
+        allow_negative_numbers = true
+    )]
+    pub(crate) poly_degree: usize,
+    /// How the polynomial NARX coefficients are estimated: `prediction` (one-step least
+    /// squares) or `simulation` (then refined by free-run error over the estimation data,
+    /// at most 30 Levenberg–Marquardt iterations).
+    #[arg(long, value_name = "FOCUS", default_value = "prediction", value_parser = poly_focus)]
+    pub(crate) poly_focus: mmenn::compare::Focus,
     /// Largest network of the MME/NN sizing sweep.
     #[arg(long, default_value_t = 10, value_parser = at_least_one)]
     pub(crate) max_hidden: usize,

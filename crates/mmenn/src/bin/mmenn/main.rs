@@ -512,6 +512,11 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             ..Default::default()
         },
         narx_lags: a.narx_lags,
+        poly_narx: (a.poly_degree > 0).then(|| mmenn::compare::PolyNarxChoice {
+            degree: a.poly_degree,
+            focus: a.poly_focus,
+            ..Default::default()
+        }),
         ..Default::default()
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
@@ -541,10 +546,20 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
                     )
                 })
                 .collect();
-            println!("  {:<14} {}", row.label, cells.join("; "));
+            println!("  {:<16} {}", row.label, cells.join("; "));
         }
-        for f in &s.failures {
-            println!("  {:<14} NOT FITTED: {}", f.model, f.reason);
+        // A free-run failure on the other dataset leaves this table's row in place.
+        for f in s
+            .failures
+            .iter()
+            .filter(|f| t.rows().iter().all(|r| r.label != f.model))
+        {
+            println!(
+                "  {:<16} {}: {}",
+                f.model,
+                f.at.to_string().to_uppercase(),
+                f.reason
+            );
         }
     }
     println!("wrote {} files into {}", s.files.len(), a.out.display());
