@@ -242,6 +242,11 @@ pub(super) fn target_note(b: Benchmark, table: &Table) -> String {
                     }
                 },
             );
+        let black_box_text = if black_box < published_black_box {
+            format!("{black_box:.4}")
+        } else {
+            format!("{black_box}")
+        };
         let ours: Vec<String> = table
             .rows
             .iter()
@@ -276,7 +281,7 @@ pub(super) fn target_note(b: Benchmark, table: &Table) -> String {
             .collect();
         parts.push(format!(
             "{record}: target ≤ {target} {unit} (best published: {best}; best black box \
-             {black_box} {unit}, {black_box_name}) — {}",
+             {black_box_text} {unit}, {black_box_name}) — {}",
             ours.join("; ")
         ));
     }
