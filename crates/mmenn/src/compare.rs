@@ -18,9 +18,9 @@
 //! one free-run judge of `sysid-core` on the first record of each dataset: initial state
 //! fitted to the first `x0_window` samples, every sample scored; each table's title states
 //! the record length and the window. NARX and polynomial NARX start from their first
-//! measured delay window, which they do not score. A polynomial NARX model whose free run
-//! leaves its divergence limits on a dataset has no row in that dataset's table (a
-//! [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on. [`compute_compare`]
+//! measured delay window, which they do not score. A NARX or polynomial NARX model whose
+//! free run leaves its divergence limits on a dataset has no row in that dataset's table
+//! (a [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on. [`compute_compare`]
 //! returns everything as values; [`write_compare`] writes the files.
 
 use std::path::{Path, PathBuf};
@@ -295,25 +295,28 @@ fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> R
         let j = judge_linear(&oe.model, data, models.window)?;
         push("linear OE", &j, &mut runs)?;
     }
-    if let Some(narx) = models.narx {
-        let (ev, run) = judge_delay_line(narx, data)?;
-        runs.push(("NARX".to_string(), run));
-        table.push("NARX", ev)?;
-    }
-    // A polynomial's free run can leave its limits on data the fit did not see: that
-    // model has no row here, and the comparison goes on.
-    if let Some(poly) = models.poly {
-        match judge_delay_line(poly, data) {
-            Ok((ev, run)) => {
-                runs.push((POLY_NARX_ROW.to_string(), run));
-                table.push(POLY_NARX_ROW, ev)?;
+    // A delay-line model's free run can leave its limits on data its fit did not see:
+    // that model has no row here, and the comparison goes on.
+    let mut delay_line =
+        |label: &str, judged: Result<(sysid_baselines::Evaluation, DMatrix<f64>)>| {
+            match judged {
+                Ok((ev, run)) => {
+                    runs.push((label.to_string(), run));
+                    table.push(label, ev)?;
+                }
+                Err(e) => failures.push(Failure {
+                    model: label.into(),
+                    reason: format!("free run on the {which} data: {}", with_causes(&e)),
+                    at: FailedAt::FreeRun,
+                }),
             }
-            Err(e) => failures.push(Failure {
-                model: POLY_NARX_ROW.into(),
-                reason: format!("free run on the {which} data: {}", with_causes(&e)),
-                at: FailedAt::FreeRun,
-            }),
-        }
+            Ok::<(), MmennError>(())
+        };
+    if let Some(narx) = models.narx {
+        delay_line("NARX", judge_delay_line(narx, data))?;
+    }
+    if let Some(poly) = models.poly {
+        delay_line(POLY_NARX_ROW, judge_delay_line(poly, data))?;
     }
     let j = judge_outputs(models.hybrid, data, models.window)?;
     let mut hybrid = match &models.hybrid.hybrid {
@@ -693,29 +696,24 @@ pub fn compute_compare_with_progress(
         )
     };
     let est = judge_all("estimation", &scope("estimation", data), data, &models)?;
-    let est_poly_failed = !est.failures.is_empty();
+    // The models whose free run failed on the data the residuals are analysed on.
+    let mut res_failed: Vec<String> = est.failures.iter().map(|f| f.model.clone()).collect();
     failures.extend(est.failures);
-    let (validation, validation_runs, hybrid_res, res_data, poly_res) = match &val {
+    let (validation, validation_runs, hybrid_res, res_data) = match &val {
         Some(v) => {
             let j = judge_all("validation", &scope("validation", v), v, &models)?;
-            let poly_res = poly.as_ref().filter(|_| j.failures.is_empty());
+            res_failed = j.failures.iter().map(|f| f.model.clone()).collect();
             failures.extend(j.failures);
             (
                 Some(j.table),
                 Some((v.experiments()[0].clone(), j.runs)),
                 j.hybrid,
                 v,
-                poly_res,
             )
         }
-        None => (
-            None,
-            None,
-            est.hybrid.clone(),
-            data,
-            poly.as_ref().filter(|_| !est_poly_failed),
-        ),
+        None => (None, None, est.hybrid.clone(), data),
     };
+    let ran = |label: &str| !res_failed.iter().any(|f| f == label);
     let rc = ResidualConfig::default();
     let mut assumed_oe = OeModel::new(lin.clone());
     assumed_oe.observer_window = window.max(10 * lin.n_states());
@@ -729,14 +727,13 @@ pub fn compute_compare_with_progress(
             residual_analysis(oe, res_data, 0, Horizon::FreeRun, &rc)?,
         ));
     }
-    if let Some(narx) = &narx {
+    if let Some(narx) = narx.as_ref().filter(|_| ran("NARX")) {
         residuals.push((
             "NARX".to_string(),
             residual_analysis(narx, res_data, 0, Horizon::FreeRun, &rc)?,
         ));
     }
-    // Its free run on `res_data` succeeded (the judge ran it on every record).
-    if let Some(poly) = poly_res {
+    if let Some(poly) = poly.as_ref().filter(|_| ran(POLY_NARX_ROW)) {
         residuals.push((
             POLY_NARX_ROW.to_string(),
             residual_analysis(poly, res_data, 0, Horizon::FreeRun, &rc)?,
