@@ -96,6 +96,22 @@ fn failure(e: &dyn std::fmt::Display) -> String {
     }
 }
 
+/// The order selection's records: how many training samples it uses (`select_samples`,
+/// else all), the first 80 % of them to fit, the rest to run free over, and that rest's
+/// measured output.
+fn selection_split(
+    est: &Experiment,
+    select_samples: Option<usize>,
+) -> Result<(usize, Dataset, Experiment, Vec<f64>)> {
+    let hold = est.intersample();
+    let used = select_samples.map_or(est.len(), |n| n.min(est.len()));
+    let cut = (used as f64 * SELECT_FRACTION) as usize;
+    let head = dataset(est, 0, cut, hold)?;
+    let tail = dataset(est, cut, used - cut, hold)?.experiments()[0].clone();
+    let y_tail = row(tail.outputs(), 0);
+    Ok((used, head, tail, y_tail))
+}
+
 /// A candidate's held-out free-run RMSE after the window, or why it has none.
 fn held_out(
     run: Result<Prediction, BaselineError>,
@@ -136,7 +152,6 @@ fn narx_inner(
     let window = b.init_window();
     let (scale, unit) = b.reporting_unit();
     let est = &data.estimation.experiments()[0];
-    let hold = est.intersample();
     let Plan {
         grid,
         select: small,
@@ -144,11 +159,8 @@ fn narx_inner(
         select_samples,
     } = plan(b, mode);
     let clock = Instant::now();
-    let used = select_samples.map_or(est.len(), |n| n.min(est.len()));
-    let cut = (used as f64 * SELECT_FRACTION) as usize;
-    let head = dataset(est, 0, cut, hold)?;
-    let tail = &dataset(est, cut, used - cut, hold)?.experiments()[0].clone();
-    let y_tail = row(tail.outputs(), 0);
+    let (used, head, tail, y_tail) = selection_split(est, select_samples)?;
+    let tail = &tail;
     let mut tried = Vec::new();
     let mut best: Option<(NarxOrders, f64)> = None;
     for &(na, nb) in &grid {
@@ -302,15 +314,9 @@ fn poly_narx_inner(
     let window = b.init_window();
     let (scale, unit) = b.reporting_unit();
     let est = &data.estimation.experiments()[0];
-    let hold = est.intersample();
-    let used = plan(b, mode)
-        .select_samples
-        .map_or(est.len(), |n| n.min(est.len()));
-    let cut = (used as f64 * SELECT_FRACTION) as usize;
     let clock = Instant::now();
-    let head = dataset(est, 0, cut, hold)?;
-    let tail = &dataset(est, cut, used - cut, hold)?.experiments()[0].clone();
-    let y_tail = row(tail.outputs(), 0);
+    let (used, head, tail, y_tail) = selection_split(est, plan(b, mode).select_samples)?;
+    let tail = &tail;
     let max_iterations = match mode {
         Mode::Quick => 10,
         Mode::Full => 30,
