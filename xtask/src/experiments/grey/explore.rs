@@ -15,11 +15,9 @@ use super::*;
 use mmenn::benchmarks::{Benchmark, load};
 
 fn data(b: Benchmark) -> mmenn::benchmarks::BenchmarkData {
-    load(
-        b,
-        &std::path::Path::new("/work/shared/data").join(b.folder()),
-    )
-    .unwrap()
+    // `GREY_DATA_DIR` points at a copy with transformed inputs (diagnoses only).
+    let root = std::env::var("GREY_DATA_DIR").unwrap_or_else(|_| "/work/shared/data".into());
+    load(b, &std::path::Path::new(&root).join(b.folder())).unwrap()
 }
 
 fn report(b: Benchmark, label: &str, spec: &GreySpec) {
@@ -178,14 +176,15 @@ fn explore_silverbox() {
     let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
     for item in all.split(';').filter(|s| !s.trim().is_empty()) {
         let mut extra = Vec::new();
-        let mut substeps = 2;
+        let mut substeps = None;
         for (key, v) in kv(item) {
             match key.as_str() {
                 "q" => extra.push(SilverboxExtra::QuadraticSpring),
+                "ig" => extra.push(SilverboxExtra::InputGainVariation),
+                "sub" => substeps = Some(v as usize),
                 "dd" => extra.push(SilverboxExtra::DisplacementDamping),
                 "q5" => extra.push(SilverboxExtra::QuinticSpring),
                 "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
-                "sub" => substeps = v as usize,
                 "v3" => extra.push(SilverboxExtra::Monomial("v^3")),
                 "yv" => extra.push(SilverboxExtra::Monomial("y*v")),
                 "vv" => extra.push(SilverboxExtra::QuadraticDrag),
@@ -198,7 +197,9 @@ fn explore_silverbox() {
             }
         }
         let mut spec = silverbox_model(k, c, b, &extra).unwrap();
-        spec.integrator = Integrator::Rk4 { substeps };
+        if let Some(substeps) = substeps {
+            spec.integrator = Integrator::Rk4 { substeps };
+        }
         report(Benchmark::Silverbox, item.trim(), &spec);
     }
 }
