@@ -402,6 +402,10 @@ pub struct EmpsOptions {
     /// Whether a force linear in the position, `k_q·q`, is calibrated beside the friction
     /// (a cable carrier, preload varying along the screw; symmetric model only).
     pub position_force: bool,
+    /// Whether friction grows with the transmitted force, `−μ·|u|·tanh(q'/ε)` (the ball
+    /// screw's efficiency; docs/decisions/emps-load-dependent-friction.md; symmetric model
+    /// only).
+    pub load_friction: bool,
 }
 
 /// EMPS (Janot et al. 2019, eqs. 1–3): `M q'' = gτ·u − Fv·q' − Fc·tanh(q'/ε) − offset`
@@ -414,6 +418,7 @@ pub fn emps_spec(eps: f64) -> Result<GreySpec> {
         asymmetric: false,
         start: None,
         position_force: false,
+        load_friction: false,
     })
 }
 
@@ -480,6 +485,9 @@ pub fn emps_model(o: &EmpsOptions) -> Result<GreySpec> {
     if o.position_force && !o.asymmetric {
         specs.push(("position_force", "q".to_string(), 0.0));
     }
+    if o.load_friction && !o.asymmetric {
+        specs.push(("load_friction", format!("abs(u)*tanh(v/{eps:e})"), 0.0));
+    }
     let free = (0..specs.len()).collect();
     let model = TermModel::from_specs(
         linear,
@@ -527,6 +535,7 @@ pub fn emps_asymmetric_from(symmetric: &TermModel, eps: f64) -> Result<GreySpec>
         asymmetric: true,
         start: Some([c[0], c[1], c[2], c[3]]),
         position_force: false,
+        load_friction: false,
     })
 }
 

@@ -130,6 +130,7 @@ fn explore_emps() {
             asymmetric: false,
             start: None,
             position_force: false,
+            load_friction: false,
         };
         let mut substeps = 1;
         let mut full = false;
@@ -147,6 +148,7 @@ fn explore_emps() {
                 "sub" => substeps = v as usize,
                 "full" => full = v != 0.0,
                 "pos" => o.position_force = v != 0.0,
+                "load" => o.load_friction = v != 0.0,
                 "holdout" => holdout = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
