@@ -419,6 +419,31 @@ fn explore_silverbox_schroeder() {
                 stage,
             ],
         ),
+        // Rule 4: amplitude-dependent damping beyond y²·y' (inverse dynamics of the first
+        // half), on R2.
+        (
+            "P4",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                InputGainVariation,
+                Monomial("y^4*v"),
+                stage,
+            ],
+        ),
+        (
+            "P5",
+            vec![
+                QuadraticSpring,
+                DisplacementDamping,
+                QuadraticDrag,
+                InputGainVariation,
+                Monomial("y^4*v"),
+                QuinticSpring,
+                stage,
+            ],
+        ),
     ];
     // Rule 2 judges on the second half: samples 65 486.. (the first 50 fit the state).
     let sch = if std::env::var("SB_HALF").is_ok() {
