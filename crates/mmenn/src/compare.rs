@@ -165,7 +165,8 @@ pub struct CompareSummary {
     pub estimation: EvaluationTable,
     /// Free-run table on the validation data, when given.
     pub validation: Option<EvaluationTable>,
-    /// NARX delays used (na = nb) and how they were chosen.
+    /// NARX delays used (na output lags, nb input taps from delay nk; they may differ
+    /// when suggested) and how they were chosen.
     pub narx_orders: NarxOrders,
     /// The polynomial NARX model (same delays), when asked for.
     pub poly_narx: Option<PolyNarxStructure>,
@@ -584,10 +585,10 @@ pub fn compute_compare_with_progress(
             Err(e) => {
                 failures.push(Failure {
                     model: "linear OE".into(),
-                    reason: e.to_string(),
+                    reason: with_causes(&e),
                     at: FailedAt::Fit,
                 });
-                (None, Vec::new(), Some(e.to_string()))
+                (None, Vec::new(), Some(with_causes(&e)))
             }
         };
     let orders = match opts.narx_lags {
@@ -625,7 +626,7 @@ pub fn compute_compare_with_progress(
         Err(e) => {
             failures.push(Failure {
                 model: "NARX".into(),
-                reason: e.to_string(),
+                reason: with_causes(&e),
                 at: FailedAt::Fit,
             });
             None
@@ -657,7 +658,7 @@ pub fn compute_compare_with_progress(
             Err(e) => {
                 failures.push(Failure {
                     model: POLY_NARX_ROW.into(),
-                    reason: e.to_string(),
+                    reason: with_causes(&e),
                     at: FailedAt::Fit,
                 });
                 (

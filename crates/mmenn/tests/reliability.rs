@@ -925,6 +925,45 @@ fn cli_poly_degree_out_of_range_or_misspelt_is_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `--poly-nonlinear-lags N` reaches the polynomial NARX (`compare.json` records it, and
+/// with one nonlinear lag per channel the model has fewer terms than with two: degree 3
+/// in 2 variables has 7 monomials of degree 2–3, in 4 variables 30); 0 or a non-number is
+/// refused naming the flag.
+#[test]
+fn cli_poly_nonlinear_lags_reach_compare_and_zero_is_refused() {
+    let dir = scratch("poly-nl");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    let mut terms = Vec::new();
+    for nl in ["1", "2"] {
+        let json = compare_json_with(&dir, &format!("o-{nl}"), "--poly-nonlinear-lags", nl);
+        let p = &json["poly_narx"];
+        assert_eq!(p["nonlinear_lags"].as_u64(), nl.parse().ok(), "{p}");
+        terms.push(p["terms"].as_u64().unwrap());
+    }
+    // Both runs share the delays, so the linear part is the same and only the monomials
+    // of degree 2..=3 differ: C(2+3, 3) - 1 - 2 = 7 against C(4+3, 3) - 1 - 4 = 30.
+    assert_eq!(terms[1] - terms[0], 30 - 7, "terms {terms:?}");
+    for bad in ["0", "two"] {
+        let (code, err) = mmenn(
+            &dir,
+            &[
+                "compare",
+                "--data",
+                "d.csv",
+                "--model",
+                "m.toml",
+                "--poly-nonlinear-lags",
+                bad,
+            ],
+            &[],
+        );
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(err.contains("--poly-nonlinear-lags"), "{bad}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `--poly-focus simulation` refines the polynomial NARX by free-run error and
 /// `compare.json` records it, with an estimation free-run fit no worse than the one-step
 /// solution's; anything but `prediction` or `simulation` is refused naming the flag.

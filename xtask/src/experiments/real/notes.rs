@@ -185,7 +185,19 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              to 0.2 m/s), moves in steps during the strokes and stays between them (segment \
              means from −11.3 to +8.6 mm), and grows with position (slope −0.042 mm/mm; \
              removing an affine function of position leaves 3.9 mm) — measured with \
-             explore_emps on 7b7e0a7. The position is the integral of the simulated velocity: \
+             explore_emps on 7b7e0a7. Stroke by stroke (the reference trajectory repeats \
+             every 6.24 s and the carriage makes the same strokes, to 0.1 mm, on both \
+             records), the test record's error grows against the motion where the training \
+             record's does not: the mean error gained over a stroke moves from +5.3 to \
+             +11.5 mm on the −147-mm strokes, from +4.8 to −1.1 mm on the +147-mm ones, from \
+             −1.8 to +1.3 mm on the −65-mm and from −2.0 to −4.8 mm on the +65-mm ones, and \
+             by at most 0.9 mm on the ±17-mm strokes (four to eight strokes each): the \
+             carriage meets about 0.6–0.95 N more resistance at 0.075–0.11 m/s than the \
+             calibration saw — friction that differs between the two days' runs, or a loss \
+             the pulses add. A friction growing with the transmitted force, calibrated on the \
+             training record, fitted it better but predicted its held-out last fifth worse \
+             and was not adopted (docs/decisions/emps-load-dependent-friction.md; \
+             explore_emps on 3937bcb). The position is the integral of the simulated velocity: \
              a force error the calibration did not see or a flexibility the training \
              record does not excite (data README) leaves a permanent position offset that the \
              open-loop model cannot remove; the same training run started from a state \

@@ -159,9 +159,9 @@ pub(crate) struct CompareArgs {
     /// NARX delays (default: suggested from PACF/XCF).
     #[arg(long)]
     pub(crate) narx_lags: Option<usize>,
-    /// Polynomial NARX row (the NARX delays; monomials of the newest 2 output lags and
-    /// input taps; see --poly-focus): highest total degree, 1 to 5 (1: linear ARX),
-    /// or 0 for no polynomial NARX row.
+    /// Polynomial NARX row (the NARX delays; monomials of the newest output lags and
+    /// input taps, see --poly-nonlinear-lags; see --poly-focus): highest total degree,
+    /// 1 to 5 (1: linear ARX), or 0 for no polynomial NARX row.
     #[arg(
         long,
         value_name = "N",
@@ -170,6 +170,11 @@ pub(crate) struct CompareArgs {
         allow_negative_numbers = true
     )]
     pub(crate) poly_degree: usize,
+    /// How many of the newest output lags and input taps (each channel) enter the
+    /// polynomial NARX's monomials of degree 2 and more: at least 1 (a value above the
+    /// NARX delays uses all of them).
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = at_least_one)]
+    pub(crate) poly_nonlinear_lags: usize,
     /// How the polynomial NARX coefficients are estimated: `prediction` (one-step least
     /// squares) or `simulation` (then refined by free-run error over the estimation data,
     /// at most 30 Levenberg–Marquardt iterations).

@@ -512,10 +512,10 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             ..Default::default()
         },
         narx_lags: a.narx_lags,
-        poly_narx: (a.poly_degree > 0).then(|| mmenn::compare::PolyNarxChoice {
+        poly_narx: (a.poly_degree > 0).then_some(mmenn::compare::PolyNarxChoice {
             degree: a.poly_degree,
+            nonlinear_lags: a.poly_nonlinear_lags,
             focus: a.poly_focus,
-            ..Default::default()
         }),
         ..Default::default()
     };
