@@ -136,7 +136,14 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              proposals of that rule extrapolated worse there (a measurement filter on the \
              output, 0.3339 mV at its best time constant; PNLSS's full state polynomial in \
              (y, y'), 0.3360 mV, though it fitted the training record best, 0.2250 mV); the \
-             error split above was measured without it. More amplitude in the training \
+             error split above was measured without it. A damping quartic in the \
+             displacement (y⁴·y'), alone or with a quintic spring, proposed from the inverse \
+             dynamics of the Schroeder record's first half, also fitted the training record \
+             better (0.2300 and 0.2289 mV) and extrapolated worse (0.3744 and 0.4103 mV on \
+             the second half; Rule 4). The anchor's protocol does not explain the gap: \
+             calibrated as PNLSS was, on the whole multisine part (training and test \
+             multisines as one 86 750-sample record), the same structure scores 0.2852 mV \
+             on test_arrow_full (explore_silverbox on 3937bcb). More amplitude in the training \
              data does not close the gap either: the same structure calibrated on the \
              training record plus schroeder80mV (outputs to 0.265 V; outside the loader's \
              split, a diagnosis, never a reported row) scores 0.2789 mV on test_arrow_full \
