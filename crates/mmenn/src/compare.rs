@@ -64,6 +64,9 @@ pub enum FailedAt {
     /// It was fitted, but its free run failed on one dataset (e.g. left its divergence
     /// limits): no row in that dataset's table.
     FreeRun,
+    /// Its rows have numbers, but its residual analysis failed (e.g. a linear part whose
+    /// state the outputs do not observe over the observer window): no residual analysis.
+    Residuals,
 }
 
 impl std::fmt::Display for FailedAt {
@@ -71,6 +74,7 @@ impl std::fmt::Display for FailedAt {
         f.write_str(match self {
             FailedAt::Fit => "not fitted",
             FailedAt::FreeRun => "free run failed",
+            FailedAt::Residuals => "residual analysis failed",
         })
     }
 }
@@ -183,6 +187,9 @@ pub struct CompareSummary {
     /// Residual analysis (free-run) of each model on the validation data (or the
     /// estimation data without validation).
     pub residuals: Vec<(String, ResidualAnalysis)>,
+    /// Models whose residual analysis failed (at [`FailedAt::Residuals`]; their table rows
+    /// stand).
+    pub residual_failures: Vec<Failure>,
     /// Files written.
     pub files: Vec<String>,
 }
@@ -718,32 +725,48 @@ pub fn compute_compare_with_progress(
     let rc = ResidualConfig::default();
     let mut assumed_oe = OeModel::new(lin.clone());
     assumed_oe.observer_window = window.max(10 * lin.n_states());
-    let mut residuals = vec![(
-        "assumed model".to_string(),
-        residual_analysis(&assumed_oe, res_data, 0, Horizon::FreeRun, &rc)?,
-    )];
+    // A model whose residual analysis fails keeps its table rows; the summary says why.
+    let mut residuals = Vec::new();
+    let mut residual_failures = Vec::new();
+    let res_which = if val.is_some() {
+        "validation"
+    } else {
+        "estimation"
+    };
+    let mut analyse = |label: &str, r: sysid_baselines::Result<ResidualAnalysis>| match r {
+        Ok(a) => residuals.push((label.to_string(), a)),
+        Err(e) => residual_failures.push(Failure {
+            model: label.into(),
+            reason: format!("on the {res_which} data: {}", with_causes(&e)),
+            at: FailedAt::Residuals,
+        }),
+    };
+    analyse(
+        "assumed model",
+        residual_analysis(&assumed_oe, res_data, 0, Horizon::FreeRun, &rc),
+    );
     if let Some(oe) = &oe_model {
-        residuals.push((
-            "linear OE".to_string(),
-            residual_analysis(oe, res_data, 0, Horizon::FreeRun, &rc)?,
-        ));
+        analyse(
+            "linear OE",
+            residual_analysis(oe, res_data, 0, Horizon::FreeRun, &rc),
+        );
     }
     if let Some(narx) = narx.as_ref().filter(|_| ran("NARX")) {
-        residuals.push((
-            "NARX".to_string(),
-            residual_analysis(narx, res_data, 0, Horizon::FreeRun, &rc)?,
-        ));
+        analyse(
+            "NARX",
+            residual_analysis(narx, res_data, 0, Horizon::FreeRun, &rc),
+        );
     }
     if let Some(poly) = poly.as_ref().filter(|_| ran(POLY_NARX_ROW)) {
-        residuals.push((
-            POLY_NARX_ROW.to_string(),
-            residual_analysis(poly, res_data, 0, Horizon::FreeRun, &rc)?,
-        ));
+        analyse(
+            POLY_NARX_ROW,
+            residual_analysis(poly, res_data, 0, Horizon::FreeRun, &rc),
+        );
     }
-    residuals.push((
-        "MME/NN".to_string(),
-        residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc)?,
-    ));
+    analyse(
+        "MME/NN",
+        residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc),
+    );
     let judge_rule = format!(
         "the one free-run judge: initial state fitted by least squares to the first {window} samples (from the minimum-norm solution of C x = y(t0)), every sample scored (the rule and numbers of `mmenn predict`)"
     );
@@ -836,6 +859,7 @@ pub fn compute_compare_with_progress(
         given_model: loaded.kind,
         initialisation,
         residuals,
+        residual_failures,
         files,
     };
     Ok(CompareOutcome {
@@ -926,6 +950,12 @@ fn compare_report(s: &CompareSummary) -> String {
         r.push_str("\n## Models without numbers\n\n");
         for f in &s.failures {
             r.push_str(&format!("- **{}** ({}): {}\n", f.model, f.at, f.reason));
+        }
+    }
+    if !s.residual_failures.is_empty() {
+        r.push_str("\n## Residual analyses that failed\n\n");
+        for f in &s.residual_failures {
+            r.push_str(&format!("- **{}**: {}\n", f.model, f.reason));
         }
     }
     r.push_str("\n## Initial conditions\n\n");

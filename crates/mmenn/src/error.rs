@@ -54,13 +54,13 @@ pub enum CsvProblem {
     },
     /// Time is not uniformly sampled.
     #[error(
-        "time step {step} s differs from the file's mean step {dt} s: data must be uniformly \
-         sampled (resample it explicitly with --resample DT)"
+        "time step {step} s differs from the file's typical (median) step {dt} s: data must \
+         be uniformly sampled (resample it explicitly with --resample DT)"
     )]
     NonUniformTime {
         /// Step found, s.
         step: f64,
-        /// Mean step, s.
+        /// The file's median step, s.
         dt: f64,
     },
     /// Time values so large that `f64` cannot resolve the sample step.

@@ -386,6 +386,32 @@ fn mmenn(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (i32, String) {
     )
 }
 
+/// Standard output closed before the command prints (as `mmenn simulate --list | head -0`
+/// or a reader that quits) ends the command quietly with success: no panic, no backtrace
+/// (`println!` panics with "failed printing to stdout: Broken pipe").
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    use std::process::Stdio;
+    let dir = scratch("closed-stdout");
+    for _ in 0..3 {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mmenn"))
+            .current_dir(&dir)
+            .args(["simulate", "--list"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Close the read end at once: the listing (a few hundred bytes) then meets a
+        // closed pipe rather than a buffer.
+        drop(child.stdout.take());
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn cli_rejects_bad_arguments_and_prints_no_backtrace() {
     let dir = scratch("cli");
@@ -922,6 +948,71 @@ fn cli_poly_degree_out_of_range_or_misspelt_is_refused() {
     let (code, err) = mmenn(&dir, &args, &[]);
     assert_eq!(code, 1, "{err}");
     assert!(err.contains("m.toml"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A model whose physics lives in its terms (linear part `A = 0`, `B = 0`) has an
+/// assumed-model row whose state the output cannot observe over the observer window:
+/// its residual analysis fails, and `compare` still writes every table (before, the whole
+/// comparison stopped with "baseline model: … not observable"), listing the failure in
+/// `compare.json`, the report and on the terminal.
+#[test]
+fn compare_goes_on_when_a_residual_analysis_fails() {
+    let dir = scratch("residual-failure");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    let model = r#"
+states = ["theta", "omega"]
+inputs = ["u"]
+A = [[0.0, 0.0], [0.0, 0.0]]
+B = [[0.0], [0.0]]
+measured = ["theta"]
+corrected = ["omega"]
+noise_variance = [0.01]
+
+[[terms]]
+state = "theta"
+effect = "kinematics"
+term = "omega"
+coefficient = 1.0
+
+[[terms]]
+state = "omega"
+effect = "pendulum"
+term = "-19.62*theta - 0.2*omega - 2*u"
+coefficient = 1.0
+"#;
+    std::fs::write(dir.join("m.toml"), model).unwrap();
+    // The default degree, stated: any flag will do for the shared helper.
+    let json = compare_json_with(&dir, "o", "--poly-degree", "3");
+    let failed = json["residual_failures"].as_array().unwrap();
+    assert!(
+        failed
+            .iter()
+            .any(|f| f["model"] == "assumed model" && f["at"] == "residuals"),
+        "{failed:?}"
+    );
+    // The assumed model's table row stands; the residual analyses that ran are there.
+    let labels: Vec<&str> = json["estimation"]["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|r| r["label"].as_str())
+        .collect();
+    assert!(labels.contains(&"assumed model"), "{labels:?}");
+    assert!(labels.contains(&"given model"), "{labels:?}");
+    let analysed: Vec<&str> = json["residuals"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|r| r[0].as_str())
+        .collect();
+    assert!(analysed.contains(&"MME/NN"), "{analysed:?}");
+    assert!(!analysed.contains(&"assumed model"), "{analysed:?}");
+    let report = std::fs::read_to_string(dir.join("o/report.md")).unwrap();
+    assert!(
+        report.contains("## Residual analyses that failed") && report.contains("not observable"),
+        "{report}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

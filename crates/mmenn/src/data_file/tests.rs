@@ -96,6 +96,25 @@ fn bad_input_classes_name_line_and_column() {
     ));
 }
 
+/// A row missing from the middle of a long uniform record is named where it is: the row
+/// after the gap, its step twice the file's typical step (compared with the mean step,
+/// which the gap shifts by 0.1 %, the first row already looked off).
+#[test]
+fn a_missing_row_is_named_where_it_is() {
+    let mut text = String::from("t,u,y\n");
+    for k in (0..1000).filter(|&k| k != 498) {
+        text.push_str(&format!("{},1,2\n", 4 * k));
+    }
+    let (line, column, p) =
+        problem(parse(&text).and_then(|t| table_to_experiment(&t, &names(&["u"]), &names(&["y"]))));
+    // Header on line 1, sample k on line k + 2 until the gap; t = 1996 s is on line 500.
+    assert_eq!((line, column.as_deref()), (500, Some("t")), "{p}");
+    match p {
+        CsvProblem::NonUniformTime { step, dt } => assert_eq!((step, dt), (8.0, 4.0)),
+        other => panic!("{other:?}"),
+    }
+}
+
 /// A jittered time column (±30 % of a 2 ms step, seeded) is an error naming its
 /// first off-grid row without `--resample`; resampled, a linear signal comes back
 /// exactly (linear interpolation is exact on it), a sine within the interpolation

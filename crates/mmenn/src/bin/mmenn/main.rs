@@ -14,6 +14,39 @@ use args::{
 };
 use reporter::Reporter;
 
+/// `println!` that ends the program quietly when standard output has been closed (piped
+/// into `head`, say), as Unix tools do, where `println!` would panic.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout().lock(), $($arg)*) {
+            crate::stdout_failed(e);
+        }
+    }};
+}
+
+/// `print!` with [`outln!`]'s handling of a closed standard output.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = write!(std::io::stdout().lock(), $($arg)*) {
+            crate::stdout_failed(e);
+        }
+    }};
+}
+
+/// Standard output failed: a closed pipe ends the program with success (the reader has
+/// what it wanted, and every file was written before anything was printed); any other
+/// error is reported.
+#[allow(clippy::print_stderr)]
+fn stdout_failed(e: std::io::Error) -> ! {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        std::process::exit(0)
+    }
+    eprintln!("error: writing to standard output: {e}");
+    std::process::exit(1)
+}
+
 mod args;
 mod reporter;
 
@@ -67,7 +100,7 @@ fn stage(out: &Path, command: &str, force: bool, inputs: &[&PathBuf]) -> Result<
 #[allow(clippy::print_stdout)]
 fn list_effects() {
     use mmenn::discovery::{Effect, EquationKind, Role, Slot};
-    println!(
+    outln!(
         "Named effects discover tries (term written over placeholders: x position, theta \
          angle, v velocity, h level, x_j any state, u input):"
     );
@@ -101,8 +134,8 @@ fn list_effects() {
                 _ => "any other equation",
             })
             .collect();
-        println!("  {:<28} {:<30} {term}", e.name(), e.label());
-        println!("  {:<28} enters {}", "", enters.join(", "));
+        outln!("  {:<28} {:<30} {term}", e.name(), e.label());
+        outln!("  {:<28} enters {}", "", enters.join(", "));
     }
 }
 
@@ -136,18 +169,19 @@ fn parse_param(text: &str) -> Result<(String, f64)> {
 fn simulate(args: SimulateArgs, force: bool, progress: &Reporter) -> Result<()> {
     if args.list {
         for s in plants::systems() {
-            println!(
+            outln!(
                 "{}  (default fs {} Hz; recipes: train, test)",
-                s.name, s.default_fs
+                s.name,
+                s.default_fs
             );
-            println!("    {}", s.description);
+            outln!("    {}", s.description);
             let params: Vec<String> = s
                 .parameters
                 .iter()
                 .map(|(n, v, u)| format!("{n}={v} {u}"))
                 .collect();
-            println!("    parameters: {}", params.join(", "));
-            println!("    default noise variance: {:?}", s.default_noise_variance);
+            outln!("    parameters: {}", params.join(", "));
+            outln!("    default noise variance: {:?}", s.default_noise_variance);
         }
         return Ok(());
     }
@@ -182,7 +216,7 @@ fn simulate(args: SimulateArgs, force: bool, progress: &Reporter) -> Result<()> 
         mmenn::simulate::run_simulate(&request, staged.path()).map_err(anyhow::Error::from)
     })?;
     staged.commit()?;
-    println!(
+    outln!(
         "wrote {}, {}, {}",
         out.join("data.csv").display(),
         out.join("truth.csv").display(),
@@ -214,41 +248,46 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
         .map_err(anyhow::Error::from)
     })?;
     staged.commit()?;
-    println!(
+    outln!(
         "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
         s.samples
     );
     for (name, nv) in &s.noise_variance {
-        println!(
+        outln!(
             "  {name}: noise variance {nv:.4e} ({}), residual variance {:.4e} (ratio {:.3})",
             mmenn::words::noise_method(s.noise_method),
             s.residual_variance[name],
             s.residual_to_noise[name]
         );
     }
-    println!(
+    outln!(
         "  W diagonal: {}",
         mmenn::words::named_values(&s.w_by_correction)
     );
     for w in &s.warnings {
-        println!("  warning: {w}");
+        outln!("  warning: {w}");
     }
     for o in s.outliers.iter().take(10) {
-        println!(
+        outln!(
             "  outlier: experiment {}, {} at sample {} (t = {} s): {} is {:.1} σ out",
-            o.experiment, o.channel, o.sample, o.time, o.value, o.sigmas
+            o.experiment,
+            o.channel,
+            o.sample,
+            o.time,
+            o.value,
+            o.sigmas
         );
     }
     if s.outliers.len() > 10 {
-        println!("  … {} outliers in all (report.md)", s.outliers.len());
+        outln!("  … {} outliers in all (report.md)", s.outliers.len());
     }
     if !s.outliers.is_empty() && !args.robust {
-        println!("  (outliers pull a plain estimate: consider --robust)");
+        outln!("  (outliers pull a plain estimate: consider --robust)");
     }
     if let Some(r) = s.sweep_samples_per_second {
-        println!("  final sweep: {:.3e} samples/s", r);
+        outln!("  final sweep: {:.3e} samples/s", r);
     }
-    println!("wrote {} files into {}", s.files.len(), args.out.display());
+    outln!("wrote {} files into {}", s.files.len(), args.out.display());
     if let Some(ended) = s.report.termination
         && !matches!(
             ended,
@@ -293,14 +332,14 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
     let outcome = mmenn::greyest::run_greyest(&args.model, &data, &opts, staged.path(), progress)?;
     staged.commit()?;
     let s = &outcome.summary;
-    println!("grey-box estimate ({}):", s.weighting);
+    outln!("grey-box estimate ({}):", s.weighting);
     for p in &s.parameters {
         let sigma = match (p.sigma, p.active_bound) {
             (Some(v), _) => format!("± {v:.3e}"),
             (None, Some(b)) => format!("(on its {b} bound)"),
             (None, None) => "(not identifiable)".into(),
         };
-        println!(
+        outln!(
             "  {} = {:.6e} {sigma} {}  (start {:.4e})",
             p.name,
             p.value,
@@ -314,7 +353,7 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
             .iter()
             .map(|(k, v)| format!("{k} {v:.2} %"))
             .collect();
-        println!(
+        outln!(
             "  free-run fit on {}: {} ({} RK4 steps per sample)",
             r.file,
             fits.join(", "),
@@ -322,16 +361,22 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         );
     }
     for st in &s.stages {
-        println!(
+        outln!(
             "  {}: {} after {} iterations, cost {:.4e} -> {:.4e}",
-            st.shooting, st.termination, st.iterations, st.initial_cost, st.final_cost
+            st.shooting,
+            st.termination,
+            st.iterations,
+            st.initial_cost,
+            st.final_cost
         );
     }
-    println!(
+    outln!(
         "  residual variance ratio s² = {:.4}, rank {} of {}",
-        s.residual_variance_ratio, s.rank.0, s.rank.1
+        s.residual_variance_ratio,
+        s.rank.0,
+        s.rank.1
     );
-    println!(
+    outln!(
         "wrote model.toml, greyest.json, report.md into {}",
         args.out.display()
     );
@@ -350,7 +395,7 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
 
 #[allow(clippy::print_stdout)]
 fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
-    println!(
+    outln!(
         "{label} — {}, {} scored, from x0 = {} ({}):",
         r.horizon,
         r.scored,
@@ -358,9 +403,12 @@ fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
         r.x0_source
     );
     for (name, m) in &r.channels {
-        println!(
+        outln!(
             "  {name}: fit {:.2} %, R² {:.5}, RMSE {:.4e}, error variance {:.4e}",
-            m.fit_percent, m.r2, m.rmse, m.error_variance
+            m.fit_percent,
+            m.r2,
+            m.rmse,
+            m.error_variance
         );
     }
 }
@@ -418,16 +466,18 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         progress,
     )?;
     staged.commit()?;
-    println!(
+    outln!(
         "network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)",
-        s.hidden, s.chosen.train_mse, s.chosen.test_mse
+        s.hidden,
+        s.chosen.train_mse,
+        s.chosen.test_mse
     );
     print_free_run("training data", &s.train);
     if let Some(v) = &s.validation {
         print_free_run("validation data", v);
     }
     if let Some(r) = &s.refinement {
-        println!(
+        outln!(
             "trajectory training: {} steps, objective {:.4e} -> {:.4e}",
             r.report.iterations,
             r.report.initial_train_objective(),
@@ -435,14 +485,14 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         );
         if let (Some(b), Some(a)) = (&r.validation_fit_before, &r.validation_fit_after) {
             for (name, before) in b {
-                println!(
+                outln!(
                     "  validation free-run fit of {name}: {before:.2} % -> {:.2} %",
                     a.get(name).copied().unwrap_or(f64::NAN)
                 );
             }
         }
     }
-    println!("wrote {} files into {}", s.files.len(), args.out.display());
+    outln!("wrote {} files into {}", s.files.len(), args.out.display());
     check_mme_converged("fit", s.mme_termination, &args.out)
 }
 
@@ -472,10 +522,10 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
     staged.commit()?;
     print_free_run(&format!("prediction ({})", s.model_kind), &s.free_run);
     if let Some(steps) = s.substeps {
-        println!("  free run: classical RK4, {steps} steps per sample interval");
+        outln!("  free run: classical RK4, {steps} steps per sample interval");
     }
     if let Some(d) = s.network_domain.as_ref().filter(|d| d.outside > 0) {
-        println!("  network: {}", d.sentence());
+        outln!("  network: {}", d.sentence());
     }
     if let Some(k) = &s.k_step {
         print_free_run(
@@ -494,7 +544,7 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
 
 #[allow(clippy::print_stdout)]
 fn show(args: ShowArgs) -> Result<()> {
-    print!("{}", mmenn::show::show_model(&args.model)?);
+    out!("{}", mmenn::show::show_model(&args.model)?);
     Ok(())
 }
 
@@ -533,7 +583,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     )?;
     staged.commit()?;
     for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
-        println!("{} — {}:", t.title(), t.horizon());
+        outln!("{} — {}:", t.title(), t.horizon());
         for row in t.rows() {
             let cells: Vec<String> = row
                 .evaluation
@@ -546,7 +596,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
                     )
                 })
                 .collect();
-            println!("  {:<16} {}", row.label, cells.join("; "));
+            outln!("  {:<16} {}", row.label, cells.join("; "));
         }
         // A free-run failure on the other dataset leaves this table's row in place.
         for f in s
@@ -554,7 +604,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             .iter()
             .filter(|f| t.rows().iter().all(|r| r.label != f.model))
         {
-            println!(
+            outln!(
                 "  {:<16} {}: {}",
                 f.model,
                 f.at.to_string().to_uppercase(),
@@ -562,7 +612,10 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             );
         }
     }
-    println!("wrote {} files into {}", s.files.len(), a.out.display());
+    for f in &s.residual_failures {
+        outln!("residual analysis of {} failed {}", f.model, f.reason);
+    }
+    outln!("wrote {} files into {}", s.files.len(), a.out.display());
     Ok(())
 }
 
@@ -602,12 +655,12 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
         progress,
     )?;
     staged.commit()?;
-    println!("verdict: {}", mmenn::words::discover_verdict(&s));
+    outln!("verdict: {}", mmenn::words::discover_verdict(&s));
     for w in &s.warnings {
-        println!("  warning: {w}");
+        outln!("  warning: {w}");
     }
     for e in &s.effects {
-        println!(
+        outln!(
             "  {} in {}: {} × {:.6} (free-run calibrated; {})",
             e.name,
             e.equations(),
@@ -629,7 +682,7 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
         } else {
             "cost stays above the noise level"
         };
-        println!(
+        outln!(
             "  not claimed ({why}): {} in {}: {} × {:.6}{support}",
             e.name,
             e.equations(),
@@ -638,7 +691,7 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
         );
     }
     if let Some(st) = &s.stand_in {
-        println!(
+        outln!(
             "  flexible stand-in on d̂: held-out gain {:.4} against threshold {:.4} ({})",
             st.statistic,
             st.threshold,
@@ -651,15 +704,15 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
     }
     let show = |label: &str, g: &mmenn::discover::GapPair| {
         for (k, b) in &g.before.fit_percent {
-            println!(
+            outln!(
                 "  {label} free-run fit of {k}: {b:.2} % → {:.2} %",
                 g.after.fit_percent[k]
             );
         }
         for (k, b) in &g.before.d_rms {
             match g.after.d_rms.get(k) {
-                Some(a) => println!("  {label} d̂ RMS of {k}: {b:.4e} → {a:.4e}"),
-                None => println!("  {label} d̂ RMS of {k}: {b:.4e} (MME not rerun)"),
+                Some(a) => outln!("  {label} d̂ RMS of {k}: {b:.4e} → {a:.4e}"),
+                None => outln!("  {label} d̂ RMS of {k}: {b:.4e} (MME not rerun)"),
             }
         }
     };
@@ -667,7 +720,7 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
     if let Some(v) = &s.validation_gap {
         show("validation", v);
     }
-    println!("wrote {}", out.join(&s.model).display());
+    outln!("wrote {}", out.join(&s.model).display());
     check_mme_converged("discover", s.mme_termination, out)
 }
 
@@ -699,31 +752,33 @@ fn monitor(cmd: MonitorCommand, force: bool, progress: &Reporter) -> Result<()> 
                     .map_err(anyhow::Error::from)
             })?;
             staged.commit()?;
-            println!(
+            outln!(
                 "trained on {} records; classify will use {} with {}",
                 m.rows.len(),
                 m.classifier.label(),
                 m.preprocessing.label()
             );
-            println!("cross-validated error % ({}):", m.table.columns.join(" | "));
+            outln!("cross-validated error % ({}):", m.table.columns.join(" | "));
             for (i, row) in m.table.rows.iter().enumerate() {
                 let cells: Vec<String> = (0..m.table.columns.len())
                     .filter_map(|j| m.table.cell(i, j))
                     .map(|c| format!("{:.1}", c.error_percent()))
                     .collect();
-                println!("  {row}: {}", cells.join(" | "));
+                outln!("  {row}: {}", cells.join(" | "));
             }
         }
         MonitorCommand::Classify(a) => {
             let c = mmenn::progress::stage(progress, "classification", || {
                 mmenn::monitor::classify(&a.monitor, &a.data).map_err(anyhow::Error::from)
             })?;
-            println!(
+            outln!(
                 "condition: {} ({}; {})",
-                c.condition, c.classifier, c.score_kind
+                c.condition,
+                c.classifier,
+                c.score_kind
             );
             for (name, s) in &c.scores {
-                println!("  {name}: {s:.3}");
+                outln!("  {name}: {s:.3}");
             }
         }
     }
