@@ -323,23 +323,45 @@ pub fn compute_greyest(
             substeps: fit.substeps[r],
         })
         .collect();
+    let last = fit.stages.len().saturating_sub(1);
     let stages = fit
         .stages
         .iter()
-        .map(|s| StageSummary {
-            shooting: match s.shooting {
-                Shooting::FreeRun => "free run".into(),
-                Shooting::Multiple { segment } => {
-                    format!("multiple shooting ({segment}-sample segments)")
-                }
-            },
-            residuals: s.residuals,
-            estimated: s.estimated,
-            termination: crate::words::termination(Some(s.report.termination)).to_owned(),
-            converged: s.report.termination == sysid_core::Termination::Converged,
-            iterations: s.report.iterations,
-            initial_cost: s.report.initial_cost,
-            final_cost: s.report.final_cost(),
+        .enumerate()
+        .map(|(i, s)| {
+            let converged = s.report.termination == sysid_core::Termination::Converged;
+            // A "converged" last solve that never moved from a start where the data do not
+            // determine every quantity is a start at a stationary point (e.g. an unmeasured
+            // state at a term's singular point, sqrt(0)), not an estimate.
+            let stuck = i == last
+                && converged
+                && fit.rank.0 < fit.rank.1
+                && no_progress(s.report.initial_cost, s.report.final_cost());
+            StageSummary {
+                shooting: match s.shooting {
+                    Shooting::FreeRun => "free run".into(),
+                    Shooting::Multiple { segment } => {
+                        format!("multiple shooting ({segment}-sample segments)")
+                    }
+                },
+                residuals: s.residuals,
+                estimated: s.estimated,
+                termination: if stuck {
+                    format!(
+                        "stopped where it started (not converged): the cost did not move and \
+                         the data determine only {} of the {} estimated quantities there — a \
+                         start at a stationary point, e.g. an unmeasured state at a term's \
+                         singular point such as sqrt(0); start it elsewhere",
+                        fit.rank.0, fit.rank.1
+                    )
+                } else {
+                    crate::words::termination(Some(s.report.termination)).to_owned()
+                },
+                converged: converged && !stuck,
+                iterations: s.report.iterations,
+                initial_cost: s.report.initial_cost,
+                final_cost: s.report.final_cost(),
+            }
         })
         .collect();
     let summary = GreyestSummary {
@@ -355,6 +377,11 @@ pub fn compute_greyest(
         files: Vec::new(),
     };
     Ok(GreyestOutcome { summary, spec, fit })
+}
+
+/// Whether a solve left its cost where it found it (to 1e-9 relative).
+fn no_progress(initial: f64, last: f64) -> bool {
+    (initial - last).abs() <= 1e-9 * initial.abs().max(f64::MIN_POSITIVE)
 }
 
 /// Write `model.toml`, `greyest.json` and `report.md` into `out` (atomically, each).

@@ -85,7 +85,10 @@ impl std::fmt::Display for ModelKind {
         f.write_str(match self {
             ModelKind::Assumed => "assumed model (model file, no terms)",
             ModelKind::WithTerms => "model file with named terms",
-            ModelKind::Physical => "physical model file (named parameters, mass-matrix form)",
+            ModelKind::Physical => {
+                "physical model file (named parameters; terms, or the mass-matrix form of \
+                 [mechanics])"
+            }
             ModelKind::Hybrid => "MME/NN hybrid model (model.json)",
         })
     }

@@ -203,3 +203,64 @@ fn cascaded_tanks_fit_then_predict_beats_the_physics_model() {
     assert!(rmse < 3.0 * 0.19, "MME/NN RMSE {rmse} V");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A fresh user's Cascaded Tanks model: Torricelli outflows `sqrt(h1)` with the upper
+/// level unmeasured. The level's start comes out at ~1e-15, where `sqrt` has no slope and
+/// the data determine fewer quantities than are estimated; the solve stops on its first
+/// iteration with the cost unchanged. `greyest` must not call that converged (it did,
+/// with exit status 0 and every coefficient "not identifiable").
+#[test]
+fn greyest_does_not_call_a_stuck_start_converged() {
+    let Some(folder) = tanks_folder() else {
+        return;
+    };
+    let model = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+C = [[0.0, 1.0]]
+outputs = ["y"]
+corrected = ["h1", "h2"]
+noise_variance = "auto"
+
+[parameters]
+k1 = { value = 0.05, bounds = [0.001, 1.0] }
+k2 = { value = 0.05, bounds = [0.001, 1.0] }
+k3 = { value = 0.05, bounds = [0.001, 1.0] }
+k4 = { value = 0.03, bounds = [0.001, 1.0] }
+
+[[terms]]
+state = "h1"
+effect = "orifice_outflow"
+term = "-k1*sqrt(h1) + k4*u"
+
+[[terms]]
+state = "h2"
+effect = "orifice_outflow"
+term = "k2*sqrt(h1) - k3*sqrt(h2)"
+"#;
+    let dir = std::env::temp_dir().join(format!("mmenn-real-greyest-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("model.toml"), model).unwrap();
+    let outcome = mmenn::greyest::run_greyest(
+        &dir.join("model.toml"),
+        &[folder.join("estimation.csv")],
+        &mmenn::greyest::GreyestOptions::default(),
+        &dir.join("out"),
+        &mmenn::progress::NoProgress,
+    )
+    .unwrap();
+    let s = &outcome.summary;
+    let last = s.stages.last().unwrap();
+    // The situation the check is for: rank-deficient, cost unchanged.
+    assert!(s.rank.0 < s.rank.1, "rank {:?}", s.rank);
+    assert!(
+        (last.initial_cost - last.final_cost).abs() <= 1e-9 * last.initial_cost,
+        "{last:?}"
+    );
+    assert!(!last.converged, "{last:?}");
+    assert!(
+        last.termination.contains("stopped where it started"),
+        "{last:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

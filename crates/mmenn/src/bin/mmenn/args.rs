@@ -11,7 +11,8 @@ use mmenn::plants::Recipe;
 /// put in place at the end. An existing --out folder is replaced only when it holds the
 /// results of the same command (or with --force). Errors are printed without a backtrace
 /// unless --debug is given or MMENN_BACKTRACE is set. Exit status: 0 success, 1 error,
-/// 3 results written but the estimator did not converge (2: bad arguments).
+/// 2 bad arguments, 3 results written but the estimator did not converge, 4 the
+/// --budget of estimate, fit, greyest or discover ran out (nothing written).
 #[derive(Debug, Parser)]
 #[command(name = "mmenn", version, about)]
 pub(crate) struct Cli {
@@ -153,7 +154,9 @@ pub(crate) struct CompareArgs {
     /// Model file (TOML).
     #[arg(long)]
     pub(crate) model: PathBuf,
-    /// Validation data file(s).
+    /// Validation data file(s): every row is judged on them. The MME/NN also makes its
+    /// choices on them (as `fit --val` does); the baselines do not, so its row there is
+    /// favoured. Judge on a further record with `predict` for an independent number.
     #[arg(long, num_args = 1..)]
     pub(crate) val: Vec<PathBuf>,
     /// NARX delays (default: suggested from PACF/XCF).
@@ -298,7 +301,10 @@ pub(crate) struct FitArgs {
     /// Model file (TOML).
     #[arg(long)]
     pub(crate) model: PathBuf,
-    /// Validation data file(s): the sweep's test set and a free-run check.
+    /// Validation data file(s). They take part in the MME/NN's choices (the network
+    /// sweep's test set, the guard that keeps physics alone, the network or the refined
+    /// network, early stopping of trajectory training), so the validation fit is not an
+    /// independent test: judge the model on a further record with `predict`.
     #[arg(long, num_args = 1..)]
     pub(crate) val: Vec<PathBuf>,
     /// Hidden units: "auto" (sizing sweep 1–10 × inits) or a number.
