@@ -317,6 +317,17 @@ pub enum MmennError {
     /// JSON serialisation failed.
     #[error("writing JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// `predict`'s first scored sample is not in the record.
+    #[error(
+        "--score-from {first}: the record has {len} samples (the first scored sample is \
+         0-based, so it must be below {len})"
+    )]
+    ScoreFromBeyondRecord {
+        /// The first sample asked to be scored.
+        first: usize,
+        /// Samples in the record.
+        len: usize,
+    },
     /// A real benchmark's data folder is in none of the places searched.
     #[error(
         "benchmark data '{benchmark}' not found (looked in: {searched:?}); pass --data-dir or set MMENN_DATA_DIR"

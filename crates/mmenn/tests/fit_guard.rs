@@ -49,6 +49,7 @@ fn exact_data(dir: &Path, model: &Path, x0: Vec<f64>) -> PathBuf {
             x0: InitialChoice::Given(x0),
             x0_window: None,
             horizon: None,
+            score_from: None,
         },
     )
     .unwrap();
@@ -135,6 +136,7 @@ noise_variance = [1e-6]
             x0: InitialChoice::Given(vec![1.0]),
             x0_window: None,
             horizon: None,
+            score_from: None,
         },
     )
     .expect_err("a free run past the blow-up limit must fail, not return numbers");

@@ -231,6 +231,7 @@ units = { x1 = "m", x2 = "m/s", u = "N", s = "m" }
         &data,
         &PredictOptions {
             horizon: Some(3),
+            score_from: None,
             ..PredictOptions::default()
         },
         &dir.join("p"),
@@ -251,6 +252,74 @@ units = { x1 = "m", x2 = "m/s", u = "N", s = "m" }
     }
     let json = std::fs::read_to_string(dir.join("p/prediction.json")).unwrap();
     assert!(json.contains("first 200 of 301 samples"), "{json}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `--score-from N` scores samples N.. only (the benchmark protocols' "RMSE after the
+/// initialisation window"): the reported RMSE equals the RMSE computed by hand from
+/// `prediction.csv`'s measured and error columns over those rows, the scored window says
+/// so, and a first sample beyond the record is a typed error.
+#[test]
+fn predict_scores_from_a_given_sample() {
+    use mmenn::data_file::{read_table, write_csv};
+    use mmenn::fit::{PredictOptions, run_predict_with};
+    use mmenn::sysid_core::Experiment;
+    use nalgebra::DMatrix;
+
+    let dir = scratch("score-from");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model_path = dir.join("m.toml");
+    std::fs::write(
+        &model_path,
+        "states = [\"x\", \"v\"]\ninputs = [\"u\"]\nA = [[0.0, 1.0], [-2.0, -0.3]]\nB = [[0.0], [1.0]]\nmeasured = [\"x\"]\ncorrected = [\"v\"]\nnoise_variance = [1e-4]\n",
+    )
+    .unwrap();
+    let model = LoadedModel::read(&model_path).unwrap();
+    let (n, dt) = (301, 0.05);
+    let u = DMatrix::from_fn(1, n, |_, k| (0.7 * k as f64 * dt).sin());
+    let exp = Experiment::new(0.0, dt, u.clone(), DMatrix::zeros(1, n)).unwrap();
+    let xs = model.simulate_states(&[0.5, 0.0], &exp).unwrap();
+    // A deterministic disturbance the model cannot follow, larger late in the record.
+    let x: Vec<f64> = (0..n)
+        .map(|k| xs[(0, k)] + 0.002 * (k as f64) * 1e-2 * (1.3 * k as f64).sin())
+        .collect();
+    let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+    let uu: Vec<f64> = u.row(0).iter().copied().collect();
+    let data = dir.join("d.csv");
+    write_csv(&data, &["t".into(), "u".into(), "x".into()], &[&t, &uu, &x]).unwrap();
+    let opts = |score_from| PredictOptions {
+        x0_window: Some(50),
+        score_from,
+        ..PredictOptions::default()
+    };
+    let all = run_predict_with(&model_path, &data, &opts(None), &dir.join("all")).unwrap();
+    let after = run_predict_with(&model_path, &data, &opts(Some(50)), &dir.join("after")).unwrap();
+    assert_eq!((after.scored.first, after.scored.end), (50, n));
+    // Same model, same start: only the scored samples differ.
+    assert_eq!(all.free_run.x0, after.free_run.x0);
+    let table = read_table(&dir.join("after/prediction.csv")).unwrap();
+    let col = |name: &str| table.columns[table.column_index(name).unwrap()].clone();
+    let (err, measured, sim) = (col("x_error"), col("x_measured"), col("x"));
+    for k in 0..n {
+        assert!((measured[k] - sim[k] - err[k]).abs() < 1e-12);
+        assert!((measured[k] - x[k]).abs() < 1e-12);
+    }
+    let by_hand =
+        |from: usize| (err[from..].iter().map(|e| e * e).sum::<f64>() / (n - from) as f64).sqrt();
+    let rmse = |p: &mmenn::fit::PredictSummary| p.free_run.channels["x"].rmse;
+    assert!(
+        (rmse(&after) - by_hand(50)).abs() <= 1e-12 * by_hand(50),
+        "{} {}",
+        rmse(&after),
+        by_hand(50)
+    );
+    assert!((rmse(&all) - by_hand(0)).abs() <= 1e-12 * by_hand(0));
+    assert!((rmse(&after) - rmse(&all)).abs() > 1e-6 * rmse(&all));
+    let beyond = run_predict_with(&model_path, &data, &opts(Some(n)), &dir.join("beyond"));
+    assert!(
+        matches!(beyond, Err(MmennError::ScoreFromBeyondRecord { first, len }) if first == n && len == n),
+        "{beyond:?}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

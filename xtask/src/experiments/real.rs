@@ -217,6 +217,7 @@ fn hybrid_output_domain(
         x0: choice.clone(),
         x0_window: Some(window),
         horizon: None,
+        score_from: None,
     };
     let outcome = mmenn::predict::compute_predict(&model, &record, &opts)?;
     let y = outcome

@@ -307,6 +307,7 @@ fn predict_states(model: &LoadedModel, rec: &Record, out: &Path) -> Result<DMatr
         x0: InitialChoice::Given(rec.x0()),
         x0_window: Some(200),
         horizon: None,
+        score_from: None,
     };
     let outcome = compute_predict(model, &read_table(&rec.files.truth)?, &opts)?;
     write_predict(&outcome, out)?;

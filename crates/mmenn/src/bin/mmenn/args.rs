@@ -398,6 +398,11 @@ pub(crate) struct PredictArgs {
     /// Also predict k steps ahead (beside the free run, labelled).
     #[arg(long, value_parser = at_least_one)]
     pub(crate) horizon: Option<usize>,
+    /// First sample (0-based) the metrics score (default: every sample). The benchmark
+    /// protocols score after their initialisation window: `--x0-window 50 --score-from 50`
+    /// (Cascaded Tanks, Silverbox) or 20 and 20 (EMPS).
+    #[arg(long, value_name = "N")]
+    pub(crate) score_from: Option<usize>,
     /// RK4 steps per sample interval of a model file's free run: `auto` (the default:
     /// four, or as many as a stiff model needs for stability along the record) or a
     /// number, 1 to 1000. A hybrid model (model.json) keeps the steps it was trained with.

@@ -507,6 +507,7 @@ fn predict(args: PredictArgs, force: bool, progress: &Reporter) -> Result<()> {
         x0,
         x0_window: Some(args.x0_window),
         horizon: args.horizon,
+        score_from: args.score_from,
     };
     let data = prepared(std::slice::from_ref(&args.data), &args.prep, staged.path())?;
     let s = mmenn::progress::stage(progress, "prediction", || {
