@@ -412,6 +412,7 @@ impl Expr {
     ///
     /// # Panics
     /// If `head` and `tail` together are shorter than the highest variable index used.
+    #[inline]
     pub fn eval_parts(&self, head: &[f64], tail: &[f64]) -> f64 {
         self.run(|i| {
             if i < head.len() {
@@ -453,9 +454,21 @@ impl Expr {
             }
             Shape::PowI(i, n) => var(i).powi(n),
             Shape::Product(i, j) => var(i) * var(j),
-            Shape::Small => self.exec::<SMALL_STACK>(var),
-            Shape::Large => self.exec::<STACK>(var),
+            Shape::Small => self.exec_small(var),
+            Shape::Large => self.exec_large(var),
         }
+    }
+
+    // The stack machine stays out of line so that `run`, inlined into its callers, costs
+    // them only the shape dispatch, and the short shapes run without a call.
+    #[inline(never)]
+    fn exec_small(&self, var: impl Fn(usize) -> f64) -> f64 {
+        self.exec::<SMALL_STACK>(var)
+    }
+
+    #[inline(never)]
+    fn exec_large(&self, var: impl Fn(usize) -> f64) -> f64 {
+        self.exec::<STACK>(var)
     }
 
     /// The postfix program on a stack of `N` slots.

@@ -102,6 +102,23 @@ pub trait TangentSource {
     }
 }
 
+/// A right-hand side that evaluates `f`, `A = ∂f/∂x` and `F_p` at one stage point in one
+/// call, for dynamics whose three share work (a term evaluated once serves `f` and its
+/// column of `F_p`). Used by [`Rk4::step_with_stage_tangents`].
+pub trait StageTangents {
+    /// At `(t, x, u)`: write `f` into `k`, `A` into `a` (`n × n`), and add `F_p` into
+    /// `fp` (`n × r`, zeroed by the caller).
+    fn stage(
+        &self,
+        t: f64,
+        x: &[f64],
+        u: &[f64],
+        k: &mut [f64],
+        a: &mut DMatrix<f64>,
+        fp: &mut DMatrix<f64>,
+    );
+}
+
 const STAGE_C: [f64; 4] = [0.0, 0.5, 0.5, 1.0];
 const WEIGHT: [f64; 4] = [1.0, 2.0, 2.0, 1.0];
 
@@ -113,8 +130,8 @@ pub struct Rk4 {
     xi: Vec<f64>,
     a: DMatrix<f64>,
     b: DMatrix<f64>,
-    /// Tangents: `∂ξ` of the current stage, `∂k` of every stage, `F_p`.
-    dxi: DMatrix<f64>,
+    /// Tangents: one column of `∂ξ` of the current stage, `∂k` of every stage, `F_p`.
+    dxi: Vec<f64>,
     dk: [DMatrix<f64>; 4],
     fp: DMatrix<f64>,
 }
@@ -128,7 +145,7 @@ impl Rk4 {
             xi: vec![0.0; n],
             a: DMatrix::zeros(n, n),
             b: DMatrix::zeros(n, m),
-            dxi: DMatrix::zeros(n, r),
+            dxi: vec![0.0; n],
             dk: std::array::from_fn(|_| DMatrix::zeros(n, r)),
             fp: DMatrix::zeros(n, r),
         }
@@ -172,10 +189,7 @@ impl Rk4 {
                 &mut self.k[s],
             );
         }
-        for (i, xi) in x.iter_mut().enumerate() {
-            *xi +=
-                h / 6.0 * (self.k[0][i] + 2.0 * self.k[1][i] + 2.0 * self.k[2][i] + self.k[3][i]);
-        }
+        self.advance_state(h, x);
     }
 
     /// `x ← x⁺` and `s ← ∂x⁺/∂z` (`n × r`) for one step, the tangent's direct source
@@ -191,40 +205,198 @@ impl Rk4 {
         s: &mut DMatrix<f64>,
         input: &StepInput<'_>,
     ) {
+        self.tangent_step(t, h, x, s, input, |ts, xi, us, k, a, b, fp| {
+            f.rhs(ts, xi, us, k);
+            if !source.state_jacobian(ts, xi, us, a) {
+                f.jacobians(ts, xi, us, a, b);
+            }
+            source.add_to(ts, xi, us, fp);
+        });
+    }
+
+    /// [`Rk4::step_with_tangents`] for dynamics that give `f`, `A` and `F_p` together
+    /// ([`StageTangents`]); the same arithmetic otherwise.
+    pub fn step_with_stage_tangents<F: StageTangents + ?Sized>(
+        &mut self,
+        f: &F,
+        t: f64,
+        h: f64,
+        x: &mut [f64],
+        s: &mut DMatrix<f64>,
+        input: &StepInput<'_>,
+    ) {
+        self.tangent_step(t, h, x, s, input, |ts, xi, us, k, a, _, fp| {
+            f.stage(ts, xi, us, k, a, fp);
+        });
+    }
+
+    /// The step with tangents, `eval(t, ξ, u, k, A, B, F_p)` filling a stage's `k`, `A`
+    /// and `F_p` (`F_p` arrives zeroed; `B` is scratch).
+    ///
+    /// The tangent products are written out over the column-major storage ([`stage_tangent`]).
+    #[inline(always)]
+    #[allow(clippy::type_complexity)]
+    fn tangent_step(
+        &mut self,
+        t: f64,
+        h: f64,
+        x: &mut [f64],
+        s: &mut DMatrix<f64>,
+        input: &StepInput<'_>,
+        mut eval: impl FnMut(
+            f64,
+            &[f64],
+            &[f64],
+            &mut [f64],
+            &mut DMatrix<f64>,
+            &mut DMatrix<f64>,
+            &mut DMatrix<f64>,
+        ),
+    ) {
         self.fit_input(input);
+        let n = s.nrows();
+        assert_eq!(
+            s.shape(),
+            self.fp.shape(),
+            "tangent shape differs from the buffers"
+        );
         for (st, &cs) in STAGE_C.iter().enumerate() {
             let c = cs * h;
             self.stage_point(st, c, x);
             let ts = t + c;
             let us = input.at(cs, &mut self.u);
-            f.rhs(ts, &self.xi, us, &mut self.k[st]);
-            if !source.state_jacobian(ts, &self.xi, us, &mut self.a) {
-                f.jacobians(ts, &self.xi, us, &mut self.a, &mut self.b);
-            }
             self.fp.fill(0.0);
-            source.add_to(ts, &self.xi, us, &mut self.fp);
-            // ∂ξ = S + c ∂k_{s−1}.
-            self.dxi.copy_from(s);
-            if st > 0 {
-                add_scaled(&mut self.dxi, c, &self.dk[st - 1]);
+            eval(
+                ts,
+                &self.xi,
+                us,
+                &mut self.k[st],
+                &mut self.a,
+                &mut self.b,
+                &mut self.fp,
+            );
+            // ∂k_s = F_p + A·∂ξ_s with ∂ξ_s = S + c ∂k_{s−1}.
+            let (done, rest) = self.dk.split_at_mut(st);
+            let prev = done.last().map(|m| (c, m.as_slice()));
+            let (a, fp, sv, dk) = (
+                self.a.as_slice(),
+                self.fp.as_slice(),
+                s.as_slice(),
+                rest[0].as_mut_slice(),
+            );
+            match n {
+                0 => {}
+                1 => stage_tangent::<1>(a, fp, sv, prev, dk),
+                2 => stage_tangent::<2>(a, fp, sv, prev, dk),
+                3 => stage_tangent::<3>(a, fp, sv, prev, dk),
+                4 => stage_tangent::<4>(a, fp, sv, prev, dk),
+                5 => stage_tangent::<5>(a, fp, sv, prev, dk),
+                6 => stage_tangent::<6>(a, fp, sv, prev, dk),
+                _ => stage_tangent_dyn(n, a, fp, sv, prev, &mut self.dxi, dk),
             }
-            let dk = &mut self.dk[st];
-            dk.copy_from(&self.fp);
-            dk.gemm(1.0, &self.a, &self.dxi, 1.0);
         }
+        self.advance_state(h, x);
+        // S⁺ = S + h/6 Σ w_s ∂k_s, the stages added in order.
+        let w = WEIGHT.map(|w| h / 6.0 * w);
+        let [d0, d1, d2, d3] = &self.dk;
+        for ((((sv, a0), a1), a2), a3) in s
+            .as_mut_slice()
+            .iter_mut()
+            .zip(d0.as_slice())
+            .zip(d1.as_slice())
+            .zip(d2.as_slice())
+            .zip(d3.as_slice())
+        {
+            *sv = *sv + w[0] * a0 + w[1] * a1 + w[2] * a2 + w[3] * a3;
+        }
+    }
+
+    /// `x ← x + h/6 (k_1 + 2 k_2 + 2 k_3 + k_4)`.
+    fn advance_state(&self, h: f64, x: &mut [f64]) {
         for (i, xi) in x.iter_mut().enumerate() {
             *xi +=
                 h / 6.0 * (self.k[0][i] + 2.0 * self.k[1][i] + 2.0 * self.k[2][i] + self.k[3][i]);
         }
-        for (st, w) in WEIGHT.iter().enumerate() {
-            add_scaled(s, h / 6.0 * w, &self.dk[st]);
+    }
+}
+
+/// `∂k = F_p + A·(S + c ∂k_prev)` (`∂k_prev` term only when `prev = Some((c, ∂k_prev))`)
+/// for `N` states, over column-major `n × r` slices, with `A` held in registers.
+///
+/// For these small shapes (a few states, tens of columns) nalgebra's general `gemm`
+/// spends more in dispatch and per-column views than in arithmetic, and a loop over a
+/// run-time `n` keeps the accumulators in memory. Every element accumulates in the order
+/// `gemm` uses for matrices of at most 5 rows (`F_p`, then `A_{i0}·∂ξ_0`, `A_{i1}·∂ξ_1`,
+/// …), so the results are the same to the last bit there.
+#[inline(always)]
+fn stage_tangent<const N: usize>(
+    a: &[f64],
+    fp: &[f64],
+    s: &[f64],
+    prev: Option<(f64, &[f64])>,
+    dk: &mut [f64],
+) {
+    let a: [[f64; N]; N] = std::array::from_fn(|l| std::array::from_fn(|i| a[l * N + i]));
+    let column = |acc: &mut [f64; N], d: &[f64; N]| {
+        for l in 0..N {
+            for i in 0..N {
+                acc[i] += a[l][i] * d[l];
+            }
+        }
+    };
+    let cols = dk
+        .chunks_exact_mut(N)
+        .zip(fp.chunks_exact(N))
+        .zip(s.chunks_exact(N));
+    match prev {
+        None => {
+            for ((out, f), sc) in cols {
+                let d: [f64; N] = std::array::from_fn(|l| sc[l]);
+                let mut acc: [f64; N] = std::array::from_fn(|i| f[i]);
+                column(&mut acc, &d);
+                out.copy_from_slice(&acc);
+            }
+        }
+        Some((c, p)) => {
+            for (((out, f), sc), pc) in cols.zip(p.chunks_exact(N)) {
+                let d: [f64; N] = std::array::from_fn(|l| sc[l] + c * pc[l]);
+                let mut acc: [f64; N] = std::array::from_fn(|i| f[i]);
+                column(&mut acc, &d);
+                out.copy_from_slice(&acc);
+            }
         }
     }
 }
 
-/// `y ← y + a·x` for matrices of one shape.
-fn add_scaled(y: &mut DMatrix<f64>, a: f64, x: &DMatrix<f64>) {
-    for (yi, xi) in y.as_mut_slice().iter_mut().zip(x.as_slice()) {
-        *yi += a * xi;
+/// [`stage_tangent`] for any number of states `n`, `dxi` (length `n`) as scratch.
+fn stage_tangent_dyn(
+    n: usize,
+    a: &[f64],
+    fp: &[f64],
+    s: &[f64],
+    prev: Option<(f64, &[f64])>,
+    dxi: &mut [f64],
+    dk: &mut [f64],
+) {
+    for (j, ((out, f), sc)) in dk
+        .chunks_exact_mut(n)
+        .zip(fp.chunks_exact(n))
+        .zip(s.chunks_exact(n))
+        .enumerate()
+    {
+        match prev {
+            None => dxi.copy_from_slice(sc),
+            Some((c, p)) => {
+                for ((d, sv), pv) in dxi.iter_mut().zip(sc).zip(&p[j * n..(j + 1) * n]) {
+                    *d = sv + c * pv;
+                }
+            }
+        }
+        out.copy_from_slice(f);
+        for (l, &d) in dxi.iter().enumerate() {
+            for (o, &av) in out.iter_mut().zip(&a[l * n..(l + 1) * n]) {
+                *o += av * d;
+            }
+        }
     }
 }

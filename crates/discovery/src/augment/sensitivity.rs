@@ -27,7 +27,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use nalgebra::DMatrix;
-use sysid_core::tangent::{Rk4, TangentSource};
+use sysid_core::tangent::{Rk4, StageTangents};
 use sysid_core::{CoreError, Dynamics, Experiment, Expr, LinearModel, Term};
 
 use super::Problem;
@@ -118,40 +118,75 @@ pub(crate) struct Propagator<'a> {
     pub(crate) blow_up: f64,
 }
 
-impl Dynamics for Propagator<'_> {
-    fn n_states(&self) -> usize {
-        self.linear.n_states()
-    }
-    fn n_inputs(&self) -> usize {
-        self.linear.n_inputs()
-    }
-    /// `dx = F(x, u)` exactly as `Trial::rhs` computes it.
-    fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        super::trial_rhs(self.linear, self.terms, self.coefficients, t, x, u, dx);
+/// One calibration's right-hand side as the RK4 step with tangents reads it: `F`, `F_x` and
+/// the coefficient columns of `F_θ` at a stage point from one evaluation of every term
+/// (each value serves `F` and its own column), the arithmetic of
+/// [`Trial`](super::Trial) and of the partials unchanged.
+struct StageEval<'p, 'a> {
+    propagator: &'p Propagator<'a>,
+    /// `(term, column)` of every coefficient column driven by a model term, by term.
+    model_columns: Vec<(usize, usize)>,
+    /// `(column, term)` of every coefficient column driven by a term outside the model.
+    extra_columns: Vec<(usize, &'a Term)>,
+}
+
+impl<'p, 'a> StageEval<'p, 'a> {
+    fn new(propagator: &'p Propagator<'a>) -> Self {
+        let mut model_columns = Vec::new();
+        let mut extra_columns = Vec::new();
+        for &(j, forcing) in &propagator.forcing {
+            match forcing {
+                Forcing::Model(k) => model_columns.push((k, j)),
+                Forcing::Extra(term) => extra_columns.push((j, term)),
+            }
+        }
+        model_columns.sort_unstable();
+        Self {
+            propagator,
+            model_columns,
+            extra_columns,
+        }
     }
 }
 
-impl TangentSource for Propagator<'_> {
-    /// The coefficient columns of `F_θ` (initial-state columns have none).
-    fn add_to(&self, _: f64, x: &[f64], u: &[f64], out: &mut DMatrix<f64>) {
-        for &(j, forcing) in &self.forcing {
-            let term = match forcing {
-                Forcing::Model(k) => &self.terms[k],
-                Forcing::Extra(term) => term,
-            };
+impl StageTangents for StageEval<'_, '_> {
+    /// `F = A x + B u + Σ_k c_k φ_k (e_{s_k} − e_{r_k})` exactly as `Trial::rhs` computes
+    /// it, `F_x = A + Σ_k c_k (e_{s_k} − e_{r_k}) ∇_x φ_kᵀ` from the symbolic partials, and
+    /// the coefficient columns `φ_k (e_{s_k} − e_{r_k})` of `F_θ` (initial-state columns
+    /// have none).
+    fn stage(
+        &self,
+        t: f64,
+        x: &[f64],
+        u: &[f64],
+        k: &mut [f64],
+        a: &mut DMatrix<f64>,
+        fp: &mut DMatrix<f64>,
+    ) {
+        let p = self.propagator;
+        p.linear.rhs(t, x, u, k);
+        a.as_mut_slice().copy_from_slice(p.linear.a().as_slice());
+        let mut columns = self.model_columns.iter().peekable();
+        for (i, ((term, c), partials)) in p
+            .terms
+            .iter()
+            .zip(p.coefficients)
+            .zip(&p.partials.terms)
+            .enumerate()
+        {
             let value = term.expr.eval_parts(x, u);
-            out[(term.state, j)] += value;
+            let v = c * value;
+            k[term.state] += v;
             if let Some(r) = term.into {
-                out[(r, j)] -= value;
+                k[r] -= v;
             }
-        }
-    }
-
-    /// `F_x = A + Σ_k c_k (e_{s_k} − e_{r_k}) ∇_x φ_kᵀ` from the symbolic partials.
-    fn state_jacobian(&self, _: f64, x: &[f64], u: &[f64], a: &mut DMatrix<f64>) -> bool {
-        a.copy_from(self.linear.a());
-        for (k, (term, c)) in self.terms.iter().zip(self.coefficients).enumerate() {
-            for (var, partial) in &self.partials.terms[k] {
+            while let Some(&(_, j)) = columns.next_if(|(owner, _)| *owner == i) {
+                fp[(term.state, j)] += value;
+                if let Some(r) = term.into {
+                    fp[(r, j)] -= value;
+                }
+            }
+            for (var, partial) in partials {
                 let g = c * partial.eval(x, u);
                 a[(term.state, *var)] += g;
                 if let Some(r) = term.into {
@@ -159,7 +194,13 @@ impl TangentSource for Propagator<'_> {
                 }
             }
         }
-        true
+        for &(j, term) in &self.extra_columns {
+            let value = term.expr.eval_parts(x, u);
+            fp[(term.state, j)] += value;
+            if let Some(r) = term.into {
+                fp[(r, j)] -= value;
+            }
+        }
     }
 }
 
@@ -177,6 +218,7 @@ impl Propagator<'_> {
         let n = self.linear.n_states();
         let m = self.linear.n_inputs();
         let q = self.q;
+        let stage = StageEval::new(self);
         let mut rk = Rk4::new(n, m, q);
         let mut x = x0.to_vec();
         let mut s = DMatrix::zeros(n, q);
@@ -203,7 +245,7 @@ impl Propagator<'_> {
                 for j in 0..substeps {
                     let t = ta + j as f64 * h;
                     let input = hold.step_input(u, ub, j, substeps);
-                    rk.step_with_tangents(self, self, t, h, &mut x, &mut s, &input);
+                    rk.step_with_stage_tangents(&stage, t, h, &mut x, &mut s, &input);
                 }
                 if let Some((state, value)) = x
                     .iter()
