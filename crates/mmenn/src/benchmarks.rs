@@ -190,7 +190,7 @@ fn column<'a>(table: &'a Table, name: &str) -> Result<&'a [f64]> {
         path: table.path.clone(),
         line: 1,
         column: None,
-        problem: CsvProblem::MissingChannel(name.to_string()),
+        problem: table.missing(name),
     })?;
     Ok(&table.columns[j])
 }
@@ -441,7 +441,13 @@ mod tests {
         match load(Benchmark::CascadedTanks, &dir) {
             Err(MmennError::Csv { path, problem, .. }) => {
                 assert!(path.ends_with("estimation.csv"));
-                assert_eq!(problem, CsvProblem::MissingChannel("y".into()));
+                assert_eq!(
+                    problem,
+                    CsvProblem::MissingChannel {
+                        name: "y".into(),
+                        header: "k, t, u".into()
+                    }
+                );
             }
             other => panic!("expected a CSV error, got {other:?}"),
         }

@@ -32,6 +32,14 @@ pub struct Table {
 }
 
 impl Table {
+    /// The problem "no column `name`", with the header the file does have.
+    pub fn missing(&self, name: &str) -> CsvProblem {
+        CsvProblem::MissingChannel {
+            name: name.to_string(),
+            header: self.header.join(", "),
+        }
+    }
+
     /// Index of a column by name.
     pub fn column_index(&self, name: &str) -> Option<usize> {
         self.header.iter().position(|h| h == name)
@@ -431,7 +439,7 @@ impl PrepareReport {
 pub fn prepare_table(mut table: Table, opts: &PrepareOptions) -> Result<(Table, PrepareReport)> {
     for (name, col) in &opts.map {
         let Some(j) = table.column_index(col) else {
-            return Err(table.err(1, Some(col), CsvProblem::MissingChannel(col.clone())));
+            return Err(table.err(1, Some(col), table.missing(col)));
         };
         if let Some(other) = table.column_index(name)
             && other != j
@@ -616,7 +624,7 @@ fn checked_channels(
         for name in names {
             let j = table
                 .column_index(name)
-                .ok_or_else(|| table.err(1, None, CsvProblem::MissingChannel(name.clone())))?;
+                .ok_or_else(|| table.err(1, None, table.missing(name)))?;
             if complete && let Some(k) = table.columns[j][..n].iter().position(|v| v.is_nan()) {
                 return Err(table.err(
                     table.lines[k],

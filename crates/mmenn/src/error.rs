@@ -78,8 +78,16 @@ pub enum CsvProblem {
     #[error("the file has {0} data rows; at least 2 are needed")]
     TooFewRows(usize),
     /// A channel the model needs is not in the file.
-    #[error("the model needs a column '{0}', which is not in the header")]
-    MissingChannel(String),
+    #[error(
+        "the model needs a column '{name}', which is not in the header (its columns: \
+         {header}); a column of another name can stand in for it with --map {name}=COLUMN"
+    )]
+    MissingChannel {
+        /// The name looked for.
+        name: String,
+        /// The file's header, comma-separated.
+        header: String,
+    },
     /// The CSV parser itself failed (bad quoting, invalid UTF-8).
     #[error("unreadable CSV: {0}")]
     Syntax(String),

@@ -83,7 +83,7 @@ fn bad_input_classes_name_line_and_column() {
         (1, _, CsvProblem::DuplicateColumn(_))
     ));
     assert!(
-        matches!(problem(exp("t,u\n0,1\n0.1,1\n")), (1, _, CsvProblem::MissingChannel(c)) if c == "y")
+        matches!(problem(exp("t,u\n0,1\n0.1,1\n")), (1, _, CsvProblem::MissingChannel { name, header }) if name == "y" && header == "t, u")
     );
     assert!(matches!(problem(exp("")), (1, _, CsvProblem::Empty)));
     assert!(matches!(
@@ -180,7 +180,7 @@ fn jittered_time_is_rejected_or_resampled_explicitly() {
         resample: None,
     };
     let r = prepare_table(parse("t,x\n0,1\n1,2\n").unwrap(), &bad);
-    assert!(matches!(problem(r), (1, _, CsvProblem::MissingChannel(c)) if c == "tau"));
+    assert!(matches!(problem(r), (1, _, CsvProblem::MissingChannel { name, .. }) if name == "tau"));
     assert!(PrepareOptions::parse_map(&["t".into()]).is_err());
     // Decreasing time names the row even when resampling.
     let r = prepare_table(
