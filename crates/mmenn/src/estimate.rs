@@ -242,6 +242,9 @@ pub struct EstimateSummary {
     pub report: sysid_core::SolveReport,
     /// Number of samples over all experiments.
     pub samples: usize,
+    /// Missing (empty or NaN) samples of each measured channel, over all experiments;
+    /// MME skips them.
+    pub missing: BTreeMap<String, usize>,
     /// Wall time per phase of the whole command, seconds.
     pub phase_seconds: BTreeMap<String, f64>,
     /// Samples per second of the final sweep (samples / time of the sweep phase).
@@ -469,6 +472,19 @@ fn compute_estimate_owned(
         cost: est.cost,
         report: est.report.clone(),
         samples,
+        missing: est
+            .output_names
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let n = data
+                    .experiments()
+                    .iter()
+                    .map(|e| e.outputs().row(i).iter().filter(|v| v.is_nan()).count())
+                    .sum();
+                (name.clone(), n)
+            })
+            .collect(),
         phase_seconds: phases,
         sweep_samples_per_second: sweep_time.filter(|s| *s > 0.0).map(|s| samples as f64 / s),
         outliers,

@@ -386,6 +386,33 @@ fn mmenn(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> (i32, String) {
     )
 }
 
+/// Empty and NaN cells of a measured column are missing samples that MME skips, and
+/// `estimate` counts them per channel (`summary.json`'s `missing`; the terminal prints a
+/// line per channel with any) instead of saying nothing.
+#[test]
+fn estimate_counts_missing_samples() {
+    let dir = scratch("missing-count");
+    let mut rows: Vec<String> = oscillation_csv().lines().map(str::to_string).collect();
+    // Rows 10 and 20 (samples 9 and 19): an empty cell; row 30: the text NaN.
+    for (row, cell) in [(10, ""), (20, ""), (30, "NaN")] {
+        let mut parts: Vec<String> = rows[row].split(',').map(str::to_string).collect();
+        parts[2] = cell.to_string();
+        rows[row] = parts.join(",");
+    }
+    std::fs::write(dir.join("d.csv"), rows.join("\n") + "\n").unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    let s = mmenn::estimate::run_estimate(
+        &[dir.join("d.csv")],
+        &dir.join("m.toml"),
+        &mmenn::estimate::EstimateOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap();
+    assert_eq!(s.samples, 400);
+    assert_eq!(s.missing.get("theta"), Some(&3), "{:?}", s.missing);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Standard output closed before the command prints (as `mmenn simulate --list | head -0`
 /// or a reader that quits) ends the command quietly with success: no panic, no backtrace
 /// (`println!` panics with "failed printing to stdout: Broken pipe").

@@ -252,6 +252,12 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
         "MME estimate (smoother over the whole record; not a prediction) of {} samples:",
         s.samples
     );
+    for (name, n) in s.missing.iter().filter(|(_, n)| **n > 0) {
+        outln!(
+            "  {name}: {n} of {} samples missing (empty or NaN cells; MME skips them)",
+            s.samples
+        );
+    }
     for (name, nv) in &s.noise_variance {
         outln!(
             "  {name}: noise variance {nv:.4e} ({}), residual variance {:.4e} (ratio {:.3})",
