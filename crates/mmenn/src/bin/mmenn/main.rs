@@ -498,6 +498,12 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
             }
         }
     }
+    outln!(
+        "kept: {} — {} (judged free-run on {})",
+        s.guard.chosen.describe(),
+        s.guard.reason,
+        s.guard.held_out
+    );
     outln!("wrote {} files into {}", s.files.len(), args.out.display());
     check_mme_converged("fit", s.mme_termination, &args.out)
 }
