@@ -325,6 +325,16 @@ pub enum MmennError {
     /// JSON serialisation failed.
     #[error("writing JSON: {0}")]
     Json(#[from] serde_json::Error),
+    /// An option names a state the model does not have.
+    #[error("{option}: the model has no state '{name}' (its states: {states})")]
+    UnknownState {
+        /// The option, e.g. `--x0`.
+        option: &'static str,
+        /// The name given.
+        name: String,
+        /// The model's states, comma-separated.
+        states: String,
+    },
     /// `predict`'s first scored sample is not in the record.
     #[error(
         "--score-from {first}: the record has {len} samples (the first scored sample is \

@@ -37,6 +37,11 @@ pub struct GreyestOptions {
     /// The job's budget (default unlimited; the CLI's `--budget SECONDS`): the estimate
     /// stops with `CoreError::BudgetExhausted` once it is spent.
     pub budget: sysid_core::Budget,
+    /// Where the calibration starts named states of every record's initial state (the
+    /// CLI's `--x0 NAME=VALUE`); the other states start from the minimum-norm solution of
+    /// `C x = y(t0)`. For an unmeasured state whose default start (0) is a singular point
+    /// of a term, e.g. a level under `sqrt`. Default none.
+    pub x0_start: Vec<(String, f64)>,
 }
 
 impl Default for GreyestOptions {
@@ -46,6 +51,7 @@ impl Default for GreyestOptions {
             substeps: sysid_core::Substeps::Auto { min: 2 },
             max_iterations: 100,
             budget: sysid_core::Budget::default(),
+            x0_start: Vec::new(),
         }
     }
 }
@@ -242,11 +248,38 @@ pub fn compute_greyest(
         budget: opts.budget.clone(),
         ..GreyboxOptions::default()
     };
+    // Start states: the minimum-norm C x = y(t0), with the states named in `x0_start` set.
+    let mut set = Vec::with_capacity(opts.x0_start.len());
+    for (name, value) in &opts.x0_start {
+        let Some(i) = lin.state_names().iter().position(|s| s == name) else {
+            return Err(MmennError::UnknownState {
+                option: "--x0",
+                name: name.clone(),
+                states: lin.state_names().join(", "),
+            });
+        };
+        set.push((i, *value));
+    }
+    let starts: Vec<Vec<f64>> = if set.is_empty() {
+        Vec::new()
+    } else {
+        records
+            .iter()
+            .map(|r| {
+                let y0: Vec<f64> = r.output(0).to_vec();
+                let mut x = sysid_core::measured_start(lin.c(), &y0);
+                for &(i, v) in &set {
+                    x[i] = v;
+                }
+                x
+            })
+            .collect()
+    };
     let data = GreyboxData {
         c: lin.c(),
         noise_variance: &variances,
         records,
-        x0: &[],
+        x0: &starts,
     };
     let mut observer = |stage: &str, k: usize, cost: f64| {
         progress.report(
@@ -351,7 +384,7 @@ pub fn compute_greyest(
                         "stopped where it started (not converged): the cost did not move and \
                          the data determine only {} of the {} estimated quantities there — a \
                          start at a stationary point, e.g. an unmeasured state at a term's \
-                         singular point such as sqrt(0); start it elsewhere",
+                         singular point such as sqrt(0); start it elsewhere (--x0 NAME=VALUE)",
                         fit.rank.0, fit.rank.1
                     )
                 } else {

@@ -92,6 +92,18 @@ fn predict_substeps(text: &str) -> std::result::Result<mmenn::sysid_core::Subste
     free_run_substeps_from(text, 4)
 }
 
+/// `NAME=VALUE` with a finite number.
+fn name_value(text: &str) -> std::result::Result<(String, f64), String> {
+    let Some((name, value)) = text.split_once('=') else {
+        return Err(format!("'{text}': expected NAME=VALUE"));
+    };
+    match value.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok((name.trim().to_string(), v)),
+        Ok(v) => Err(format!("'{text}': {v} is not a finite number")),
+        Err(e) => Err(format!("'{text}': '{value}' is not a number ({e})")),
+    }
+}
+
 /// `compare --poly-degree`: 0 (no polynomial NARX row) or a degree, 1 to 5.
 fn poly_degree(text: &str) -> std::result::Result<usize, String> {
     match text.trim().parse::<usize>() {
@@ -447,6 +459,12 @@ pub(crate) struct GreyestArgs {
     /// 1 to 1000, taken as given.
     #[arg(long, default_value = "auto", value_parser = free_run_substeps)]
     pub(crate) substeps: mmenn::sysid_core::Substeps,
+    /// Start of named states of every record's initial state, NAME=VALUE (repeatable or
+    /// comma-separated); the others start from the measured outputs' minimum-norm state.
+    /// For an unmeasured state whose default start (0) sits where a term has no slope,
+    /// e.g. a tank level under sqrt: `--x0 h1=5`.
+    #[arg(long, value_name = "NAME=VALUE", value_delimiter = ',', value_parser = name_value)]
+    pub(crate) x0: Vec<(String, f64)>,
     /// Most Levenberg–Marquardt iterations per solve.
     #[arg(long, default_value_t = 100, value_parser = at_least_one)]
     pub(crate) max_iterations: usize,

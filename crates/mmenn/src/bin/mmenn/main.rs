@@ -331,6 +331,7 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         substeps: args.substeps,
         max_iterations: args.max_iterations,
         budget: args.budget.start(),
+        x0_start: args.x0,
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "greyest", force, &inputs)?;
