@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
-use sysid_core::dataset::{time_resolves_step, uniform_step_tolerance};
+use sysid_core::dataset::{first_irregular_step, time_resolves_step};
 use sysid_core::{Channel, Dataset, Experiment};
 
 use crate::atomic::write_atomic;
@@ -280,36 +280,13 @@ fn check_time(table: &Table, t: &[f64]) -> Result<(f64, f64)> {
             CsvProblem::TimeResolution { t: t_max, dt },
         ));
     }
-    // Each step is compared with the median step, so a missing or doubled row is named
-    // where it is (against the mean, which the gap itself shifts, every step could differ).
-    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    steps.sort_by(f64::total_cmp);
-    let typical = if steps.len() % 2 == 1 {
-        steps[steps.len() / 2]
-    } else {
-        0.5 * (steps[steps.len() / 2 - 1] + steps[steps.len() / 2])
-    };
-    for k in 1..t.len() {
-        let step = t[k] - t[k - 1];
-        // Same tolerance as sysid-core: relative to the step, plus round-off of |t| capped
-        // at a share of the step (a missing row is caught at any |t|).
-        if (step - typical).abs() > uniform_step_tolerance(typical, t[k]) {
-            return Err(table.err(
-                table.lines[k],
-                Some("t"),
-                CsvProblem::NonUniformTime { step, dt: typical },
-            ));
-        }
-    }
-    // Uniform steps: the mean step (end to end) is the record's step, as before.
-    if (dt - typical).abs() > uniform_step_tolerance(typical, t[t.len() - 1]) {
+    // The shared rule (sysid-core): each step against the median step, so a missing or
+    // doubled row is named where it is.
+    if let Some((k, step, typical)) = first_irregular_step(t) {
         return Err(table.err(
-            table.lines[t.len() - 1],
+            table.lines[k],
             Some("t"),
-            CsvProblem::NonUniformTime {
-                step: dt,
-                dt: typical,
-            },
+            CsvProblem::NonUniformTime { step, dt: typical },
         ));
     }
     Ok((t[0], dt))

@@ -265,17 +265,20 @@ term = "k2*sqrt(h1) - k3*sqrt(h2)"
     assert!(last.termination.contains("--x0"), "{last:?}");
     // Started where sqrt has a slope (`--x0 h1=5`), the same model calibrates: the cost
     // falls by more than an order of magnitude (8.0e3 -> 3.7e2 when this was written).
-    let moved = mmenn::greyest::run_greyest(
-        &dir.join("model.toml"),
-        &[folder.join("estimation.csv")],
-        &mmenn::greyest::GreyestOptions {
-            x0_start: vec![("h1".into(), 5.0)],
-            ..mmenn::greyest::GreyestOptions::default()
-        },
-        &dir.join("out-x0"),
-        &mmenn::progress::NoProgress,
-    )
-    .unwrap();
+    #[allow(clippy::result_large_err)] // mmenn's errors carry paths and context
+    let from = |state: &str, value: f64, out: &str| {
+        mmenn::greyest::run_greyest(
+            &dir.join("model.toml"),
+            &[folder.join("estimation.csv")],
+            &mmenn::greyest::GreyestOptions {
+                x0_start: vec![(state.into(), value)],
+                ..mmenn::greyest::GreyestOptions::default()
+            },
+            &dir.join(out),
+            &mmenn::progress::NoProgress,
+        )
+    };
+    let moved = from("h1", 5.0, "out-x0").unwrap();
     let last = moved.summary.stages.last().unwrap();
     assert!(last.converged, "{last:?}");
     assert!(last.final_cost < 0.1 * last.initial_cost, "{last:?}");
@@ -284,17 +287,7 @@ term = "k2*sqrt(h1) - k3*sqrt(h2)"
         "the start is calibrated"
     );
     // A state the model does not have is refused, naming the option and the states.
-    let err = mmenn::greyest::run_greyest(
-        &dir.join("model.toml"),
-        &[folder.join("estimation.csv")],
-        &mmenn::greyest::GreyestOptions {
-            x0_start: vec![("h9".into(), 5.0)],
-            ..mmenn::greyest::GreyestOptions::default()
-        },
-        &dir.join("out-bad"),
-        &mmenn::progress::NoProgress,
-    )
-    .unwrap_err();
+    let err = from("h9", 5.0, "out-bad").unwrap_err();
     assert!(
         matches!(&err, mmenn::MmennError::UnknownState { option: "--x0", name, states }
             if name == "h9" && states == "h1, h2"),

@@ -883,6 +883,17 @@ fn cli_hold_network_domain_is_saved() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `compare` on the oscillation record with `flag value`, which must be refused as a
+/// command-line error (exit status 2); its standard error.
+fn compare_refuses(dir: &Path, flag: &str, value: &str) -> String {
+    let args = [
+        "compare", "--data", "d.csv", "--model", "m.toml", flag, value,
+    ];
+    let (code, err) = mmenn(dir, &args, &[]);
+    assert_eq!(code, 2, "{flag} {value}: {err}");
+    err
+}
+
 /// `compare` on the oscillation record with small settings and one extra flag; its
 /// `compare.json`.
 fn compare_json_with(dir: &Path, out: &str, flag: &str, value: &str) -> serde_json::Value {
@@ -1063,20 +1074,7 @@ fn cli_poly_nonlinear_lags_reach_compare_and_zero_is_refused() {
     // of degree 2..=3 differ: C(2+3, 3) - 1 - 2 = 7 against C(4+3, 3) - 1 - 4 = 30.
     assert_eq!(terms[1] - terms[0], 30 - 7, "terms {terms:?}");
     for bad in ["0", "two"] {
-        let (code, err) = mmenn(
-            &dir,
-            &[
-                "compare",
-                "--data",
-                "d.csv",
-                "--model",
-                "m.toml",
-                "--poly-nonlinear-lags",
-                bad,
-            ],
-            &[],
-        );
-        assert_eq!(code, 2, "{bad}: {err}");
+        let err = compare_refuses(&dir, "--poly-nonlinear-lags", bad);
         assert!(err.contains("--poly-nonlinear-lags"), "{bad}: {err}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
@@ -1125,20 +1123,7 @@ fn cli_poly_focus_reaches_compare_and_a_bad_value_is_refused() {
         fit[0],
         fit[1]
     );
-    let (code, err) = mmenn(
-        &dir,
-        &[
-            "compare",
-            "--data",
-            "d.csv",
-            "--model",
-            "m.toml",
-            "--poly-focus",
-            "sim",
-        ],
-        &[],
-    );
-    assert_eq!(code, 2, "{err}");
+    let err = compare_refuses(&dir, "--poly-focus", "sim");
     assert!(
         err.contains("--poly-focus") && err.contains("prediction or simulation"),
         "{err}"
