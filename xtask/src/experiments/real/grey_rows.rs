@@ -195,6 +195,11 @@ pub(super) fn grey_rows(
     if data.benchmark == Benchmark::Emps {
         push_dynonet(table, &label, &fit, scale);
     }
+    if data.benchmark == Benchmark::CascadedTanks
+        && let Some((name, e)) = tests.first()
+    {
+        push_same_x0(table, &label, name, &chosen_spec, &fit, e, scale);
+    }
     table.set_for_model(&label, "train_s", seconds);
     table.set_for_model(&label, "threads", 1.0);
     table.note(format!(
@@ -386,6 +391,30 @@ fn shared_state_note(
          (instead of from a state guessed from those outputs), {fitted}. The official row \
          and every target comparison use the loader's protocol."
     )
+}
+
+/// Cascaded Tanks: the grey box's row under the older protocol
+/// ([`same_x0_protocol`]): the test record run from the calibrated training initial state,
+/// RMSE over all samples (docs/decisions/tanks-older-protocol-rows.md).
+fn push_same_x0(
+    table: &mut Table,
+    label: &str,
+    record: &str,
+    spec: &grey::GreySpec,
+    fit: &grey::GreyFit,
+    test: &Experiment,
+    scale: f64,
+) {
+    let protocol = same_x0_protocol();
+    let key = [label, record, protocol.as_str()];
+    let y = row(test.outputs(), 0);
+    match grey::free_run(spec, &fit.model, test, &fit.x0) {
+        Ok(v) => match rmse_after(&y, &v, 0, scale) {
+            Some(r) => table.push(&key, &[Some(r)]),
+            None => table.push_remark(&key, &[None], "diverged (non-finite output)"),
+        },
+        Err(m) => table.push_remark(&key, &[None], &format!("diverged ({m})")),
+    }
 }
 
 /// The row of a grey box scored under dynoNet's published EMPS protocol

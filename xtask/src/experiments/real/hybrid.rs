@@ -196,6 +196,36 @@ pub fn failure_text(text: &str) -> String {
     }
 }
 
+/// A row of the hybrid run free over the whole of `record` (written at `csv`) from the
+/// given state, every sample scored (the protocols that do not fit the state to a window).
+#[allow(clippy::too_many_arguments)]
+fn push_from_start(
+    table: &mut Table,
+    cells: [&str; 3],
+    model_json: &std::path::Path,
+    csv: &std::path::Path,
+    record: &Experiment,
+    start: Vec<f64>,
+    window: usize,
+    output: &str,
+    scale: f64,
+) {
+    let y = row(record.outputs(), 0);
+    match super::hybrid_output(
+        model_json,
+        csv,
+        &InitialChoice::Given(start),
+        window,
+        output,
+    ) {
+        Ok(v) => match rmse_after(&y, &v, 0, scale) {
+            Some(r) => table.push(&cells, &[Some(r)]),
+            None => table.push_remark(&cells, &[None], "diverged (non-finite output)"),
+        },
+        Err(err) => table.push_remark(&cells, &[None], &failure(&err)),
+    }
+}
+
 /// Rows of the hybrid on the grey box, under the official protocol; the first test
 /// record's simulation joins the figure (`offset`: what the figure adds back).
 pub fn hybrid_rows(
@@ -344,30 +374,43 @@ fn hybrid_rows_inner(
         .channels
         .get(&output)
         .map_or(f64::NAN, |m| m.rmse * scale);
+    if data.benchmark == Benchmark::CascadedTanks
+        && let Some(test) = data.tests.first()
+    {
+        // docs/decisions/tanks-older-protocol-rows.md: from the fit's training initial
+        // state, every test sample scored.
+        let protocol = super::same_x0_protocol();
+        push_from_start(
+            table,
+            [LABEL, test.name.as_str(), protocol.as_str()],
+            &model_json,
+            &work.join(format!("{}.csv", test.name)),
+            &test.data.experiments()[0],
+            summary.train.x0.clone(),
+            window,
+            &output,
+            scale,
+        );
+    }
     if data.benchmark == Benchmark::Emps {
         // docs/decisions/emps-kfold-guard-and-hybrid-start.md, item 2: from the record's
         // measured start, as the grey-box rows (was MME's x̂(t0)).
-        let start = gspec.x0_guess(est);
-        let cells = [
-            LABEL,
-            super::DYNONET_RECORD,
-            "dynoNet's published EMPS script: estimation record (DATA_EMPS), free run over \
-             every sample from the record's measured start (position y[0], first-difference velocity)",
-        ];
-        let y = row(est.outputs(), 0);
-        match super::hybrid_output(
+        push_from_start(
+            table,
+            [
+                LABEL,
+                super::DYNONET_RECORD,
+                "dynoNet's published EMPS script: estimation record (DATA_EMPS), free run over \
+                 every sample from the record's measured start (position y[0], first-difference velocity)",
+            ],
             &model_json,
             &est_csv,
-            &InitialChoice::Given(start),
+            est,
+            gspec.x0_guess(est),
             window,
             &output,
-        ) {
-            Ok(v) => match rmse_after(&y, &v, 0, scale) {
-                Some(r) => table.push(&cells, &[Some(r)]),
-                None => table.push_remark(&cells, &[None], "diverged (non-finite output)"),
-            },
-            Err(err) => table.push_remark(&cells, &[None], &failure(&err)),
-        }
+            scale,
+        );
     }
     let w_text = summary
         .w_by_correction
