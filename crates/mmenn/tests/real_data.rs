@@ -50,17 +50,43 @@ fn cascaded_tanks_with_estimated_noise() {
 /// The benchmark folder, or `None` (with a note) when it is absent — except under CI
 /// (`CI` set), where the data are provisioned and a missing folder is a failure.
 #[allow(clippy::print_stderr)]
-fn tanks_folder() -> Option<PathBuf> {
+fn folder(benchmark: Benchmark) -> Option<PathBuf> {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
-    match DataDirSearch::from_env(None, Some(root)).locate(Benchmark::CascadedTanks) {
+    match DataDirSearch::from_env(None, Some(root)).locate(benchmark) {
         Ok(folder) => Some(folder),
         Err(e) if std::env::var_os("CI").is_some() => panic!("CI must provide the data: {e}"),
         Err(_) => {
             eprintln!(
-                "SKIPPED: the Cascaded Tanks data folder is absent (set MMENN_DATA_DIR or provide ../shared/data)"
+                "SKIPPED: the {benchmark} data folder is absent (set MMENN_DATA_DIR or provide ../shared/data)"
             );
             None
         }
+    }
+}
+
+fn tanks_folder() -> Option<PathBuf> {
+    folder(Benchmark::CascadedTanks)
+}
+
+/// EMPS's recorded times are single-precision sums (steps of 0.99998 and 1.00002 ms): the
+/// CSV reader takes them as the 1-ms clock they stamp, with the mean step, where it used to
+/// refuse the official files (a user had to pass `--resample 0.001`).
+#[test]
+fn emps_recorded_times_read_as_a_uniform_clock() {
+    let Some(folder) = folder(Benchmark::Emps) else {
+        return;
+    };
+    for (file, rows) in [("estimation.csv", 24_841), ("validation.csv", 24_841)] {
+        let table = mmenn::data_file::read_table(&folder.join(file)).unwrap();
+        let t = &table.columns[table.column_index("t").unwrap()];
+        assert!(
+            t.windows(2).any(|w| (w[1] - w[0] - 1e-3).abs() > 1e-8),
+            "{file}: the record's steps are expected to jitter"
+        );
+        let e = mmenn::data_file::table_to_experiment(&table, &["u".into()], &["y".into()])
+            .unwrap_or_else(|err| panic!("{file}: {err}"));
+        assert_eq!(e.len(), rows, "{file}");
+        assert!((e.dt() - 1e-3).abs() < 1e-9, "{file}: dt = {}", e.dt());
     }
 }
 

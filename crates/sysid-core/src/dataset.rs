@@ -37,6 +37,13 @@ pub const UNIFORM_TIME_RTOL: f64 = 1e-6;
 /// that would hide a missing sample.
 pub const TIME_RESOLUTION_SHARE: f64 = 0.01;
 
+/// Largest distance, as a share of the step, at which a recorded time may sit from the
+/// uniform grid `t0 + k·dt` (`dt` the mean step) and still count as that grid's sample: a
+/// clock that stamps samples with jitter (EMPS's recorded times are single-precision sums,
+/// 0.99998 / 1.00002 ms steps, within 3e-5 of a step of the grid) is uniform; a missing
+/// row moves every sample after it by a whole step and stays refused.
+pub const TIME_JITTER_SHARE: f64 = 1e-3;
+
 /// Tolerance on `|step − dt|` for a step ending at time `t`: [`UNIFORM_TIME_RTOL`] of
 /// `dt`, plus the round-off of decimal time text (`1e-12·|t|`) but never more than
 /// [`TIME_RESOLUTION_SHARE`] of `dt`, so that a missing or duplicated sample (an error
@@ -292,8 +299,10 @@ pub fn uniform_step(t: &[f64]) -> Result<(f64, f64)> {
 /// `(sample, step, median step)` for the first sample whose step from the one before
 /// differs from the median step by more than [`uniform_step_tolerance`], or — when every
 /// step is within it — the last sample with the mean step, if that drifted beyond it;
-/// `None` for uniform times. Against the median, a missing or doubled row is named where
-/// it is; against the mean, which the gap itself shifts, every step could look off.
+/// `None` for uniform times, and for times that each lie within [`TIME_JITTER_SHARE`] of a
+/// step of the uniform grid with the mean step (a jittered clock; its step is the mean).
+/// Against the median, a missing or doubled row is named where it is; against the mean,
+/// which the gap itself shifts, every step could look off.
 pub fn first_irregular_step(t: &[f64]) -> Option<(usize, f64, f64)> {
     let n = t.len();
     if n < 2 {
@@ -307,20 +316,38 @@ pub fn first_irregular_step(t: &[f64]) -> Option<(usize, f64, f64)> {
     } else {
         0.5 * (steps[m / 2 - 1] + steps[m / 2])
     };
-    for (k, w) in t.windows(2).enumerate() {
-        let step = w[1] - w[0];
-        // Tolerance: relative to the step, plus round-off of the absolute time value
-        // (capped at a share of the step).
-        if (step - typical).abs() > uniform_step_tolerance(typical, w[1]) {
-            return Some((k + 1, step, typical));
-        }
-    }
     let mean = (t[n - 1] - t[0]) / (n - 1) as f64;
-    ((mean - typical).abs() > uniform_step_tolerance(typical, t[n - 1])).then_some((
-        n - 1,
-        mean,
-        typical,
-    ))
+    // The first step off the median by more than `share` of it (at least the round-off
+    // tolerance).
+    let off = |share: f64| {
+        t.windows(2)
+            .enumerate()
+            .find(|(_, w)| {
+                let tol = uniform_step_tolerance(typical, w[1]).max(share * typical);
+                (w[1] - w[0] - typical).abs() > tol
+            })
+            .map(|(k, w)| (k + 1, w[1] - w[0], typical))
+    };
+    // A step further off than a jittered clock's two stamps can make it: refused, named
+    // where it is (a missing or doubled row).
+    if let Some(found) = off(2.0 * TIME_JITTER_SHARE) {
+        return Some(found);
+    }
+    let strict = off(0.0).or_else(|| {
+        ((mean - typical).abs() > uniform_step_tolerance(typical, t[n - 1])).then_some((
+            n - 1,
+            mean,
+            typical,
+        ))
+    });
+    // Jittered stamps of a uniform clock: every sample within TIME_JITTER_SHARE of a step
+    // of the grid through the first sample with the mean step.
+    let on_grid = || {
+        t.iter()
+            .enumerate()
+            .all(|(k, &tk)| (tk - (t[0] + k as f64 * mean)).abs() <= TIME_JITTER_SHARE * mean)
+    };
+    strict.filter(|_| !on_grid())
 }
 
 /// Several experiments sharing the same named input and output channels.
@@ -544,6 +571,35 @@ mod tests {
         ));
         let uniform: Vec<f64> = (0..1000).map(|k| 4.0 * k as f64).collect();
         assert_eq!(first_irregular_step(&uniform), None);
+    }
+
+    /// A jittered clock (EMPS's recorded times: steps 0.99998 / 1.00002 ms, stamps within
+    /// 3e-5 of a step of the 1-ms grid) is uniform; the same clock with a missing row, or
+    /// steps that alternate by 10 %, is not.
+    #[test]
+    fn jittered_stamps_are_uniform_a_missing_row_is_not() {
+        let h = 1e-3;
+        let jitter = |k: usize| 2.4e-8 * (((k * 7919) % 13) as f64 / 6.0 - 1.0);
+        let t: Vec<f64> = (0..25_000).map(|k| k as f64 * h + jitter(k)).collect();
+        assert!(t.windows(2).any(|w| (w[1] - w[0] - h).abs() > 1e-8));
+        assert_eq!(first_irregular_step(&t), None);
+        let (_, dt) = uniform_step(&t).unwrap();
+        assert!((dt - h).abs() < 1e-11, "{dt}");
+        let mut missing = t.clone();
+        missing.remove(12_345);
+        assert_eq!(first_irregular_step(&missing).map(|f| f.0), Some(12_345));
+        let alternating: Vec<f64> = (0..100)
+            .map(|k| k as f64 * h + if k % 2 == 1 { 0.1 * h } else { 0.0 })
+            .collect();
+        assert!(first_irregular_step(&alternating).is_some());
+        // Steps each within the jitter share but drifting away from every grid (4e-4 of a
+        // step longer in the first half, shorter in the second) are not a uniform clock.
+        let mut walk = vec![0.0];
+        for k in 1..10_000 {
+            let sign = if k < 5_000 { 1.0 } else { -1.0 };
+            walk.push(walk[k - 1] + h * (1.0 + sign * 4e-4));
+        }
+        assert!(first_irregular_step(&walk).is_some());
     }
 
     /// Issue 21: at t ≈ 1e9 a missing row is caught (the old `1e-12·|t|` tolerance was
