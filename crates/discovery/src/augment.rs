@@ -21,7 +21,10 @@
 //! not build, and from the first non-finite sensitivity on.
 //! A trial step whose simulation diverges counts as a failed step. A stage stops when an
 //! accepted step lowers `J` by at most `tolerance·J`, when no damping gives a descent (a
-//! stationary point, reported as converged), or after `max_iterations` Jacobians.
+//! stationary point, reported as converged), or after `max_iterations` Jacobians. A
+//! calibration none of whose stages moved `J`, ending at a rank-deficient Jacobian, stopped
+//! where it started ([`sysid_core::Termination::NoProgress`]): an error
+//! ([`DiscoveryError::NoProgress`]), not a calibrated model.
 //!
 //! **Growing horizons.** Free-run error of an oscillator is far from convex in its
 //! coefficients: a 40 % error in a stiffness shifts the phase by half a period within a
@@ -460,7 +463,10 @@ fn check_x0(linear: &LinearModel, data: &Dataset, x0: &[Vec<f64>]) -> Result<()>
 /// (one initial state per experiment). See the module doc for cost and solver.
 ///
 /// Errors: invalid config; data channels or `x0` not matching the model; a term index
-/// out of range; no measured value; a simulation that diverges at the starting point.
+/// out of range; no measured value; a simulation that diverges at the starting point; a
+/// calibration that stopped where it started ([`DiscoveryError::NoProgress`]: no stage
+/// moved the cost and the Jacobian at the start is rank-deficient, e.g. a term that is
+/// zero along the whole start trajectory).
 pub fn calibrate(
     model: &TermModel,
     data: &Dataset,
@@ -555,11 +561,27 @@ pub fn calibrate(
     let cost_before = r_full.norm_squared();
     let mut iterations = Vec::new();
     let mut termination = Termination::Exact;
+    // Until a stage moves the cost each one is asked whether it stopped where it started;
+    // a later stage that finds nothing to do (warm-started at a moved point) has converged.
+    let mut ask = true;
+    let mut rank = None;
     for &fraction in &config.horizons {
         problem.set_horizon(fraction);
-        let (t, term) = lm_stage(&mut problem, theta, config, &mut iterations)?;
-        theta = t;
-        termination = term;
+        let stage = lm_stage(&mut problem, theta, config, ask, &mut iterations)?;
+        theta = stage.theta;
+        termination = stage.termination;
+        rank = stage.rank;
+        ask &= !stage.moved;
+    }
+    // No stage moved and the last (the full records) stopped at a rank-deficient start:
+    // no calibrated model.
+    if termination == Termination::NoProgress {
+        let (rank, of) = rank.unwrap_or((0, theta.len()));
+        return Err(DiscoveryError::NoProgress {
+            what: "the free-run calibration",
+            rank,
+            of,
+        });
     }
     problem.set_horizon(1.0);
     let r = problem
@@ -633,17 +655,35 @@ impl LeastSquaresProblem for Stage<'_, '_> {
     }
 }
 
+/// How one stage of [`calibrate`] ended.
+struct StageEnd {
+    theta: Vec<f64>,
+    termination: Termination,
+    /// Whether the stage lowered its cost ([`sysid_core::LmReport::moved`]).
+    moved: bool,
+    /// Rank and columns of the normalised `JᵀJ` when the no-progress test ran.
+    rank: Option<(usize, usize)>,
+}
+
 /// One Levenberg–Marquardt solve ([`sysid_core::least_squares`]) at the problem's current
 /// horizon, from `theta`; its accepted steps are appended to `iterations`. A stage that
-/// finds no descent at any damping ends at a stationary point, reported as converged.
+/// finds no descent at any damping ends at a stationary point, reported as converged —
+/// unless `ask_no_progress` and it never moved from a rank-deficient start
+/// ([`Termination::NoProgress`], [`LmSettings::no_progress`]).
 fn lm_stage(
     problem: &mut Problem<'_>,
     theta: Vec<f64>,
     config: &CalibrationConfig,
+    ask_no_progress: bool,
     iterations: &mut Vec<IterationRecord>,
-) -> Result<(Vec<f64>, Termination)> {
+) -> Result<StageEnd> {
     if theta.is_empty() {
-        return Ok((theta, Termination::Exact));
+        return Ok(StageEnd {
+            theta,
+            termination: Termination::Exact,
+            moved: false,
+            rank: None,
+        });
     }
     // The start of a stage must simulate: its error names the experiment.
     problem
@@ -652,6 +692,7 @@ fn lm_stage(
     let settings = LmSettings {
         max_iterations: config.max_iterations,
         ftol: config.tolerance,
+        no_progress: ask_no_progress,
         ..LmSettings::default()
     };
     let solution = levenberg_marquardt(&mut Stage { problem }, &theta, &settings)?;
@@ -665,7 +706,12 @@ fn lm_stage(
         Termination::NoDescent => Termination::Converged,
         t => t,
     };
-    Ok((solution.theta, termination))
+    Ok(StageEnd {
+        theta: solution.theta,
+        termination,
+        moved: solution.report.moved(),
+        rank: solution.report.rank,
+    })
 }
 
 /// Term derivatives for sensitivity Jacobians, or `None` where finite differences must

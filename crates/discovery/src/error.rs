@@ -131,6 +131,24 @@ pub enum DiscoveryError {
         /// What the integrator reported.
         source: CoreError,
     },
+    /// A calibration stopped where it started: the solver ended without moving the cost,
+    /// at a rank-deficient Jacobian ([`sysid_core::Termination::NoProgress`]). The start
+    /// is a stationary point of a degenerate problem (e.g. a state at a term's singular
+    /// point, `sqrt(0)`, or a term that is zero along the whole start trajectory), not a
+    /// calibrated model.
+    #[error(
+        "{what} stopped where it started: the cost did not move and the data determine \
+         only {rank} of the {of} calibrated quantities there (a start at a stationary \
+         point, e.g. a state at a term's singular point such as sqrt(0))"
+    )]
+    NoProgress {
+        /// Which calibration.
+        what: &'static str,
+        /// Rank of the column-normalised `JᵀJ` at the start.
+        rank: usize,
+        /// Quantities calibrated.
+        of: usize,
+    },
 }
 
 /// Result alias of the crate.

@@ -19,7 +19,9 @@
 //!    parameters held; the coefficients are estimated by free-run output error
 //!    (`sysid_core::estimate_parameters`, initial states estimated too), with the
 //!    Gauss–Newton σ inflated by `√(N/N_eff)` of the residuals' autocorrelation
-//!    (`stats::effective_sample_size`): the free run's residuals are coloured.
+//!    (`stats::effective_sample_size`): the free run's residuals are coloured. A
+//!    calibration that stopped where it started (`Termination::NoProgress`) failed: the
+//!    verdict is `unexplained`, the proposals unconfirmed.
 //! 3. **Elimination**: while a coefficient's 95 % interval covers zero (or has no σ), the
 //!    least significant term is dropped and the rest recalibrated.
 //! 4. **Acceptance**: with validation records, the kept terms must lower the validation
@@ -209,7 +211,8 @@ pub struct ForceProblem<'a, E> {
 #[derive(Debug, Clone)]
 pub struct ForceOutcome {
     /// `found` when terms were kept (and, with validation records, lowered the validation
-    /// cost); `unexplained` when kept terms failed that test or the calibration failed;
+    /// cost); `unexplained` when kept terms failed that test or the calibration failed
+    /// (an error, or a start the solver could not leave: [`DiscoveryError::NoProgress`]);
     /// `none` when nothing was proposed or every proposal was eliminated.
     pub verdict: Verdict,
     /// Kept effects.
@@ -350,7 +353,8 @@ fn coefficient_names(model: &PhysicalModel, count: usize) -> Vec<String> {
 }
 
 /// Calibrate `effects` (coefficients as start values) on the estimation records; writes
-/// the calibrated coefficients and σ into `effects`.
+/// the calibrated coefficients and σ into `effects`. A calibration that stopped where it
+/// started ([`sysid_core::Termination::NoProgress`]) is [`DiscoveryError::NoProgress`].
 fn calibrate<E: From<DiscoveryError> + std::fmt::Display>(
     problem: &ForceProblem<'_, E>,
     effects: &mut [ForceEffect],
@@ -388,6 +392,16 @@ fn calibrate<E: From<DiscoveryError> + std::fmt::Display>(
     };
     let fit = estimate_parameters(&model, &data, &config.calibration)
         .map_err(|e| E::from(DiscoveryError::Core(e)))?;
+    // A start the solver could not leave is no calibration (the caller's failure path).
+    let report = fit.report();
+    if report.termination == sysid_core::Termination::NoProgress {
+        let (rank, of) = report.rank.unwrap_or(fit.rank);
+        return Err(E::from(DiscoveryError::NoProgress {
+            what: "the calibration",
+            rank,
+            of,
+        }));
+    }
     let inflation = colour_inflation(&fit, problem.data, lin.c());
     let estimate = |name: &str| fit.parameters.iter().find(|p| p.name == name);
     for ((effect, name), term) in effects.iter_mut().zip(names).zip(&terms) {

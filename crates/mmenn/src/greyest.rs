@@ -356,20 +356,16 @@ pub fn compute_greyest(
             substeps: fit.substeps[r],
         })
         .collect();
-    let last = fit.stages.len().saturating_sub(1);
     let stages = fit
         .stages
         .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            let converged = s.report.termination == sysid_core::Termination::Converged;
-            // A "converged" last solve that never moved from a start where the data do not
-            // determine every quantity is a start at a stationary point (e.g. an unmeasured
-            // state at a term's singular point, sqrt(0)), not an estimate.
-            let stuck = i == last
-                && converged
-                && fit.rank.0 < fit.rank.1
-                && no_progress(s.report.initial_cost, s.report.final_cost());
+        .map(|s| {
+            // The solver's verdict (sysid-core's grey-box estimation asks for it): a solve
+            // that never moved from a start where the data do not determine every quantity
+            // is a start at a stationary point (e.g. an unmeasured state at a term's
+            // singular point, sqrt(0)), not an estimate.
+            let stuck = s.report.termination == sysid_core::Termination::NoProgress;
+            let (rank, of) = s.report.rank.unwrap_or(fit.rank);
             StageSummary {
                 shooting: match s.shooting {
                     Shooting::FreeRun => "free run".into(),
@@ -382,15 +378,14 @@ pub fn compute_greyest(
                 termination: if stuck {
                     format!(
                         "stopped where it started (not converged): the cost did not move and \
-                         the data determine only {} of the {} estimated quantities there — a \
+                         the data determine only {rank} of the {of} estimated quantities there — a \
                          start at a stationary point, e.g. an unmeasured state at a term's \
-                         singular point such as sqrt(0); start it elsewhere (--x0 NAME=VALUE)",
-                        fit.rank.0, fit.rank.1
+                         singular point such as sqrt(0); start it elsewhere (--x0 NAME=VALUE)"
                     )
                 } else {
                     crate::words::termination(Some(s.report.termination)).to_owned()
                 },
-                converged: converged && !stuck,
+                converged: s.report.termination == sysid_core::Termination::Converged,
                 iterations: s.report.iterations,
                 initial_cost: s.report.initial_cost,
                 final_cost: s.report.final_cost(),
@@ -410,11 +405,6 @@ pub fn compute_greyest(
         files: Vec::new(),
     };
     Ok(GreyestOutcome { summary, spec, fit })
-}
-
-/// Whether a solve left its cost where it found it (to 1e-9 relative).
-fn no_progress(initial: f64, last: f64) -> bool {
-    (initial - last).abs() <= 1e-9 * initial.abs().max(f64::MIN_POSITIVE)
 }
 
 /// Write `model.toml`, `greyest.json` and `report.md` into `out` (atomically, each).

@@ -24,6 +24,10 @@ pub fn termination(t: Option<Termination>) -> &'static str {
         }
         Some(Termination::StoppedEarly) => "stopped early: the held-out cost stopped improving",
         Some(Termination::Diverged) => "not run: the model diverged at the starting point",
+        Some(Termination::NoProgress) => {
+            "stopped where it started (not converged): the cost did not move and the \
+             Jacobian there is rank-deficient"
+        }
         Some(_) => "ended for another reason",
     }
 }

@@ -28,6 +28,13 @@ pub enum Termination {
     StoppedEarly,
     /// The model could not be evaluated at the starting point.
     Diverged,
+    /// Stopped where it started: the solve ended as it would have converged (or found
+    /// no descent), but the cost never moved from its start and the Jacobian there is
+    /// rank-deficient — a start at a stationary point of a degenerate problem (e.g. an
+    /// unmeasured state at a term's singular point, `sqrt(0)`, where its sensitivity is
+    /// zero), not an estimate. Only a solve that asks for this test reports it
+    /// ([`crate::LmSettings::no_progress`]).
+    NoProgress,
 }
 
 /// One iteration of an iterative solve.

@@ -34,6 +34,15 @@
 //! residuals of sampled data are rarely white (quantisation, unmodelled dynamics), so
 //! these σ are the usual optimistic ones.
 //!
+//! **Stopped where it started.** A start at a stationary point of a degenerate problem
+//! (an unmeasured state at a term's singular point, `sqrt(0)`, whose sensitivity is
+//! zero) ends the solver at once, as if converged. While no solve of the estimation has
+//! moved the cost, the solver is asked to tell that apart ([`LmSettings::no_progress`]):
+//! a solve that does not move the cost and whose Jacobian is rank-deficient ends
+//! [`crate::Termination::NoProgress`], and the caller reports no estimate. A re-solve
+//! after the cost has moved (more sub-steps at the estimate) that finds nothing to do is
+//! converged.
+//!
 //! An estimator in sysid-core, stated in its README: like the initial-state fit it is a
 //! generic step on sysid-core's own model, solver and integrator.
 
@@ -219,7 +228,11 @@ pub fn estimate_parameters<D: ParametricDynamics>(
 /// channels that do not match the model, a non-positive noise variance, a segment under
 /// 2 samples, no more measured values than estimated quantities. A start whose
 /// simulation diverges is [`CoreError::Diverged`]; a solve that does not converge is
-/// reported in [`StageReport::report`], not as an error.
+/// reported in [`StageReport::report`], not as an error. So is a start the solver cannot
+/// leave: while no solve of the estimation has moved the cost, one that stops without
+/// moving it at a rank-deficient Jacobian ends [`crate::Termination::NoProgress`] (e.g. an
+/// unmeasured state started at a term's singular point, `sqrt(0)`, where its sensitivity
+/// is zero); the fit is then the start, not an estimate.
 pub fn estimate_parameters_with<D: ParametricDynamics>(
     model: &D,
     data: &GreyboxData<'_>,
@@ -231,9 +244,13 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     validate(model, data, opts)?;
     let weight: Vec<f64> = data.noise_variance.iter().map(|v| 1.0 / v.sqrt()).collect();
     let x0 = start_states(data, n)?;
-    let settings = LmSettings {
+    // Until a solve moves the cost, each one is asked whether it stopped where it started
+    // (Termination::NoProgress); after that a solve that does not move is a re-solve from
+    // an estimate (more sub-steps), which has simply converged.
+    let mut settings = LmSettings {
         max_iterations: opts.max_iterations,
         ftol: opts.ftol,
+        no_progress: true,
         ..LmSettings::default()
     };
     let mut stages = Vec::new();
@@ -261,6 +278,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
         problem.observer = Some(&mut *observer);
         problem.budget = opts.budget.clone();
         let solution = levenberg_marquardt(&mut problem, &theta0, &settings)?;
+        settings.no_progress &= !solution.report.moved();
         stages.push(StageReport {
             shooting: opts.shooting,
             residuals: problem.rows,
@@ -319,6 +337,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     let mut theta = theta0;
     for round in 0.. {
         let solution = levenberg_marquardt(&mut problem, &theta, &settings)?;
+        settings.no_progress &= !solution.report.moved();
         theta = solution.theta;
         stages.push(StageReport {
             shooting: Shooting::FreeRun,

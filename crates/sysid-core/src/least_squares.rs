@@ -123,6 +123,14 @@ pub struct LmSettings {
     /// Smallest factor on `μ` after an accepted step (Nielsen's `1/3`; trainlm's `0.1`
     /// for networks, whose steps it pays to let approach Gauss–Newton fast). Default 1/3.
     pub mu_floor_factor: f64,
+    /// Report a solve that stopped where it started as [`Termination::NoProgress`]
+    /// instead of [`Termination::Converged`] or [`Termination::NoDescent`]: its cost did
+    /// not move from the start ([`LmReport::moved`] false) and the column-normalised
+    /// `JᵀJ` of its last Jacobian (taken where the cost still was the start's) is
+    /// rank-deficient (an eigenvalue at most `1e-12` of the largest, or a zero column).
+    /// For calibrations of physical models, where that is a start at a singular point;
+    /// a network's Jacobian is rank-deficient as a rule. Default false.
+    pub no_progress: bool,
 }
 
 impl Default for LmSettings {
@@ -137,6 +145,7 @@ impl Default for LmSettings {
             exact_cost: 0.0,
             scaling: Scaling::Columns,
             mu_floor_factor: 1.0 / 3.0,
+            no_progress: false,
         }
     }
 }
@@ -156,6 +165,9 @@ pub struct LmReport {
     pub trials: usize,
     /// Damping at the end.
     pub mu: f64,
+    /// Rank of the column-normalised `JᵀJ` and its number of columns, when the test of
+    /// [`LmSettings::no_progress`] ran (a solve that did not move); `None` otherwise.
+    pub rank: Option<(usize, usize)>,
 }
 
 impl LmReport {
@@ -169,6 +181,15 @@ impl LmReport {
     /// Cost at the end.
     pub fn final_cost(&self) -> f64 {
         self.steps.last().map_or(self.initial_cost, |s| s.cost)
+    }
+
+    /// Whether the cost moved: it fell by more than `1e-9` of the start's (both finite).
+    /// A solve that diverged at its start did not move.
+    pub fn moved(&self) -> bool {
+        let (start, end) = (self.initial_cost, self.final_cost());
+        start.is_finite()
+            && end.is_finite()
+            && (start - end).abs() > 1e-9 * start.abs().max(f64::MIN_POSITIVE)
     }
 
     /// As the workspace's general [`SolveReport`].
@@ -212,6 +233,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
         iterations: 0,
         trials: 0,
         mu: settings.mu_initial,
+        rank: None,
     };
     let finish = |theta, residuals, report| LmSolution {
         theta,
@@ -351,7 +373,51 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
         }
     }
     report.mu = mu;
+    // Stopped where it started (LmSettings::no_progress). The loop ran, so `jtj` is the
+    // last Jacobian's, taken at a point of the start's cost.
+    if settings.no_progress
+        && report.iterations > 0
+        && matches!(
+            report.termination,
+            Termination::Converged | Termination::NoDescent
+        )
+        && !report.moved()
+    {
+        let rank = normalised_rank(&jtj);
+        report.rank = Some((rank, p));
+        if rank < p {
+            report.termination = Termination::NoProgress;
+        }
+    }
     Ok(finish(theta, r, report))
+}
+
+/// Rank of `JᵀJ` with its columns normalised (`JᵀJ_ij / (‖J_i‖·‖J_j‖)`): eigenvalues above
+/// `1e-12` of the largest. A zero or non-finite column counts as a lost rank; when the
+/// decomposition does not converge the other columns count as independent (no verdict
+/// without one).
+fn normalised_rank(jtj: &DMatrix<f64>) -> usize {
+    let p = jtj.nrows();
+    let keep: Vec<usize> = (0..p)
+        .filter(|&j| {
+            let d = jtj[(j, j)];
+            d.is_finite() && d > 0.0
+        })
+        .collect();
+    if keep.is_empty() {
+        return 0;
+    }
+    let norms: Vec<f64> = keep.iter().map(|&j| jtj[(j, j)].sqrt()).collect();
+    let k = keep.len();
+    let scaled = DMatrix::from_fn(k, k, |a, b| jtj[(keep[a], keep[b])] / (norms[a] * norms[b]));
+    if !scaled.iter().all(|v| v.is_finite()) {
+        return k;
+    }
+    let Some(eig) = nalgebra::SymmetricEigen::try_new(scaled, f64::EPSILON, 10_000) else {
+        return k;
+    };
+    let top = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    eig.eigenvalues.iter().filter(|&&l| l > 1e-12 * top).count()
 }
 
 /// Forward-difference Jacobian of `residuals` at `theta` (residuals `r` there), step
@@ -431,6 +497,55 @@ mod tests {
         let h = sol.report.cost_history();
         assert!(h.windows(2).all(|w| w[1] < w[0]), "{h:?}");
         assert_eq!(sol.report.termination, Termination::Converged);
+    }
+
+    /// `r = (θ₁θ₂ − 1, θ₁θ₂ − 2)`: at the origin every column of the Jacobian is zero, so
+    /// the gradient is zero and the solve stops at once, where it started.
+    struct Product;
+
+    impl LeastSquaresProblem for Product {
+        type Error = ();
+        fn residual_count(&self) -> usize {
+            2
+        }
+        fn residuals(&mut self, t: &[f64], r: &mut [f64]) -> Result<bool, ()> {
+            r[0] = t[0] * t[1] - 1.0;
+            r[1] = t[0] * t[1] - 2.0;
+            Ok(true)
+        }
+        fn jacobian(&mut self, t: &[f64], _: &[f64], j: &mut DMatrix<f64>) -> Result<(), ()> {
+            for row in 0..2 {
+                j[(row, 0)] = t[1];
+                j[(row, 1)] = t[0];
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_start_at_a_singular_stationary_point_is_no_progress_when_asked() {
+        let asked = LmSettings {
+            no_progress: true,
+            ..LmSettings::default()
+        };
+        let sol = levenberg_marquardt(&mut Product, &[0.0, 0.0], &asked).unwrap();
+        assert_eq!(sol.report.termination, Termination::NoProgress);
+        assert_eq!(sol.report.rank, Some((0, 2)));
+        assert!(!sol.report.moved());
+        assert_eq!(sol.theta, vec![0.0, 0.0]);
+        // Not asked: the same stop reads as converged, as before.
+        let sol = levenberg_marquardt(&mut Product, &[0.0, 0.0], &LmSettings::default()).unwrap();
+        assert_eq!(sol.report.termination, Termination::Converged);
+        assert_eq!(sol.report.rank, None);
+        // A solve that moves is converged, asked or not, with the same numbers.
+        let mut p = Rosenbrock {
+            diverge_beyond: f64::INFINITY,
+        };
+        let plain = levenberg_marquardt(&mut p, &[-1.2, 1.0], &LmSettings::default()).unwrap();
+        let checked = levenberg_marquardt(&mut p, &[-1.2, 1.0], &asked).unwrap();
+        assert_eq!(checked.report.termination, Termination::Converged);
+        assert!(checked.report.moved());
+        assert_eq!(plain, checked);
     }
 
     #[test]

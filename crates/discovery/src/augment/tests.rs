@@ -32,4 +32,34 @@ fn recovers_a_cubic_coefficient_without_noise() {
         cal.coefficients_after
     );
     assert!(cal.cost_after < 1e-10 * cal.cost_before);
+    assert_eq!(cal.termination, Termination::Converged);
+}
+
+/// `ẋ = c·x³` from `x(0) = 0` stays at 0 whatever `c`: the coefficient's sensitivity is
+/// zero along the whole run, the solver cannot leave the start, and the calibration says
+/// so instead of returning the start as a calibrated model.
+#[test]
+fn a_start_the_solver_cannot_leave_is_no_calibration() {
+    let linear = crate::test_support::scalar_model(0.0, 0.0);
+    let len = 101;
+    let dt = 0.05;
+    let u = DMatrix::zeros(1, len);
+    let y = DMatrix::from_fn(1, len, |_, k| (0.3 * k as f64).sin());
+    let data = Dataset::new(
+        vec![Channel::new("u")],
+        vec![Channel::new("x")],
+        vec![Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"))],
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let start = TermModel::from_specs(linear, [("x", "cubic_stiffness", "x^3", -0.2)])
+        .unwrap_or_else(|e| panic!("{e}"));
+    let got = calibrate(&start, &data, &[vec![0.0]], &CalibrationConfig::default());
+    match got {
+        Err(DiscoveryError::NoProgress { rank, of, .. }) => assert_eq!((rank, of), (0, 1)),
+        other => panic!("expected NoProgress, got {other:?}"),
+    }
+    // Started off the singular point, the same calibration moves (and converges).
+    let cal = calibrate(&start, &data, &[vec![0.5]], &CalibrationConfig::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(cal.cost_after < cal.cost_before, "{cal:?}");
 }

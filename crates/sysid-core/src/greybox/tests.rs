@@ -179,6 +179,10 @@ fn linear_in_parameters_matches_ordinary_least_squares() {
         // And it is the truth within a few σ (the closed form is an unbiased estimator).
         assert!((p.value - B_TRUE).abs() < 4.0 * sigma, "{p:?}");
         assert!(fit.fit_percent[0][0] > 90.0, "{:?}", fit.fit_percent);
+        // A calibration that moves is converged, and no rank test ran on it.
+        assert_eq!(fit.report().termination, crate::Termination::Converged);
+        assert!(fit.report().moved());
+        assert_eq!(fit.report().rank, None);
     }
 }
 
@@ -469,4 +473,77 @@ fn a_spent_budget_stops_the_calibration_with_a_typed_error() {
             }))
         );
     }
+}
+
+/// `ẋ = a·z²`, `ż = 0`, `y = x`: with the unmeasured `z` started at 0 (the minimum-norm
+/// start) the sensitivities of `a` and of `z(0)` are zero all along, and on a record
+/// whose mean is its first sample (`1, then 1.5, 0.5, …`, exact in binary) the gradient
+/// of the start is exactly zero too: the solver stops at once, where it started.
+fn flat_through_a_square() -> (PhysicalModel, Experiment) {
+    let names = ModelNames {
+        states: vec!["x".into(), "z".into()],
+        inputs: vec!["u".into()],
+        outputs: vec!["x".into()],
+        corrections: Vec::new(),
+    };
+    let linear = LinearModel::with_names(
+        DMatrix::zeros(2, 2),
+        DMatrix::zeros(2, 1),
+        DMatrix::from_row_slice(1, 2, &[1.0, 0.0]),
+        DMatrix::zeros(2, 0),
+        names,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let term = PhysicalTerm {
+        state: 0,
+        into: None,
+        effect: "square",
+        term: "a*z^2",
+        coefficient: 1.0,
+    };
+    let model = PhysicalModel::new(linear, vec![Parameter::new("a", 1.0)], &[term], None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let y = DMatrix::from_fn(1, 21, |_, k| match k {
+        0 => 1.0,
+        k if k % 2 == 1 => 1.5,
+        _ => 0.5,
+    });
+    let exp = Experiment::new(0.0, DT, DMatrix::zeros(1, 21), y).unwrap_or_else(|e| panic!("{e}"));
+    (model, exp)
+}
+
+#[test]
+fn a_start_with_a_zero_sensitivity_that_does_not_move_is_no_progress() {
+    let (model, exp) = flat_through_a_square();
+    let records = [exp];
+    let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
+    let nv = [0.25];
+    let fit = estimate_parameters(&model, &data(&c, &records, &nv), &GreyboxOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let report = fit.report();
+    assert_eq!(
+        report.termination,
+        crate::Termination::NoProgress,
+        "{report:?}"
+    );
+    assert!(!report.moved());
+    // Only the start of x is determined: a and z(0) have zero columns.
+    assert_eq!(report.rank, Some((1, 3)));
+    assert_eq!(fit.rank, (1, 3));
+    assert_eq!(fit.x0, vec![vec![1.0, 0.0]]);
+    assert_eq!(fit.parameters[0].value.to_bits(), 1.0f64.to_bits());
+
+    // Started elsewhere (z = 1, so x moves with a) the same data calibrate: the cost
+    // falls. (Only the product a·z(0)² is determined, so the solve ends at a stationary
+    // valley, `NoDescent` — a moved solve is never `NoProgress`.)
+    let starts = [vec![1.0, 1.0]];
+    let elsewhere = GreyboxData {
+        x0: &starts,
+        ..data(&c, &records, &nv)
+    };
+    let fit = estimate_parameters(&model, &elsewhere, &GreyboxOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(fit.report().moved());
+    assert_eq!(fit.report().termination, crate::Termination::NoDescent);
+    assert_eq!(fit.report().rank, None);
 }
