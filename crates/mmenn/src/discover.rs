@@ -293,7 +293,7 @@ pub const DISCOVER_TASK: &str = "discover";
 
 /// The workflow's steps as progress reports of one task, [`DISCOVER_TASK`]: `done` of
 /// `total` steps of the workflow's plan (`discovery::workflow::Observer::steps`), the
-/// note naming the round and the step that begins.
+/// [`Progress::stage`] naming the round and the step that begins.
 struct Reported<'a> {
     sink: &'a dyn ProgressSink,
     stage: std::sync::Mutex<String>,
@@ -311,9 +311,10 @@ impl Observer for Reported<'_> {
     }
 
     fn steps(&self, done: usize, total: usize) {
-        let note = self.stage.lock().map(|s| s.clone()).unwrap_or_default();
+        // The workflow names its steps (Observer::stage); done counts those finished.
+        let stage = self.stage.lock().map(|s| s.clone()).unwrap_or_default();
         self.sink
-            .report(&Progress::new(DISCOVER_TASK, done, Some(total)).with_note(note));
+            .report(&Progress::new(DISCOVER_TASK, done, Some(total)).with_stage(stage));
     }
 }
 
@@ -326,7 +327,7 @@ impl ProgressSink for StageLines {
         if p.total != Some(p.done) {
             #[allow(clippy::print_stderr)]
             {
-                eprintln!("{}: {}", p.task, p.note);
+                eprintln!("{}", p.line());
             }
         }
     }

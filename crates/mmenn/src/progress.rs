@@ -19,7 +19,17 @@
 //! `discover` reports one task, `"discover"`, whose total is the workflow's plan of steps
 //! (the first MME run, four per round up to `--max-rounds`, three after the rounds;
 //! `discovery::workflow::Observer::steps`), shrinking when the rounds stop early, with
-//! the round and step that begins as the note.
+//! the round and step that begins as the [`Progress::stage`] (named by the workflow,
+//! `discovery::workflow::Observer::stage`).
+//!
+//! # Stages
+//!
+//! A task that runs through named stages (discover's steps) says which one is running in
+//! [`Progress::stage`], named by the code that runs it; `done` then counts the stages
+//! finished, so the one running is `done + 1` of `total`. A task without stages is its
+//! own stage (a [`stage`] such as "MME estimate"). A display shows the stage in every
+//! line, also in the "still running" line of a step that reports nothing for a while
+//! ([`Progress::running_line`]).
 //!
 //! ```
 //! use mmenn::progress::{NoProgress, Progress, ProgressSink, stage};
@@ -59,6 +69,9 @@ pub struct Progress {
     pub total: Option<usize>,
     /// A short note about the latest step ("3 hidden units, test MSE 1.2e-3").
     pub note: String,
+    /// The stage running, for a task that runs through named stages ("round 1: proposal
+    /// from d̂"); empty when the task is its own stage. `done` counts the stages finished.
+    pub stage: String,
 }
 
 impl Progress {
@@ -69,6 +82,7 @@ impl Progress {
             done,
             total,
             note: String::new(),
+            stage: String::new(),
         }
     }
 
@@ -76,6 +90,60 @@ impl Progress {
     pub fn with_note(mut self, note: impl Into<String>) -> Self {
         self.note = note.into();
         self
+    }
+
+    /// The same report in a named stage (`done` stages finished).
+    pub fn with_stage(mut self, stage: impl Into<String>) -> Self {
+        self.stage = stage.into();
+        self
+    }
+
+    /// The stage and where it stands, "round 1: proposal from d̂ (step 3 of 15)" (no
+    /// position once `done` reaches `total`); empty without a stage.
+    pub fn position(&self) -> String {
+        match self.total {
+            _ if self.stage.is_empty() => String::new(),
+            Some(n) if self.done < n => format!("{} (step {} of {n})", self.stage, self.done + 1),
+            _ => self.stage.clone(),
+        }
+    }
+
+    /// What a display shows beside the task: the stage with its position, then the note.
+    pub fn message(&self) -> String {
+        match (self.position(), self.note.as_str()) {
+            (p, "") => p,
+            (p, note) if p.is_empty() => note.to_owned(),
+            (p, note) => format!("{p}: {note}"),
+        }
+    }
+
+    /// A plain progress line: "discover: round 1: proposal from d̂ (step 3 of 15)" for a
+    /// task in a stage, "network sizing sweep: 3 of 12 done  4 hidden, …" otherwise.
+    pub fn line(&self) -> String {
+        if self.stage.is_empty() {
+            let of = self.total.map(|n| format!(" of {n}")).unwrap_or_default();
+            format!("{}: {}{of} done  {}", self.task, self.done, self.note)
+                .trim_end()
+                .to_owned()
+        } else {
+            format!("{}: {}", self.task, self.message())
+        }
+    }
+
+    /// The line for a task whose last report was this one and that has been running for
+    /// `seconds` without another: it names the stage ("discover: round 1: free-run search
+    /// over the catalogue (step 4 of 15), running for 35 s"); a task without stages is
+    /// its own ("MME estimate: running for 35 s", with "3 of 12 done" when counted).
+    pub fn running_line(&self, seconds: f64) -> String {
+        let position = self.position();
+        let at = if !position.is_empty() {
+            format!("{position}, ")
+        } else if let Some(n) = self.total.filter(|_| self.done > 0) {
+            format!("{} of {n} done, ", self.done)
+        } else {
+            String::new()
+        };
+        format!("{}: {at}running for {seconds:.0} s", self.task)
     }
 }
 
@@ -131,6 +199,45 @@ mod tests {
             seen,
             vec![("job".into(), 0, None), ("job".into(), 1, Some(2))]
         );
+    }
+
+    #[test]
+    fn lines_name_the_stage_the_task_is_in() {
+        let p = Progress::new("discover", 3, Some(15)).with_stage("round 1: proposal from d̂");
+        assert_eq!(
+            p.running_line(35.2),
+            "discover: round 1: proposal from d̂ (step 4 of 15), running for 35 s"
+        );
+        assert_eq!(
+            p.line(),
+            "discover: round 1: proposal from d̂ (step 4 of 15)"
+        );
+        assert_eq!(p.message(), "round 1: proposal from d̂ (step 4 of 15)");
+        // With a note, after the stage; at the end no position.
+        let p = p.with_note("2 candidates");
+        assert_eq!(
+            p.message(),
+            "round 1: proposal from d̂ (step 4 of 15): 2 candidates"
+        );
+        let end = Progress::new("discover", 15, Some(15)).with_stage("bootstrap judge");
+        assert_eq!(
+            end.running_line(5.0),
+            "discover: bootstrap judge, running for 5 s"
+        );
+        // A task without stages is its own stage; a counted one says how far it is.
+        let own = Progress::new("MME estimate", 0, None);
+        assert_eq!(own.running_line(5.0), "MME estimate: running for 5 s");
+        assert_eq!(own.line(), "MME estimate: 0 done");
+        let counted = Progress::new("network sizing sweep", 3, Some(12)).with_note("4 hidden");
+        assert_eq!(
+            counted.running_line(61.0),
+            "network sizing sweep: 3 of 12 done, running for 61 s"
+        );
+        assert_eq!(
+            counted.line(),
+            "network sizing sweep: 3 of 12 done  4 hidden"
+        );
+        assert_eq!(counted.message(), "4 hidden");
     }
 
     #[test]

@@ -259,8 +259,9 @@ fn band_limited_input_needs_the_first_order_hold() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// One recorded event: task, done, total, note.
-type Event = (String, usize, Option<usize>, String);
+/// One recorded event: task, done, total, stage, and the "still running" line a display
+/// would print after this report.
+type Event = (String, usize, Option<usize>, String, String);
 
 /// Records progress reports and task ends, in order.
 #[derive(Default)]
@@ -268,22 +269,29 @@ struct Recorder(std::sync::Mutex<Vec<Event>>);
 
 impl mmenn::progress::ProgressSink for Recorder {
     fn report(&self, p: &mmenn::progress::Progress) {
-        self.0
-            .lock()
-            .unwrap()
-            .push((p.task.clone(), p.done, p.total, p.note.clone()));
+        self.0.lock().unwrap().push((
+            p.task.clone(),
+            p.done,
+            p.total,
+            p.stage.clone(),
+            p.running_line(5.0),
+        ));
     }
     fn finish(&self, task: &str) {
-        self.0
-            .lock()
-            .unwrap()
-            .push((format!("finished {task}"), 0, None, String::new()));
+        self.0.lock().unwrap().push((
+            format!("finished {task}"),
+            0,
+            None,
+            String::new(),
+            String::new(),
+        ));
     }
 }
 
 /// Issue 18: `discover` reports one task with a known total (the workflow's steps), so a
 /// terminal bar can show an ETA: the reports arrive in order (done never decreases and
-/// never exceeds the total), name the round and step, end with done = total, and the
+/// never exceeds the total), name the round and step as the stage — also in the line a
+/// display prints while a step runs without reporting — end with done = total, and the
 /// task is finished once, last.
 #[test]
 fn discover_reports_its_steps_against_a_known_total() {
@@ -326,8 +334,13 @@ fn discover_reports_its_steps_against_a_known_total() {
     assert_eq!(reports[0].2, Some(planned), "{events:?}");
     assert_eq!(reports[0].3, "MME with the assumed model");
     assert_eq!(reports[1].3, "round 1: noise floor of d̂");
+    assert_eq!(
+        reports[1].4,
+        format!("discover: round 1: noise floor of d̂ (step 2 of {planned}), running for 5 s")
+    );
     let mut prev = 0;
-    for (task, done, total, _) in reports {
+    for (task, done, total, stage, line) in reports {
+        assert!(line.contains(stage.as_str()), "{events:?}");
         assert_eq!(task, mmenn::discover::DISCOVER_TASK);
         let total = total.expect("a known total");
         assert!(*done >= prev && *done <= total, "{events:?}");

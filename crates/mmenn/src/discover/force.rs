@@ -135,8 +135,8 @@ pub(super) fn run_force_discover(
     out: &Path,
     progress: &dyn ProgressSink,
 ) -> Result<DiscoverSummary> {
-    let step = |done: usize, note: &str| {
-        progress.report(&Progress::new(DISCOVER_TASK, done, Some(STEPS)).with_note(note));
+    let step = |done: usize, stage: &str| {
+        progress.report(&Progress::new(DISCOVER_TASK, done, Some(STEPS)).with_stage(stage));
     };
     step(0, "MME with the assumed model");
     let outcome = search(original, data, val, opts, &step);

@@ -6,17 +6,24 @@ enum Shown {
     Nothing,
     /// A bar (or spinner) on the terminal.
     Bar(String, indicatif::ProgressBar),
-    /// Plain lines: the task, when it started, when the last line was due or printed,
-    /// and whether any line was printed (short tasks print nothing).
-    Lines(String, std::time::Instant, std::time::Instant, bool),
+    /// Plain lines: the task's latest report (its stage), when the task started, when the
+    /// last line was due or printed, and whether any line was printed (short tasks print
+    /// nothing).
+    Lines(
+        mmenn::progress::Progress,
+        std::time::Instant,
+        std::time::Instant,
+        bool,
+    ),
 }
 
 /// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
 /// every few seconds of a task's progress reports (a task shorter than that prints
 /// nothing, so a failing command's stderr stays its one error line), and for a step
-/// that reports nothing while it runs (a `stage`, such as MME's `W` search) a line from
-/// a watcher thread every few seconds saying how long it has been running; nothing with
-/// `--quiet`.
+/// that reports nothing while it runs (a `stage`, such as MME's `W` search, or a long
+/// step of discover) a line from a watcher thread every few seconds saying which stage it
+/// is in and how long it has been running ([`mmenn::progress::Progress::running_line`]);
+/// nothing with `--quiet`.
 pub(crate) struct Reporter {
     quiet: bool,
     terminal: bool,
@@ -64,7 +71,8 @@ impl Reporter {
     }
 
     /// Once a second: a line for the task shown in plain lines when it has printed
-    /// nothing for a while ([`line_due`]; no report came in that time).
+    /// nothing for a while ([`line_due`]; no report came in that time), naming the stage
+    /// of its latest report.
     #[allow(clippy::print_stderr)]
     fn watch(shown: &std::sync::Mutex<Shown>) {
         loop {
@@ -72,12 +80,12 @@ impl Reporter {
             let Ok(mut shown) = shown.lock() else {
                 return;
             };
-            if let Shown::Lines(task, start, last, printed) = &mut *shown
+            if let Shown::Lines(latest, start, last, printed) = &mut *shown
                 && line_due(*start, *last)
             {
                 *last = std::time::Instant::now();
                 *printed = true;
-                eprintln!("{task}: running for {:.0} s", start.elapsed().as_secs_f64());
+                eprintln!("{}", latest.running_line(start.elapsed().as_secs_f64()));
             }
         }
     }
@@ -112,7 +120,8 @@ impl mmenn::progress::ProgressSink for Reporter {
             return;
         };
         let same = match &*shown {
-            Shown::Bar(t, _) | Shown::Lines(t, _, _, _) => t == &p.task,
+            Shown::Bar(t, _) => t == &p.task,
+            Shown::Lines(latest, _, _, _) => latest.task == p.task,
             Shown::Nothing => false,
         };
         if !same {
@@ -123,7 +132,7 @@ impl mmenn::progress::ProgressSink for Reporter {
                 Shown::Bar(p.task.clone(), Self::bar(p))
             } else {
                 let now = std::time::Instant::now();
-                Shown::Lines(p.task.clone(), now, now, false)
+                Shown::Lines(p.clone(), now, now, false)
             };
         }
         match &mut *shown {
@@ -133,14 +142,14 @@ impl mmenn::progress::ProgressSink for Reporter {
                     b.set_length(n as u64);
                 }
                 b.set_position(p.done as u64);
-                b.set_message(p.note.clone());
+                b.set_message(p.message());
             }
-            Shown::Lines(_, start, last, printed) => {
+            Shown::Lines(latest, start, last, printed) => {
+                latest.clone_from(p);
                 if line_due(*start, *last) {
                     *last = std::time::Instant::now();
                     *printed = true;
-                    let of = p.total.map(|n| format!(" of {n}")).unwrap_or_default();
-                    eprintln!("{}: {}{of} done  {}", p.task, p.done, p.note);
+                    eprintln!("{}", p.line());
                 }
             }
             Shown::Nothing => {}
@@ -158,7 +167,7 @@ impl mmenn::progress::ProgressSink for Reporter {
                     eprintln!("{task}: done in {:.1} s", b.elapsed().as_secs_f64());
                 }
             }
-            Shown::Lines(t, start, _, printed) if t == task => {
+            Shown::Lines(latest, start, _, printed) if latest.task == task => {
                 if *printed || start.elapsed().as_secs() >= WORTH_A_LINE_SECONDS {
                     eprintln!("{task}: done in {:.1} s", start.elapsed().as_secs_f64());
                 }
