@@ -10,7 +10,9 @@
 //! ([`GuardReport`]) runs the assumed model alone, the network before trajectory training
 //! and after it free on held-out data (the validation record, else the last fifth of the
 //! first training record) and keeps the best; the report says which and why, and whether
-//! the trajectory training hurt.
+//! the trajectory training hurt. Under [`DomainPolicy::Checked`] (the command line's
+//! default) each network candidate first meets an amplitude stress check and holds its
+//! edge value outside its training box when it fails ([`DomainCheck`]).
 
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -34,9 +36,13 @@ pub use crate::predict::{
     InitialChoice, PredictOptions, PredictSummary, run_predict, run_predict_with,
 };
 pub use choices::{
-    HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkInputs, NetworkSelection, Training,
+    DomainPolicy, HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkInputs,
+    NetworkSelection, Training,
 };
-pub use guard::{CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
+pub use guard::{
+    CandidateScore, DomainCheck, FoldScores, GuardCandidate, GuardHeldOut, GuardReport,
+    STRESS_FACTOR, StressChannel, StressCheck, StressVerdict,
+};
 pub use output::write_fit;
 use trajectory::train_network_on_trajectories;
 pub use trajectory::{TrajectoryChoice, TrajectorySummary};
@@ -85,10 +91,16 @@ pub struct FitOptions {
     /// Where the guard judges physics alone, the network and the refined network when no
     /// validation data is given. Default [`GuardHeldOut::LastFifth`].
     pub guard: GuardHeldOut,
-    /// What the network does outside the box its training pairs spanned, in every hybrid
-    /// this fit builds, judges and saves. Default [`nn::Domain::Extrapolate`] (the thesis
-    /// method; `--hold-network-domain` on the command line for [`nn::Domain::Hold`]).
-    pub network_domain: nn::Domain,
+    /// What the network does outside the box its training pairs spanned, or how the
+    /// guard decides it per candidate. Default [`DomainPolicy::Extrapolate`] (the thesis
+    /// method, unchecked: the library's default is unchanged, and `cargo xtask reproduce`
+    /// relies on it). The command line's default is [`DomainPolicy::Checked`]: a network
+    /// candidate that fails the guard's amplitude stress check (the held-out input scaled
+    /// by [`STRESS_FACTOR`] about its mean) holds ([`nn::Domain::Hold`]); the others
+    /// extrapolate. `--network-domain hold` (or `--hold-network-domain`) for
+    /// [`DomainPolicy::Hold`]. The network sweep's free-run selection and the trajectory
+    /// training use [`DomainPolicy::initial`].
+    pub network_domain: DomainPolicy,
     /// What the network reads: `(x̂, u)` or the states alone. Default
     /// [`NetworkInputs::StatesAndInputs`] (the thesis; `--network-inputs states` on the
     /// command line for the states alone).
@@ -159,7 +171,7 @@ impl Default for FitOptions {
             training: Training::Trainlm,
             ensemble: NetworkEnsemble::Single,
             guard: GuardHeldOut::LastFifth,
-            network_domain: nn::Domain::Extrapolate,
+            network_domain: DomainPolicy::Extrapolate,
             network_inputs: NetworkInputs::StatesAndInputs,
         }
     }
@@ -321,7 +333,8 @@ pub struct FitSummary {
     /// The box of the network's training pairs, `(name, low, high)` per network input
     /// (states, then inputs): where the correction was learnt.
     pub network_box: Vec<(String, f64, f64)>,
-    /// What the network does outside that box.
+    /// What the kept network does outside that box (how it was decided:
+    /// [`GuardReport::domain`]).
     pub network_domain: nn::Domain,
     /// What the network reads.
     pub network_inputs: NetworkInputs,
@@ -525,31 +538,43 @@ pub fn compute_fit(
     if refinement.is_some() {
         candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
-    let (guard_report, kept) = match (opts.guard, &val) {
-        (held @ (GuardHeldOut::Folds(_) | GuardHeldOut::LastFifthRetrained), None) => {
-            folds::choose_by_folds(&spec, est, data, &x0, held, candidates, opts, progress)?
-        }
-        _ => {
-            let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
-            guard::choose(
-                &spec,
-                candidates,
-                &held,
-                exp0.dt(),
-                opts.substeps,
-                opts.network_domain,
-            )?
-        }
-    };
-    let network = kept;
-    let (file, loaded) = hybrid_loaded(
+    // The held-out data (the validation record, else the last fifth of the first training
+    // record): the last-fifth guard judges on them, and under `DomainPolicy::Checked` the
+    // stress check scales their input (the K-fold guard's too).
+    let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
+    let (candidates, domain_check) = guard::check_domains(
         &spec,
-        &network,
-        &x0,
+        candidates,
+        &held,
         exp0.dt(),
         opts.substeps,
         opts.network_domain,
     )?;
+    let (guard_report, network, kept_domain) = match (opts.guard, &val) {
+        (kind @ (GuardHeldOut::Folds(_) | GuardHeldOut::LastFifthRetrained), None) => {
+            folds::choose_by_folds(
+                &spec,
+                est,
+                data,
+                &x0,
+                kind,
+                candidates,
+                domain_check,
+                opts,
+                progress,
+            )?
+        }
+        _ => guard::choose(
+            &spec,
+            candidates,
+            &held,
+            exp0.dt(),
+            opts.substeps,
+            domain_check,
+        )?,
+    };
+    let (file, loaded) =
+        hybrid_loaded(&spec, &network, &x0, exp0.dt(), opts.substeps, kept_domain)?;
     let train_j = judge_outputs(&loaded, data, opts.x0_window)?;
     let train = FreeRunReport::of(&train_j);
     let validation_j = match &val {
@@ -597,7 +622,7 @@ pub fn compute_fit(
                 .map(|(n, (c, h))| (n, c - h, c + h))
                 .collect()
         },
-        network_domain: opts.network_domain,
+        network_domain: kept_domain,
         network_inputs: opts.network_inputs,
         files: fit_files(&spec, val.is_some(), opts.network_inputs),
     };
@@ -726,7 +751,7 @@ fn train_networks(
                 set.data,
                 x0,
                 opts.substeps,
-                opts.network_domain,
+                opts.network_domain.initial(),
                 set.skip.as_ref(),
             )?;
             (i, Some(sse))

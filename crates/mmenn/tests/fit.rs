@@ -449,7 +449,7 @@ fn held_network_domain_is_saved_and_reported() {
         &train.model,
         &[],
         &FitOptions {
-            network_domain: mmenn::nn::Domain::Hold,
+            network_domain: mmenn::fit::DomainPolicy::Hold,
             max_hidden: 2,
             inits: 2,
             ..FitOptions::default()

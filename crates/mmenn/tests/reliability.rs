@@ -857,28 +857,106 @@ fn cli_network_inputs_reach_the_saved_network() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// `--hold-network-domain` reaches the saved model (fit and compare share the flag's
-/// meaning); without it the network extrapolates.
+/// `--network-domain` (and its shorthand `--hold-network-domain`) reaches the saved model
+/// (fit and compare share the flags' meaning); without either the guard's stress check
+/// decides, and `summary.json` and the terminal say how; the two flags together, or a
+/// misspelt policy, are refused.
 #[test]
-fn cli_hold_network_domain_is_saved() {
+fn cli_network_domain_is_saved() {
     let dir = scratch("hold");
     std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
     std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
-    for (flag, want) in [
-        (Some("--hold-network-domain"), mmenn::nn::Domain::Hold),
-        (None, mmenn::nn::Domain::Extrapolate),
-    ] {
-        let out = format!("o-{want:?}");
+    let fit = |out: &str, flags: &[&str]| {
         let mut args = vec![
-            "--quiet", "fit", "--data", "d.csv", "--model", "m.toml", "--hidden", "2", "--inits",
-            "1", "--w", "100", "--out", &out,
+            "fit", "--data", "d.csv", "--model", "m.toml", "--hidden", "2", "--inits", "1", "--w",
+            "100", "--out", out,
         ];
-        args.extend(flag);
-        let (code, err) = mmenn(&dir, &args, &[]);
-        assert_eq!(code, 0, "{err}");
-        let text = std::fs::read_to_string(dir.join(&out).join("model.json")).unwrap();
+        args.extend(flags);
+        let out_dir = dir.join(out);
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
+            .current_dir(&dir)
+            .args(&args)
+            .output()
+            .unwrap();
+        (output, out_dir)
+    };
+    let read = |out_dir: &Path| {
+        let text = std::fs::read_to_string(out_dir.join("model.json")).unwrap();
         let file = mmenn::fit::HybridFile::parse(Path::new("model.json"), &text).unwrap();
-        assert_eq!(file.domain, want);
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out_dir.join("summary.json")).unwrap())
+                .unwrap();
+        (file.domain, summary)
+    };
+    for (flags, want, policy) in [
+        (
+            &["--hold-network-domain"][..],
+            mmenn::nn::Domain::Hold,
+            "hold",
+        ),
+        (
+            &["--network-domain", "hold"][..],
+            mmenn::nn::Domain::Hold,
+            "hold",
+        ),
+        (
+            &["--network-domain", "extrapolate"][..],
+            mmenn::nn::Domain::Extrapolate,
+            "extrapolate",
+        ),
+    ] {
+        let (output, out_dir) = fit(&format!("o-{}", flags.join("")), flags);
+        assert!(output.status.success(), "{output:?}");
+        let (domain, summary) = read(&out_dir);
+        assert_eq!(domain, want);
+        assert_eq!(summary["guard"]["domain"]["policy"], policy);
+        assert_eq!(summary["guard"]["domain"]["checks"], serde_json::json!([]));
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            stdout.contains(&format!("network domain: {policy}, as asked")),
+            "{stdout}"
+        );
+    }
+    // The default: the stress check decides each network candidate's domain, and the
+    // saved one is the kept candidate's.
+    let (output, out_dir) = fit("o-default", &[]);
+    assert!(output.status.success(), "{output:?}");
+    let (domain, summary) = read(&out_dir);
+    let guard = &summary["guard"];
+    assert_eq!(guard["domain"]["policy"], "checked");
+    let checks = guard["domain"]["checks"].as_array().unwrap();
+    assert!(!checks.is_empty());
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    for c in checks {
+        assert!(
+            ["passed", "failed"].contains(&c["verdict"].as_str().unwrap()),
+            "{c}"
+        );
+        let line = format!(
+            "stress check, {}",
+            match c["candidate"].as_str().unwrap() {
+                "network" => "network before trajectory training",
+                _ => "network after trajectory training",
+            }
+        );
+        assert!(stdout.contains(&line), "{stdout}");
+    }
+    let kept = guard["candidates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["candidate"] == guard["chosen"])
+        .unwrap();
+    if guard["chosen"] != "physics_alone" {
+        assert_eq!(kept["domain"], serde_json::to_value(domain).unwrap());
+    }
+    // Both flags, or a misspelt policy: a command-line error.
+    for flags in [
+        &["--hold-network-domain", "--network-domain", "extrapolate"][..],
+        &["--network-domain", "held"][..],
+    ] {
+        let (output, _) = fit("o-refused", flags);
+        assert_eq!(output.status.code(), Some(2), "{flags:?}: {output:?}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

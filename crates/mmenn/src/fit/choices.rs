@@ -148,3 +148,69 @@ pub enum NetworkInputs {
     /// of its training pairs. `model.json` records it through the network's input count.
     States,
 }
+
+impl std::str::FromStr for DomainPolicy {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "checked" => Ok(Self::Checked),
+            "extrapolate" => Ok(Self::Extrapolate),
+            "hold" => Ok(Self::Hold),
+            _ => Err(format!(
+                "'{s}' is neither \"checked\", \"extrapolate\" nor \"hold\""
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for DomainPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Extrapolate => "extrapolate",
+            Self::Hold => "hold",
+            Self::Checked => "checked",
+        })
+    }
+}
+
+/// What the network does outside the box its training pairs spanned ([`nn::Domain`]), or
+/// how `fit` decides it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DomainPolicy {
+    /// [`nn::Domain::Extrapolate`] for every candidate, unchecked (the thesis method; the
+    /// library's default, kept for the thesis experiments of `cargo xtask reproduce`).
+    #[default]
+    Extrapolate,
+    /// [`nn::Domain::Hold`] for every candidate (`--network-domain hold`, or
+    /// `--hold-network-domain`).
+    Hold,
+    /// [`nn::Domain::Extrapolate`] unless the guard's amplitude stress check fails a
+    /// network candidate, which is then judged and kept with [`nn::Domain::Hold`]
+    /// (`crate::fit::guard`'s `check_domains`; the command line's default). The held-out
+    /// data never leave the training box by much, so they cannot show a network that
+    /// explodes beyond it; the stress check runs each candidate on the held-out input
+    /// scaled by [`STRESS_FACTOR`](crate::fit::STRESS_FACTOR) about its mean.
+    Checked,
+}
+
+impl DomainPolicy {
+    /// The domain the networks are selected, trained and first judged with: `Hold` for
+    /// [`DomainPolicy::Hold`], otherwise `Extrapolate`.
+    pub fn initial(self) -> nn::Domain {
+        match self {
+            Self::Hold => nn::Domain::Hold,
+            Self::Extrapolate | Self::Checked => nn::Domain::Extrapolate,
+        }
+    }
+}
+
+impl From<nn::Domain> for DomainPolicy {
+    /// The fixed policy of one domain.
+    fn from(d: nn::Domain) -> Self {
+        match d {
+            nn::Domain::Extrapolate => Self::Extrapolate,
+            nn::Domain::Hold => Self::Hold,
+        }
+    }
+}

@@ -20,7 +20,10 @@ use nn::{Mlp, ShootingRecord};
 use rayon::prelude::*;
 use sysid_core::{Dataset, MmeEstimate};
 
-use super::guard::{self, CandidateScore, FoldScores, GuardCandidate, GuardHeldOut, GuardReport};
+use super::guard::{
+    self, Candidate, CandidateScore, DomainCheck, FoldScores, GuardCandidate, GuardHeldOut,
+    GuardReport,
+};
 use super::{
     FitOptions, Trained, TrainingSet, first_state, hybrid_loaded, judge_outputs, split_last_fifth,
     train_networks, training_pairs_without,
@@ -33,8 +36,9 @@ use crate::progress::{NoProgress, Progress, ProgressSink};
 /// Shortest stretch the guard cuts: shorter records fall back to the last fifth.
 const MIN_STRETCH: usize = 8;
 
-/// Choose among `candidates` (trained on the whole record) by the K-fold guard; returns
-/// the report and the whole-record network of the kept kind.
+/// Choose among `candidates` (trained on the whole record, each with its domain: the
+/// stretches' networks of a kind are judged with that kind's domain) by the K-fold guard;
+/// returns the report, the whole-record network of the kept kind and its domain.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn choose_by_folds(
     spec: &ModelSpec,
@@ -42,10 +46,11 @@ pub(super) fn choose_by_folds(
     data: &Dataset,
     x0: &[f64],
     held: GuardHeldOut,
-    candidates: Vec<(GuardCandidate, Mlp)>,
+    candidates: Vec<Candidate>,
+    domain: DomainCheck,
     opts: &FitOptions,
     progress: &dyn ProgressSink,
-) -> Result<(GuardReport, Mlp)> {
+) -> Result<(GuardReport, Mlp, nn::Domain)> {
     let exp = &data.experiments()[0];
     let len = exp.len();
     // The stretches: K equal ones, or the last fifth alone.
@@ -59,22 +64,17 @@ pub(super) fn choose_by_folds(
     };
     if stretches.is_empty() || stretches.iter().any(|r| r.len() < MIN_STRETCH) {
         let last = guard::held_out(data, None, est, x0, opts)?;
-        let (mut report, kept) = guard::choose(
-            spec,
-            candidates,
-            &last,
-            exp.dt(),
-            opts.substeps,
-            opts.network_domain,
-        )?;
+        let (mut report, kept, kept_domain) =
+            guard::choose(spec, candidates, &last, exp.dt(), opts.substeps, domain)?;
         report.held_out = format!(
             "{} ({held} asked for: fewer than 2 stretches or stretches shorter than \
              {MIN_STRETCH} samples of {len})",
             report.held_out
         );
-        return Ok((report, kept));
+        return Ok((report, kept, kept_domain));
     }
-    let kinds: Vec<GuardCandidate> = candidates.iter().map(|(c, _)| *c).collect();
+    let kinds: Vec<(GuardCandidate, nn::Domain)> =
+        candidates.iter().map(|(c, _, d)| (*c, *d)).collect();
     const TASK: &str = "K-fold guard";
     let done = AtomicUsize::new(0);
     progress.report(&Progress::new(TASK, 0, Some(folds)));
@@ -92,7 +92,13 @@ pub(super) fn choose_by_folds(
     let scores = kinds
         .iter()
         .enumerate()
-        .map(|(i, &c)| pooled(c, per_fold.iter().map(|f| &f.candidates[i])))
+        .map(|(i, &(c, d))| {
+            pooled(
+                c,
+                guard::scored_domain(c, d),
+                per_fold.iter().map(|f| &f.candidates[i]),
+            )
+        })
         .collect();
     let w = window(stretches[0].len(), opts);
     // Stretches whose first window MME could not estimate, and where they started instead.
@@ -130,7 +136,13 @@ pub(super) fn choose_by_folds(
              stretches' squared errors"
         )
     };
-    Ok(guard::decide(scores, candidates, description, per_fold))
+    Ok(guard::decide(
+        scores,
+        candidates,
+        description,
+        per_fold,
+        domain,
+    ))
 }
 
 /// Samples fitted for a stretch's initial state.
@@ -145,7 +157,7 @@ fn fold(
     data: &Dataset,
     x0: &[f64],
     stretch: Range<usize>,
-    kinds: &[GuardCandidate],
+    kinds: &[(GuardCandidate, nn::Domain)],
     opts: &FitOptions,
 ) -> Result<FoldScores> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
@@ -157,22 +169,19 @@ fn fold(
         .map_err(core("cutting a K-fold guard stretch"))?;
     let w = window(stretch.len(), opts);
     let mut candidates = Vec::with_capacity(kinds.len());
-    for &kind in kinds {
+    for &(kind, domain) in kinds {
         let net = match kind {
             GuardCandidate::PhysicsAlone => guard::zero_network(&t.network)?,
             GuardCandidate::Network => t.before.clone(),
             GuardCandidate::Refined => t.network.clone(),
         };
-        let judged = hybrid_loaded(
-            spec,
-            &net,
-            &start,
-            first.dt(),
-            opts.substeps,
-            opts.network_domain,
-        )
-        .and_then(|(_, loaded)| judge_outputs(&loaded, &segment, w));
-        candidates.push(guard::score(kind, judged));
+        let judged = hybrid_loaded(spec, &net, &start, first.dt(), opts.substeps, domain)
+            .and_then(|(_, loaded)| judge_outputs(&loaded, &segment, w));
+        candidates.push(guard::score(
+            kind,
+            guard::scored_domain(kind, domain),
+            judged,
+        ));
     }
     Ok(FoldScores {
         samples: (stretch.start, stretch.end),
@@ -395,6 +404,7 @@ fn fallback_start(
 /// of the mean output variance; failed when any stretch failed.
 fn pooled<'a>(
     candidate: GuardCandidate,
+    domain: Option<nn::Domain>,
     folds: impl Iterator<Item = &'a CandidateScore>,
 ) -> CandidateScore {
     let mut mse: BTreeMap<String, Vec<f64>> = BTreeMap::new();
@@ -403,6 +413,7 @@ fn pooled<'a>(
         if f.held_out_error.is_none() {
             return CandidateScore {
                 candidate,
+                domain,
                 held_out_error: None,
                 rmse: BTreeMap::new(),
                 fit_percent: BTreeMap::new(),
@@ -440,6 +451,7 @@ fn pooled<'a>(
     };
     CandidateScore {
         candidate,
+        domain,
         held_out_error: error.is_finite().then_some(error),
         rmse,
         fit_percent,

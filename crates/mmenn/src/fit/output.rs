@@ -245,10 +245,14 @@ fn fit_report(s: &FitSummary) -> String {
     r.push_str(&format!(
         "The network learnt the correction on {}; outside that box it {}.\n\n",
         bounds.join(", "),
-        match s.network_domain {
-            nn::Domain::Hold => "keeps its value at the box's nearest point (held)",
-            nn::Domain::Extrapolate => {
-                "extrapolates (`--hold-network-domain` holds it at the box's edge instead; \
+        match (s.network_domain, s.guard.domain.policy) {
+            (nn::Domain::Hold, crate::fit::DomainPolicy::Checked) => {
+                "keeps its value at the box's nearest point (held: it failed the stress check, \
+                 see *Which model was kept*)"
+            }
+            (nn::Domain::Hold, _) => "keeps its value at the box's nearest point (held)",
+            (nn::Domain::Extrapolate, _) => {
+                "extrapolates (`--network-domain hold` holds it at the box's edge instead; \
                  `predict` says how often a free run leaves the box)"
             }
         }

@@ -123,8 +123,14 @@ pub(super) fn train_network_on_trajectories(
     let before = match val {
         Some((_, v)) => {
             let dt = v.experiments()[0].dt();
-            let (_, loaded) =
-                hybrid_loaded(spec, network, x0, dt, opts.substeps, opts.network_domain)?;
+            let (_, loaded) = hybrid_loaded(
+                spec,
+                network,
+                x0,
+                dt,
+                opts.substeps,
+                opts.network_domain.initial(),
+            )?;
             let j = judge_outputs(&loaded, v, opts.x0_window)?;
             Some(
                 j.channels
@@ -144,7 +150,7 @@ pub(super) fn train_network_on_trajectories(
         network.clone(),
         x0,
         opts.substeps,
-        opts.network_domain,
+        opts.network_domain.initial(),
     )?;
     let val = val.map_or_else(Vec::new, |(e, d)| shooting(d, e));
     const TASK: &str = "trajectory training";

@@ -124,7 +124,7 @@ fn fit_options(eff: &Effort, substeps: usize, window: usize) -> FitOptions {
         },
         // docs/decisions/hybrid-network-domain-hold.md: beyond its training data the
         // network keeps its edge value; only the physics extrapolates.
-        network_domain: mmenn::nn::Domain::Hold,
+        network_domain: mmenn::fit::DomainPolicy::Hold,
         ..FitOptions::default()
     }
 }

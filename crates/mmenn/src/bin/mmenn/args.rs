@@ -208,9 +208,12 @@ pub(crate) struct CompareArgs {
     /// (as `fit --guard`).
     #[arg(long, default_value = "last-fifth")]
     pub(crate) guard: mmenn::fit::GuardHeldOut,
-    /// Hold MME/NN's network at the edge of its training box (as `fit
-    /// --hold-network-domain`).
-    #[arg(long)]
+    /// What MME/NN's network does outside its training box: checked, extrapolate or hold
+    /// (as `fit --network-domain`).
+    #[arg(long, value_name = "POLICY", default_value = "checked")]
+    pub(crate) network_domain: mmenn::fit::DomainPolicy,
+    /// The same as `--network-domain hold` (as `fit --hold-network-domain`).
+    #[arg(long, conflicts_with = "network_domain")]
     pub(crate) hold_network_domain: bool,
     /// What MME/NN's network reads: states-and-inputs or states (as `fit
     /// --network-inputs`).
@@ -358,11 +361,19 @@ pub(crate) struct FitArgs {
     /// trainings).
     #[arg(long, default_value = "last-fifth")]
     pub(crate) guard: mmenn::fit::GuardHeldOut,
-    /// Hold the network at the edge of the box its training pairs spanned: each of its
-    /// inputs (states, inputs) is clamped to its training range, so beyond the data the
-    /// correction keeps its edge value and only the physics extrapolates (saved in
-    /// model.json; `predict` and `simulate` use it).
-    #[arg(long)]
+    /// What the network does outside the box its training pairs spanned (saved in
+    /// model.json; `predict` and `simulate` use it). checked: the guard runs each network
+    /// candidate and the physics alone free on the held-out input scaled by 1.5 about its
+    /// mean; a candidate whose run fails, or which changes the physics' response by more
+    /// than the response's own RMS size on any output, holds, the others extrapolate (the
+    /// summary says which, with the numbers). extrapolate: the network is evaluated
+    /// wherever it is asked (the thesis), unchecked. hold: each network input (states,
+    /// inputs) is clamped to its training range, so beyond the data the correction keeps
+    /// its edge value and only the physics extrapolates.
+    #[arg(long, value_name = "POLICY", default_value = "checked")]
+    pub(crate) network_domain: mmenn::fit::DomainPolicy,
+    /// The same as `--network-domain hold`.
+    #[arg(long, conflicts_with = "network_domain")]
     pub(crate) hold_network_domain: bool,
     /// What the network reads: states-and-inputs (x̂, u; the thesis) or states (x̂ alone,
     /// for a model that already carries the input's path: a wider input than the training

@@ -420,12 +420,13 @@ fn print_free_run(label: &str, r: &mmenn::fit::FreeRunReport) {
     }
 }
 
-/// The network's behaviour outside its training box from `--hold-network-domain`.
-fn domain(hold: bool) -> mmenn::nn::Domain {
+/// The network's behaviour outside its training box from `--network-domain` and its
+/// shorthand `--hold-network-domain`.
+fn domain(policy: mmenn::fit::DomainPolicy, hold: bool) -> mmenn::fit::DomainPolicy {
     if hold {
-        mmenn::nn::Domain::Hold
+        mmenn::fit::DomainPolicy::Hold
     } else {
-        mmenn::nn::Domain::Extrapolate
+        policy
     }
 }
 
@@ -447,7 +448,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         train_on_trajectories: args.train_on_trajectories,
         training: args.training,
         guard: args.guard,
-        network_domain: domain(args.hold_network_domain),
+        network_domain: domain(args.network_domain, args.hold_network_domain),
         network_inputs: args.network_inputs,
         trajectory: mmenn::nn::TrajectoryConfig {
             window: args.trajectory_window,
@@ -505,6 +506,9 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         s.guard.reason,
         s.guard.held_out
     );
+    for line in s.guard.domain.lines() {
+        outln!("{line}");
+    }
     outln!("wrote {} files into {}", s.files.len(), args.out.display());
     check_mme_converged("fit", s.mme_termination, &args.out)
 }
@@ -571,7 +575,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             seed: a.seed,
             training: a.training,
             guard: a.guard,
-            network_domain: domain(a.hold_network_domain),
+            network_domain: domain(a.network_domain, a.hold_network_domain),
             network_inputs: a.network_inputs,
             ..Default::default()
         },
