@@ -40,6 +40,12 @@ pub struct PolyNarxConfig {
     pub divergence_factor: f64,
     /// What the coefficients minimise. Default [`Focus::Prediction`].
     pub focus: Focus,
+    /// Hold the monomials at the training box: every monomial of degree ≥ 2 is evaluated
+    /// at the scaled variables clamped to the range they spanned over the fitted rows
+    /// (the constant and the linear part see the variables as they are), so an input or a
+    /// simulated output beyond the training range cannot drive a cubic without bound.
+    /// Default false (the plain polynomial).
+    pub hold: bool,
 }
 
 /// What the coefficients minimise (the "focus" of MATLAB's `nlarx`).
@@ -67,6 +73,7 @@ impl Default for PolyNarxConfig {
             nonlinear_lags: 2,
             divergence_factor: 100.0,
             focus: Focus::Prediction,
+            hold: false,
         }
     }
 }
@@ -120,6 +127,10 @@ pub struct PolyNarxModel {
     input_names: Vec<String>,
     output_names: Vec<String>,
     limits: Vec<(f64, f64)>,
+    /// Per regressor variable, the range of its scaled values over the fitted rows, when
+    /// the monomials are held there ([`PolyNarxConfig::hold`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    held: Option<Vec<(f64, f64)>>,
 }
 
 #[derive(Deserialize)]
@@ -132,6 +143,8 @@ struct PolyNarxRaw {
     input_names: Vec<String>,
     output_names: Vec<String>,
     limits: Vec<(f64, f64)>,
+    #[serde(default)]
+    held: Option<Vec<(f64, f64)>>,
 }
 
 impl TryFrom<PolyNarxRaw> for PolyNarxModel {
@@ -146,6 +159,7 @@ impl TryFrom<PolyNarxRaw> for PolyNarxModel {
             input_names: r.input_names,
             output_names: r.output_names,
             limits: r.limits,
+            held: r.held,
         };
         model.validate()?;
         Ok(model)
@@ -226,6 +240,22 @@ impl PolyNarxModel {
                 expected: self.terms.len(),
             });
         }
+        if let Some(held) = &self.held {
+            if held.len() != len {
+                return Err(BaselineError::Dimension {
+                    what: "held ranges vs regressor length",
+                    found: held.len(),
+                    expected: len,
+                });
+            }
+            check_config(
+                "polynomial NARX held ranges",
+                f64::NAN,
+                "must be finite with low ≤ high",
+                held.iter()
+                    .all(|(lo, hi)| lo.is_finite() && hi.is_finite() && lo <= hi),
+            )?;
+        }
         if self.limits.len() != self.output_names.len() {
             return Err(BaselineError::Dimension {
                 what: "divergence limits vs NARX output channels",
@@ -254,6 +284,39 @@ impl PolyNarxModel {
     /// The tapped delays.
     pub fn orders(&self) -> NarxOrders {
         self.orders
+    }
+
+    /// Per regressor variable, the range (scaled) at which the monomials are held, when
+    /// they are ([`PolyNarxConfig::hold`]).
+    pub fn held(&self) -> Option<&[(f64, f64)]> {
+        self.held.as_deref()
+    }
+
+    /// The value of term `vars` at the scaled regressor `z` (`zc`: `z` clamped to the
+    /// held ranges, or `z` itself): a monomial of degree ≥ 2 is evaluated at `zc`.
+    fn term_value(vars: &[usize], z: &[f64], zc: &[f64]) -> f64 {
+        let v = if vars.len() >= 2 { zc } else { z };
+        vars.iter().map(|&i| v[i]).product()
+    }
+
+    /// Whether scaled variable `i` at `zi` lies outside its held range (never when
+    /// nothing is held).
+    fn beyond(&self, i: usize, zi: f64) -> bool {
+        self.held
+            .as_ref()
+            .is_some_and(|h| zi < h[i].0 || zi > h[i].1)
+    }
+
+    /// `zc = z` clamped to the held ranges (a copy of `z` when nothing is held).
+    fn clamp_into(&self, z: &[f64], zc: &mut [f64]) {
+        match &self.held {
+            Some(held) => {
+                for ((c, v), (lo, hi)) in zc.iter_mut().zip(z).zip(held) {
+                    *c = v.clamp(*lo, *hi);
+                }
+            }
+            None => zc.copy_from_slice(z),
+        }
     }
 
     /// Number of terms (constant included).
@@ -311,6 +374,8 @@ impl PolyNarxModel {
 /// Scratch of one step: the scaled regressor.
 pub(crate) struct PolyScratch {
     z: Vec<f64>,
+    /// `z` clamped to the held ranges.
+    zc: Vec<f64>,
 }
 
 impl OneStep for PolyNarxModel {
@@ -335,6 +400,7 @@ impl OneStep for PolyNarxModel {
     fn scratch(&self) -> PolyScratch {
         PolyScratch {
             z: vec![0.0; self.centre.len()],
+            zc: vec![0.0; self.centre.len()],
         }
     }
 
@@ -346,9 +412,10 @@ impl OneStep for PolyNarxModel {
         {
             *z = (r - c) / sc;
         }
+        self.clamp_into(&s.z, &mut s.zc);
         out.fill(0.0);
         for (t, vars) in self.terms.iter().enumerate() {
-            let phi: f64 = vars.iter().map(|&i| s.z[i]).product();
+            let phi = Self::term_value(vars, &s.z, &s.zc);
             for (c, o) in out.iter_mut().enumerate() {
                 *o += self.coefficients[(c, t)] * phi;
             }
@@ -443,9 +510,13 @@ pub fn fit_poly_narx(data: &Dataset, config: &PolyNarxConfig) -> Result<PolyNarx
     }
     let mut phi = DMatrix::zeros(n, t);
     let mut z = vec![0.0; len];
+    // The range of each scaled variable over the fitted rows (where a held monomial is
+    // evaluated as it is).
+    let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); len];
     for r in 0..n {
         for (i, zi) in z.iter_mut().enumerate() {
             *zi = (rows.inputs[(i, r)] - centre[i]) / scale[i];
+            range[i] = (range[i].0.min(*zi), range[i].1.max(*zi));
         }
         for (j, vars) in degree_terms.iter().enumerate() {
             phi[(r, j)] = vars.iter().map(|&i| z[i]).product();
@@ -465,6 +536,7 @@ pub fn fit_poly_narx(data: &Dataset, config: &PolyNarxConfig) -> Result<PolyNarx
         input_names: data.input_names(),
         output_names: data.output_names(),
         limits: divergence_limits(data, config.divergence_factor)?,
+        held: config.hold.then_some(range),
     };
     model.validate()?;
     let refinement = match config.focus {
@@ -558,6 +630,7 @@ impl SimulationError<'_> {
         let ring_len = o.na + 1;
         let mut reg = vec![0.0; len];
         let mut z = vec![0.0; len];
+        let mut zc = vec![0.0; len];
         let mut phi = vec![0.0; t_count];
         let mut grad = vec![0.0; p * n_out_vars];
         let mut row = vec![0.0; n_par];
@@ -582,8 +655,9 @@ impl SimulationError<'_> {
                 for i in 0..len {
                     z[i] = (reg[i] - m.centre[i]) / m.scale[i];
                 }
+                m.clamp_into(&z, &mut zc);
                 for (f, vars) in phi.iter_mut().zip(&m.terms) {
-                    *f = vars.iter().map(|&i| z[i]).product();
+                    *f = PolyNarxModel::term_value(vars, &z, &zc);
                 }
                 for c in 0..p {
                     let th = &theta[c * t_count..(c + 1) * t_count];
@@ -599,8 +673,17 @@ impl SimulationError<'_> {
                     for c in 0..p {
                         let th = &theta[c * t_count..(c + 1) * t_count];
                         for (t, ders) in self.derivatives.iter().enumerate() {
+                            let monomial = m.terms[t].len() >= 2;
                             for (v, mult, rest) in ders {
-                                let d: f64 = rest.iter().map(|&i| z[i]).product();
+                                // A held monomial is flat in a variable outside its range.
+                                if monomial && m.beyond(*v, z[*v]) {
+                                    continue;
+                                }
+                                let d: f64 = if monomial {
+                                    rest.iter().map(|&i| zc[i]).product()
+                                } else {
+                                    rest.iter().map(|&i| z[i]).product()
+                                };
                                 grad[c * n_out_vars + v] += th[t] * mult * d;
                             }
                         }
@@ -789,6 +872,77 @@ mod tests {
         );
     }
 
+    impl PolyNarxModel {
+        /// The range of scaled regressor variable `i` over `data`'s training rows.
+        fn held_range_of(&self, i: usize, data: &Dataset) -> (f64, f64) {
+            let rows = training_rows(data, &self.orders).unwrap();
+            rows.inputs
+                .row(i)
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                    let z = (v - self.centre[i]) / self.scale[i];
+                    (a.min(z), b.max(z))
+                })
+        }
+    }
+
+    /// A cubic in the input, fitted on |u| ≤ 1: run on an input 30 times larger, the plain
+    /// polynomial leaves its divergence limits and the held one stays bounded; on the
+    /// fitted record's own regressors (one-step prediction) the two agree to the bit.
+    #[test]
+    fn held_monomials_stay_bounded_beyond_the_training_range() {
+        let n = 400;
+        let wave = |a: f64| -> Vec<f64> {
+            (0..n)
+                .map(|k| a * ((0.37 * k as f64).sin() * 0.7 + 0.3 * (0.11 * k as f64).cos()))
+                .collect()
+        };
+        let truth = |u: &[f64]| -> Vec<f64> {
+            let mut y = vec![0.0; u.len()];
+            for k in 1..u.len() {
+                y[k] = 0.5 * y[k - 1] + u[k - 1] + 0.3 * u[k - 1].powi(3);
+            }
+            y
+        };
+        let u = wave(1.0);
+        let train = dataset(u.clone(), truth(&u));
+        let config = |hold| PolyNarxConfig {
+            orders: NarxOrders {
+                na: 1,
+                nb: 1,
+                nk: 1,
+            },
+            degree: 3,
+            nonlinear_lags: 1,
+            hold,
+            ..PolyNarxConfig::default()
+        };
+        let plain = fit_poly_narx(&train, &config(false)).unwrap().model;
+        let held = fit_poly_narx(&train, &config(true)).unwrap().model;
+        assert!(plain.held().is_none());
+        assert_eq!(held.held().map(<[_]>::len), Some(2));
+        let e = &train.experiments()[0];
+        let (a, b) = (plain.predict(e, 1).unwrap(), held.predict(e, 1).unwrap());
+        for (x, y) in a.outputs.iter().zip(b.outputs.iter()) {
+            assert!(x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()));
+        }
+        let big = wave(30.0);
+        let far = dataset(big.clone(), truth(&big));
+        let e = &far.experiments()[0];
+        assert!(matches!(
+            plain.simulate(e),
+            Err(BaselineError::Diverged { .. })
+        ));
+        let sim = held.simulate(e).unwrap();
+        let peak = sim
+            .outputs
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold(0.0_f64, |m, v| m.max(v.abs()));
+        // The linear part alone: |y| ≤ 2·30 + the held cubic's edge value (< 1).
+        assert!(peak < 70.0, "peak {peak}");
+    }
+
     fn dataset(u: Vec<f64>, y: Vec<f64>) -> Dataset {
         let n = u.len();
         Dataset::new(
@@ -819,6 +973,17 @@ mod tests {
     /// The exact sensitivities of the free run against central differences.
     #[test]
     fn simulation_jacobian_matches_finite_differences() {
+        jacobian_check(None);
+    }
+
+    /// The same with the monomials held at ranges narrower than the data's (60 % of each
+    /// width about its middle), so that many samples evaluate clamped monomials.
+    #[test]
+    fn held_simulation_jacobian_matches_finite_differences() {
+        jacobian_check(Some(0.6));
+    }
+
+    fn jacobian_check(held: Option<f64>) {
         let n = 120;
         let u: Vec<f64> = (0..n)
             .map(|k| (0.21 * k as f64).sin() + 0.3 * (0.05 * k as f64).cos())
@@ -843,7 +1008,18 @@ mod tests {
             },
         )
         .unwrap();
-        let model = &fit.model;
+        let mut model = fit.model.clone();
+        if let Some(share) = held {
+            let ranges = (0..model.centre.len())
+                .map(|i| {
+                    let (lo, hi) = fit.model.held_range_of(i, &data);
+                    let (mid, half) = (0.5 * (lo + hi), 0.5 * share * (hi - lo));
+                    (mid - half, mid + half)
+                })
+                .collect();
+            model.held = Some(ranges);
+        }
+        let model = &model;
         let problem = SimulationError {
             model,
             data: &data,
