@@ -11,9 +11,15 @@
 //! * Dead-zone widths `δ` at the `dead_zone_quantiles` of `|u|` (default 10 % and 25 %).
 //! * Overflow rims `L` at the `overflow_quantiles` of a level's estimated values (default
 //!   75 % and 90 %), positive ones only (a rim is a height above the tank's floor), and
-//!   only for a level whose values pile up under a top edge (`overflow_pileup`).
+//!   only for a level whose values pile up under a top edge (`overflow_pileup`) — or
+//!   for a level no output reads. A measured level shows its rim in its values; an
+//!   unmeasured one cannot: its estimated values follow the assumed model, which has no
+//!   rim, wherever the data are silent, so the pile-up test would ask the assumed model to
+//!   show the effect it lacks. There the free-run search and the judge decide alone.
 //! * Orifice outflow `√h_j` and overflow `max(h_j − L, 0)` only in the balance of tank `j` itself and of tanks the
-//!   assumed model connects it to (`A[i][j] ≠ 0`).
+//!   assumed model connects it to: `A[i][j] ≠ 0`, or a term of the assumed model in
+//!   equation `i` (or transferring into it) reads `h_j` (`LibraryConfig::connections`; a
+//!   Torricelli model has `A = 0` and its tanks connected by `√h` terms only).
 //!
 //! Saturation and dead zone are tried only in equations where the input acts in the
 //! assumed model (`B[i, j] ≠ 0`): they are the missing part `b·(sat(u) − u)` of an
@@ -28,7 +34,7 @@
 
 use std::collections::BTreeMap;
 
-use sysid_core::{Expr, LinearModel, term_variables};
+use sysid_core::{Expr, LinearModel, TermModel, term_variables};
 
 use crate::catalogue::{Effect, Slot, coefficient_unit, round_significant};
 use crate::error::{DiscoveryError, Result};
@@ -56,6 +62,10 @@ pub struct LibraryConfig {
     pub overflow_pileup: f64,
     /// Coulomb smoothing width as a fraction of the velocity's RMS (> 0). Default 0.01.
     pub eps_fraction: f64,
+    /// `(equation, state)` pairs the assumed model connects through its nonlinear terms
+    /// besides `A` ([`term_connections`]): where orifice and overflow laws of a tank may
+    /// enter. Default none (the linear part alone).
+    pub connections: Vec<(usize, usize)>,
     /// Stribeck velocity as a fraction of the velocity's RMS (> 0). Default 0.1.
     pub stribeck_fraction: f64,
 }
@@ -73,6 +83,7 @@ impl Default for LibraryConfig {
             overflow_pileup: 0.22,
             eps_fraction: 0.01,
             stribeck_fraction: 0.1,
+            connections: Vec::new(),
         }
     }
 }
@@ -221,6 +232,13 @@ pub fn build_library(
         .collect();
 
     let enabled = |e: Effect| config.effects.contains(&e) && e.is_candidate();
+    // Whether tank `v`'s laws may enter equation `eq`: its own balance, or one the
+    // assumed model connects it to (through `A` or a term).
+    let connected = |eq: usize, v: usize| {
+        v == eq || model.a()[(eq, v)] != 0.0 || config.connections.contains(&(eq, v))
+    };
+    // Whether no output reads state `v`.
+    let unmeasured = |v: usize| (0..model.c().nrows()).all(|r| model.c()[(r, v)] == 0.0);
     let mut out = Vec::with_capacity(corrected.len());
     for (correction, &eq) in corrected.iter().enumerate() {
         let kind = roles.equation_kind(eq);
@@ -344,7 +362,7 @@ pub fn build_library(
                     // a flow between tanks the model does not connect is not an orifice
                     // law but a missing pipe, outside this effect.
                     for v in states_with(effect, roles) {
-                        if v == eq || model.a()[(eq, v)] != 0.0 {
+                        if connected(eq, v) {
                             push(effect, vec![v], vec![])?;
                         }
                     }
@@ -352,12 +370,14 @@ pub fn build_library(
                 Effect::Overflow => {
                     // Where an orifice law may enter: the tank's own balance (a loss) and
                     // the tanks the model connects it to (the spill falling into them).
+                    // A measured level must show its rim (its values pile up under a top
+                    // edge); an unmeasured level's values cannot show one (module docs).
                     for v in states_with(effect, roles) {
-                        if v != eq && model.a()[(eq, v)] == 0.0 {
+                        if !connected(eq, v) {
                             continue;
                         }
                         let values = series(v);
-                        if !piles_up(&values, config.overflow_pileup) {
+                        if !unmeasured(v) && !piles_up(&values, config.overflow_pileup) {
                             continue;
                         }
                         let mut used: Vec<f64> = Vec::new();
@@ -394,6 +414,25 @@ pub fn build_library(
         });
     }
     Ok(out)
+}
+
+/// `(equation, state)` pairs that the terms of `model` connect: a term of equation `i`
+/// (or transferring into `i`) that reads state `j`, `j ≠ i`. With `A`, where a tank's
+/// orifice and overflow laws may enter ([`LibraryConfig::connections`]).
+pub fn term_connections(model: &TermModel) -> Vec<(usize, usize)> {
+    let n = model.linear().n_states();
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for t in model.terms() {
+        for v in t.expr.variables_used().into_iter().filter(|&v| v < n) {
+            for eq in std::iter::once(t.state).chain(t.into) {
+                if eq != v && !out.contains(&(eq, v)) {
+                    out.push((eq, v));
+                }
+            }
+        }
+    }
+    out.sort_unstable();
+    out
 }
 
 /// Whether a level's values pile up under a top edge, as a tank's level does when it
@@ -548,6 +587,92 @@ mod tests {
             .find(|c| c.effect == Effect::GravityNonlinearity)
             .unwrap_or_else(|| panic!("no gravity"));
         assert_eq!(gravity.coefficient_unit.as_deref(), Some("rad/s^2"));
+    }
+
+    /// A Torricelli model of two cascaded tanks (`A = 0`: the tanks are connected by
+    /// `√h` terms only) whose upper level is not measured and whose values do not pile
+    /// up. The terms connect tank 1 to tank 2's balance, so tank 1's orifice and overflow
+    /// laws are offered there; overflow of the unmeasured upper tank is offered (its
+    /// values cannot show a rim), of the measured lower one only if it piled up (it does
+    /// not); with the upper level measured and not piling up, its overflow is not offered.
+    #[test]
+    fn unmeasured_level_connected_by_terms_gets_overflow() {
+        let linear = |c: DMatrix<f64>, outputs: Vec<String>| {
+            let names = ModelNames {
+                states: vec!["h1".into(), "h2".into()],
+                inputs: vec!["u".into()],
+                outputs,
+                corrections: vec!["h1".into(), "h2".into()],
+            };
+            LinearModel::with_names(
+                DMatrix::zeros(2, 2),
+                DMatrix::from_row_slice(2, 1, &[0.04, 0.0]),
+                c,
+                DMatrix::identity(2, 2),
+                names,
+            )
+            .unwrap_or_else(|e| panic!("{e}"))
+        };
+        let lower_only = linear(
+            DMatrix::from_row_slice(1, 2, &[0.0, 1.0]),
+            vec!["h2".into()],
+        );
+        let model = TermModel::from_specs(
+            lower_only.clone(),
+            [
+                ("h1", "orifice_outflow", "sqrt(abs(h1))", -0.04),
+                ("h2", "orifice_outflow", "sqrt(abs(h1))", 0.07),
+                ("h2", "orifice_outflow", "sqrt(abs(h2))", -0.09),
+            ],
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(term_connections(&model), vec![(1, 0)]);
+        let units = BTreeMap::new(); // names h1, h2: levels
+        let roles = StateRoles::infer(&lower_only, &units, &[]).unwrap_or_else(|e| panic!("{e}"));
+        let len = 400;
+        // Levels spread evenly (no top edge): ratio 0.44 for both.
+        let states = DMatrix::from_fn(2, len, |i, k| {
+            (2.0 + 8.0 * k as f64 / len as f64) * (1.0 - 0.3 * i as f64)
+        });
+        let inputs = DMatrix::from_fn(1, len, |_, k| 3.0 + (k as f64 * 0.07).cos());
+        let s =
+            Samples::new(states, inputs, DMatrix::zeros(2, len)).unwrap_or_else(|e| panic!("{e}"));
+        let samples = std::slice::from_ref(&s);
+        let config = LibraryConfig {
+            connections: term_connections(&model),
+            ..LibraryConfig::default()
+        };
+        let terms = |lib: &[EquationLibrary], eq: usize, effect: Effect| -> Vec<String> {
+            lib[eq]
+                .candidates
+                .iter()
+                .filter(|c| c.effect == effect)
+                .map(|c| c.variables.join(","))
+                .collect()
+        };
+        let lib = build_library(&lower_only, &roles, &units, samples, &config)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(terms(&lib, 1, Effect::OrificeOutflow), vec!["h1", "h2"]);
+        // Rims at the 75 % and 90 % quantiles of the upper level, in both balances.
+        assert_eq!(terms(&lib, 0, Effect::Overflow), vec!["h1", "h1"]);
+        assert_eq!(terms(&lib, 1, Effect::Overflow), vec!["h1", "h1"]);
+        // Without the terms' connections the lower balance gets nothing of tank 1.
+        let plain = build_library(
+            &lower_only,
+            &roles,
+            &units,
+            samples,
+            &LibraryConfig::default(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(terms(&plain, 1, Effect::OrificeOutflow), vec!["h2"]);
+        assert!(terms(&plain, 1, Effect::Overflow).is_empty());
+        // Both levels measured: neither piles up, so no overflow anywhere.
+        let both = linear(DMatrix::identity(2, 2), vec!["h1".into(), "h2".into()]);
+        let lib = build_library(&both, &roles, &units, samples, &config)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert!(terms(&lib, 0, Effect::Overflow).is_empty());
+        assert!(terms(&lib, 1, Effect::Overflow).is_empty());
     }
 
     /// Two cascaded tanks (h1 drains into h2): tank 1's balance may get only its own

@@ -28,7 +28,7 @@ pub use augment::{
     Calibration, CalibrationConfig, InitialState, OutputWeights, augment, calibrate, free_run_cost,
     measured_values, simulate_outputs,
 };
-pub use candidates::{Candidate, EquationLibrary, LibraryConfig, build_library};
+pub use candidates::{Candidate, EquationLibrary, LibraryConfig, build_library, term_connections};
 pub use catalogue::{Effect, Slot, coefficient_unit};
 pub use error::{DiscoveryError, Result};
 pub use floor::NoiseFloor;

@@ -43,8 +43,8 @@ pub use plan::{FINAL_STEPS, Observer, STEPS_PER_ROUND, Silent};
 pub use report::{Ambiguity, AssumedEntry, NamedEffect, Round};
 pub use steps::d_rms;
 use steps::{
-    alternative_explanation, final_stand_in, free_run_states, noise_floor, round_candidates,
-    trim_ends, validation_cost, without, x0_of,
+    alternative_explanation, final_stand_in, first_estimate, free_run_states, noise_floor,
+    round_candidates, trim_ends, validation_cost, without, x0_of,
 };
 
 /// Largest free-run cost `J = (1/M) Σ r²/R` (1 for a right model and right noise
@@ -216,7 +216,7 @@ fn run_planned<M: Mme + Sync>(
     observer: &Plan<'_>,
 ) -> Result<Outcome, M::Error> {
     observer.stage(0, "MME with the assumed model");
-    let first = mme.estimate(model, data, None)?;
+    let first = first_estimate(mme, model, data)?;
     let x0_guess: Vec<f64> = first.experiments[0]
         .states
         .column(0)
@@ -264,7 +264,13 @@ fn run_planned<M: Mme + Sync>(
             units,
             &samples,
             &floor,
-            &DiscoveryConfig::default(),
+            &DiscoveryConfig {
+                library: LibraryConfig {
+                    connections: crate::term_connections(&current),
+                    ..LibraryConfig::default()
+                },
+                ..DiscoveryConfig::default()
+            },
         )?;
         first_verdict.get_or_insert(found.verdict);
         let exp = &data.experiments()[0];

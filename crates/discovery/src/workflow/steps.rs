@@ -176,7 +176,11 @@ pub(super) fn round_candidates(
 ) -> crate::Result<(Vec<RefineCandidate>, Vec<usize>)> {
     let linear = model.linear();
     let roles = StateRoles::infer(linear, units, &[])?;
-    let libraries = build_library(linear, &roles, units, samples, &LibraryConfig::default())?;
+    let library = LibraryConfig {
+        connections: crate::term_connections(model),
+        ..LibraryConfig::default()
+    };
+    let libraries = build_library(linear, &roles, units, samples, &library)?;
     let mut candidates: Vec<RefineCandidate> = Vec::new();
     for lib in &libraries {
         for c in &lib.candidates {
@@ -228,6 +232,32 @@ pub(super) fn without(model: &TermModel, drop: &[usize]) -> crate::Result<TermMo
         .map(|(_, t)| t)
         .collect();
     Ok(TermModel::new(linear, kept)?)
+}
+
+/// MME with the assumed model, the workflow's first estimate: from MME's data-based start,
+/// and when that finds no finite solution, from the open-loop run of the model from
+/// initial states fitted by free-run error on every record
+/// ([`crate::augment::fit_initial_states`], default calibration settings). The
+/// data-based start puts an unmeasured state at 0 (the minimum-norm `C⁺y`), where a term
+/// such as a tank's `√|h|` has no finite slope: with the upper level unmeasured, a
+/// Torricelli model of two cascaded tanks stopped there with "no finite rollout found".
+/// When the retry fails too, the data-based start's error is returned.
+pub(super) fn first_estimate<M: Mme>(
+    mme: &M,
+    model: &TermModel,
+    data: &Dataset,
+) -> Result<MmeEstimate, M::Error> {
+    match mme.estimate(model, data, None) {
+        Ok(e) => Ok(e),
+        Err(error) => {
+            let Ok(fit) =
+                crate::augment::fit_initial_states(model, data, &[], &CalibrationConfig::default())
+            else {
+                return Err(error);
+            };
+            mme.estimate(model, data, Some(&fit.x0)).map_err(|_| error)
+        }
+    }
 }
 
 /// Initial states of every record from MME's `x̂(t0)`.
