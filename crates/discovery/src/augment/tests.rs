@@ -1,6 +1,16 @@
 use super::*;
 use sysid_core::{Channel, Experiment};
 
+/// One record of input `u` and measured state `x`, sampled every `dt`.
+fn one_record(dt: f64, u: DMatrix<f64>, y: DMatrix<f64>) -> Dataset {
+    Dataset::new(
+        vec![Channel::new("u")],
+        vec![Channel::new("x")],
+        vec![Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"))],
+    )
+    .unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// ẋ = −a·x + u with the term −b·x³ hidden: data simulated with b = 0.5 (no noise);
 /// calibration from b = 0.2 recovers 0.5 (noise-free, so to solver precision).
 #[test]
@@ -16,12 +26,7 @@ fn recovers_a_cubic_coefficient_without_noise() {
         .unwrap_or_else(|e| panic!("{e}"));
     let y = simulate_outputs(&truth, linear.c(), &[1.0], &blank, &integrator)
         .unwrap_or_else(|e| panic!("{e}"));
-    let data = Dataset::new(
-        vec![Channel::new("u")],
-        vec![Channel::new("x")],
-        vec![Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"))],
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let data = one_record(dt, u, y);
     let start = TermModel::from_specs(linear, [("x", "cubic_stiffness", "x^3", -0.2)])
         .unwrap_or_else(|e| panic!("{e}"));
     let cal = calibrate(&start, &data, &[vec![1.0]], &CalibrationConfig::default())
@@ -45,12 +50,7 @@ fn a_start_the_solver_cannot_leave_is_no_calibration() {
     let dt = 0.05;
     let u = DMatrix::zeros(1, len);
     let y = DMatrix::from_fn(1, len, |_, k| (0.3 * k as f64).sin());
-    let data = Dataset::new(
-        vec![Channel::new("u")],
-        vec![Channel::new("x")],
-        vec![Experiment::new(0.0, dt, u, y).unwrap_or_else(|e| panic!("{e}"))],
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let data = one_record(dt, u, y);
     let start = TermModel::from_specs(linear, [("x", "cubic_stiffness", "x^3", -0.2)])
         .unwrap_or_else(|e| panic!("{e}"));
     let got = calibrate(&start, &data, &[vec![0.0]], &CalibrationConfig::default());
