@@ -136,8 +136,17 @@ pub fn narx_rows(
     if let Err(e) = narx_inner(data, mode, table, sims, offset) {
         table.note(format!("NARX: not built: {e:#}"));
     }
-    if let Err(e) = poly_narx_inner(data, mode, table, sims, offset) {
-        table.note(format!("Polynomial NARX: not built: {e:#}"));
+    match poly_narx_inner(data, mode, table, sims, offset, None) {
+        Ok(chosen) => {
+            // docs/decisions/poly-narx-stress-selection.md: a second row whose selection
+            // refuses candidates that diverge on the held-out input scaled by 1.5.
+            if let Err(e) = poly_narx_inner(data, mode, table, sims, offset, Some(chosen)) {
+                table.note(format!(
+                    "Polynomial NARX, stress-checked selection: not built: {e:#}"
+                ));
+            }
+        }
+        Err(e) => table.note(format!("Polynomial NARX: not built: {e:#}")),
     }
 }
 
@@ -300,16 +309,40 @@ fn poly_grid(mode: Mode) -> Vec<(usize, usize, usize)> {
     grid
 }
 
+/// Input scale of the polynomial NARX's stress-checked selection
+/// (docs/decisions/poly-narx-stress-selection.md; `mmenn fit`'s guard uses the same).
+const POLY_STRESS: f64 = 1.5;
+
+/// `exp` with each input scaled by [`POLY_STRESS`] about its mean.
+fn stressed(exp: &Experiment) -> Result<Experiment> {
+    let mut u = exp.inputs().clone();
+    for mut r in u.row_iter_mut() {
+        let mean = r.mean();
+        for v in r.iter_mut() {
+            *v = mean + POLY_STRESS * (*v - mean);
+        }
+    }
+    Ok(
+        Experiment::new(exp.t0(), exp.dt(), u, exp.outputs().clone())?
+            .with_intersample(exp.intersample()),
+    )
+}
+
 /// Polynomial NARX rows under the official protocol: every candidate of [`poly_grid`]
 /// fitted on the first 80 % of the samples the network NARX's order selection uses and run
-/// free over the rest; the best is refitted on the whole training record.
+/// free over the rest; the best is refitted on the whole training record. With
+/// `stress_after` (the unconstrained selection's choice), the stress-checked selection of
+/// docs/decisions/poly-narx-stress-selection.md: a candidate whose held-out free run
+/// diverges with the input scaled by [`POLY_STRESS`] is not chosen, and no row is added
+/// when it chooses what the unconstrained selection chose. Returns the choice.
 fn poly_narx_inner(
     data: &BenchmarkData,
     mode: Mode,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
-) -> Result<()> {
+    stress_after: Option<(usize, usize, usize)>,
+) -> Result<(usize, usize, usize)> {
     let b = data.benchmark;
     let window = b.init_window();
     let (scale, unit) = b.reporting_unit();
@@ -317,6 +350,22 @@ fn poly_narx_inner(
     let clock = Instant::now();
     let (used, head, tail, y_tail) = selection_split(est, plan(b, mode).select_samples)?;
     let tail = &tail;
+    let tail_stressed = match stress_after {
+        Some(_) => Some(stressed(tail)?),
+        None => None,
+    };
+    // A candidate's held-out score; under the stress check, an error when its free run on
+    // the stressed held-out input fails.
+    let score = |c: &PolyNarxConfig| -> Result<f64, String> {
+        let fit = fit_poly_narx(&head, c).map_err(|e| failure(&e))?;
+        let r = held_out(fit.model.simulate(tail), &y_tail, window, scale)?;
+        if let Some(st) = &tail_stressed {
+            fit.model.simulate(st).map_err(|e| {
+                format!("refused: its free run with the input scaled by {POLY_STRESS} fails ({}; {r:.4} unscaled)", failure(&e))
+            })?;
+        }
+        Ok(r)
+    };
     let max_iterations = match mode {
         Mode::Quick => 10,
         Mode::Full => 30,
@@ -337,13 +386,7 @@ fn poly_narx_inner(
         if d > window {
             continue;
         }
-        let scored = held_out(
-            fit_poly_narx(&head, &config(d, degree, nl)).and_then(|f| f.model.simulate(tail)),
-            &y_tail,
-            window,
-            scale,
-        );
-        match scored {
+        match score(&config(d, degree, nl)) {
             Ok(r) => {
                 tried.push(format!("({d}, {degree}, {nl}): {r:.4}"));
                 if best.is_none_or(|(_, b)| r < b) {
@@ -369,12 +412,7 @@ fn poly_narx_inner(
         if d > window {
             break;
         }
-        match held_out(
-            fit_poly_narx(&head, &config(d, degree, nl)).and_then(|f| f.model.simulate(tail)),
-            &y_tail,
-            window,
-            scale,
-        ) {
+        match score(&config(d, degree, nl)) {
             Ok(r) => {
                 tried.push(format!("({d}, {degree}, {nl}): {r:.4}"));
                 if r >= r0 {
@@ -392,11 +430,28 @@ fn poly_narx_inner(
     let Some(((d, degree, nl), _)) = best else {
         anyhow::bail!("every candidate failed: {}", tried.join("; "));
     };
+    if stress_after == Some((d, degree, nl)) {
+        table.note(format!(
+            "Polynomial NARX, stress-checked selection (docs/decisions/\
+             poly-narx-stress-selection.md: a candidate whose held-out free run fails with the \
+             input scaled by {POLY_STRESS} about its mean is not chosen): it chooses ({d}, \
+             {degree}, {nl}) as the row above does, so no second row (held-out, {unit}: {}).",
+            tried.join(", ")
+        ));
+        return Ok((d, degree, nl));
+    }
     let clock = Instant::now();
     let fit = fit_poly_narx(&data.estimation, &config(d, degree, nl))?;
     let fit_seconds = clock.elapsed().as_secs_f64();
-    let label =
-        format!("polynomial NARX (na = nb = {d}, degree {degree}, chosen on held-out data)");
+    let label = match stress_after {
+        None => {
+            format!("polynomial NARX (na = nb = {d}, degree {degree}, chosen on held-out data)")
+        }
+        Some(_) => format!(
+            "polynomial NARX, stress-checked selection (na = nb = {d}, degree {degree}, chosen \
+             on held-out data)"
+        ),
+    };
     let protocol = format!(
         "{OFFICIAL}: all training samples at full rate; delay window = the first {d} of the {window} initialisation samples, RMSE after them"
     );
@@ -405,13 +460,24 @@ fn poly_narx_inner(
         data,
         &label,
         &protocol,
-        "polynomial NARX",
+        match stress_after {
+            None => "polynomial NARX",
+            Some(_) => "polynomial NARX (stress-checked)",
+        },
         table,
         sims,
         offset,
     );
+    let intro = match stress_after {
+        None => format!("Polynomial NARX ({OFFICIAL}; docs/decisions/polynomial-narx-baseline.md)"),
+        Some(_) => format!(
+            "Polynomial NARX, stress-checked selection ({OFFICIAL}; docs/decisions/\
+             poly-narx-stress-selection.md: as the row above, but a candidate whose held-out \
+             free run fails with the input scaled by {POLY_STRESS} about its mean is not chosen)"
+        ),
+    };
     table.note(format!(
-        "Polynomial NARX ({OFFICIAL}; docs/decisions/polynomial-narx-baseline.md): \
+        "{intro}: \
          y(k) = a constant + every output lag and input tap (na = nb, nk = 1) + every monomial \
          of degree 2..=degree in the newest `nl` output lags and input taps, variables \
          centred and scaled by the training record (not held at their training range: \
@@ -436,5 +502,5 @@ fn poly_narx_inner(
     ));
     table.set_for_model(&label, "train_s", select_seconds + fit_seconds);
     table.set_for_model(&label, "threads", 1.0);
-    Ok(())
+    Ok((d, degree, nl))
 }
