@@ -41,7 +41,7 @@ pub use choices::{
 };
 pub use guard::{
     CandidateScore, DomainCheck, FoldScores, GuardCandidate, GuardHeldOut, GuardReport,
-    STRESS_FACTOR, StressChannel, StressCheck, StressVerdict,
+    STRESS_FACTOR, StressChannel, StressCheck, StressVerdict, stress_input,
 };
 pub use output::write_fit;
 use trajectory::train_network_on_trajectories;

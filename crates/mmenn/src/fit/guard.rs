@@ -692,9 +692,10 @@ pub(crate) fn check_domains(
     ))
 }
 
-/// The first record with each input scaled by [`STRESS_FACTOR`] about its mean (its
-/// measured outputs unchanged: the stress runs score nothing).
-fn stress_input(exp: &Experiment) -> Result<Experiment> {
+/// The record with each input scaled by [`STRESS_FACTOR`] about its mean (its measured
+/// outputs unchanged: the stress runs score nothing). The guard's stress input, and the
+/// reproduce's stress-checked polynomial NARX selection's.
+pub fn stress_input(exp: &Experiment) -> Result<Experiment> {
     let mut u = exp.inputs().clone();
     for mut row in u.row_iter_mut() {
         let mean = row.mean();
@@ -859,6 +860,11 @@ mod tests {
         let dt = 0.05;
         let u = nalgebra::DMatrix::from_element(1, n, 1.0);
         let y = nalgebra::DMatrix::from_fn(1, n, |_, k| 1.0 - (-(k as f64) * dt).exp());
+        one_record(dt, u, y)
+    }
+
+    /// One record of input `u` and measured state `x`, sampled every `dt`.
+    fn one_record(dt: f64, u: nalgebra::DMatrix<f64>, y: nalgebra::DMatrix<f64>) -> Dataset {
         Dataset::new(
             vec![Channel::new("u")],
             vec![Channel::new("x")],
@@ -1003,12 +1009,7 @@ mod tests {
             let t = k as f64 * dt;
             (t.sin() - t.cos() + (-t).exp()) / 2.0
         });
-        Dataset::new(
-            vec![Channel::new("u")],
-            vec![Channel::new("x")],
-            vec![Experiment::new(0.0, dt, u, y).unwrap()],
-        )
-        .unwrap()
+        one_record(dt, u, y)
     }
 
     /// The stress check's rule on a constructed case: a network that is nearly zero inside

@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use mmenn::benchmarks::{Benchmark, BenchmarkData};
+use mmenn::fit::{STRESS_FACTOR, stress_input};
 use mmenn::sysid_baselines::{
     BaselineError, NarxConfig, NarxOrders, NetworkChoice, PolyNarxConfig, fit_narx, fit_poly_narx,
     poly_narx::Focus,
@@ -309,31 +310,12 @@ fn poly_grid(mode: Mode) -> Vec<(usize, usize, usize)> {
     grid
 }
 
-/// Input scale of the polynomial NARX's stress-checked selection
-/// (docs/decisions/poly-narx-stress-selection.md; `mmenn fit`'s guard uses the same).
-const POLY_STRESS: f64 = 1.5;
-
-/// `exp` with each input scaled by [`POLY_STRESS`] about its mean.
-fn stressed(exp: &Experiment) -> Result<Experiment> {
-    let mut u = exp.inputs().clone();
-    for mut r in u.row_iter_mut() {
-        let mean = r.mean();
-        for v in r.iter_mut() {
-            *v = mean + POLY_STRESS * (*v - mean);
-        }
-    }
-    Ok(
-        Experiment::new(exp.t0(), exp.dt(), u, exp.outputs().clone())?
-            .with_intersample(exp.intersample()),
-    )
-}
-
 /// Polynomial NARX rows under the official protocol: every candidate of [`poly_grid`]
 /// fitted on the first 80 % of the samples the network NARX's order selection uses and run
 /// free over the rest; the best is refitted on the whole training record. With
 /// `stress_after` (the unconstrained selection's choice), the stress-checked selection of
 /// docs/decisions/poly-narx-stress-selection.md: a candidate whose held-out free run
-/// diverges with the input scaled by [`POLY_STRESS`] is not chosen, and no row is added
+/// diverges with the input scaled by [`STRESS_FACTOR`] is not chosen, and no row is added
 /// when it chooses what the unconstrained selection chose. Returns the choice.
 fn poly_narx_inner(
     data: &BenchmarkData,
@@ -351,7 +333,7 @@ fn poly_narx_inner(
     let (used, head, tail, y_tail) = selection_split(est, plan(b, mode).select_samples)?;
     let tail = &tail;
     let tail_stressed = match stress_after {
-        Some(_) => Some(stressed(tail)?),
+        Some(_) => Some(stress_input(tail)?),
         None => None,
     };
     // A candidate's held-out score; under the stress check, an error when its free run on
@@ -361,7 +343,7 @@ fn poly_narx_inner(
         let r = held_out(fit.model.simulate(tail), &y_tail, window, scale)?;
         if let Some(st) = &tail_stressed {
             fit.model.simulate(st).map_err(|e| {
-                format!("refused: its free run with the input scaled by {POLY_STRESS} fails ({}; {r:.4} unscaled)", failure(&e))
+                format!("refused: its free run with the input scaled by {STRESS_FACTOR} fails ({}; {r:.4} unscaled)", failure(&e))
             })?;
         }
         Ok(r)
@@ -434,7 +416,7 @@ fn poly_narx_inner(
         table.note(format!(
             "Polynomial NARX, stress-checked selection (docs/decisions/\
              poly-narx-stress-selection.md: a candidate whose held-out free run fails with the \
-             input scaled by {POLY_STRESS} about its mean is not chosen): it chooses ({d}, \
+             input scaled by {STRESS_FACTOR} about its mean is not chosen): it chooses ({d}, \
              {degree}, {nl}) as the row above does, so no second row (held-out, {unit}: {}).",
             tried.join(", ")
         ));
@@ -473,7 +455,7 @@ fn poly_narx_inner(
         Some(_) => format!(
             "Polynomial NARX, stress-checked selection ({OFFICIAL}; docs/decisions/\
              poly-narx-stress-selection.md: as the row above, but a candidate whose held-out \
-             free run fails with the input scaled by {POLY_STRESS} about its mean is not chosen)"
+             free run fails with the input scaled by {STRESS_FACTOR} about its mean is not chosen)"
         ),
     };
     table.note(format!(
