@@ -8,7 +8,9 @@
 //! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos holdout ref (the reference
 //! IDIM-LS coefficients uncalibrated); `GREY_SB` keys q dd vv
 //! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
-//! `GREY_DUMP=/tmp/prefix` writes the training and first test run as CSV. E.g.
+//! `explore_silverbox_bandlimited` takes `GREY_SB` with `up=L` (records resampled `L`× by
+//! windowed sinc, scored at the recorded samples) and the input monomials u2 u3 u2y uv uyv
+//! u2v uv2. `GREY_DUMP=/tmp/prefix` writes the training and first test run as CSV. E.g.
 //! `GREY_TANKS="pump0=1 lin=1 c=1" cargo test --release -p xtask explore_tanks --
 //! --ignored --nocapture`.
 use super::*;
@@ -584,5 +586,131 @@ fn explore_emps_window_rule() {
             fit.x0
         );
         held_out(Benchmark::Emps, &format!("{label} (b)"), &spec);
+    }
+}
+
+/// `e` resampled `l`× by windowed-sinc interpolation (Blackman window, `half` samples each
+/// side; ends held): the band-limited reading of the samples between them. Every `l`-th
+/// sample is the original one.
+fn upsample(e: &Experiment, l: usize, half: usize) -> Experiment {
+    let n = e.len();
+    let interp = |row: Vec<f64>| -> Vec<f64> {
+        let mut out = Vec::with_capacity(n * l);
+        let h = half as f64;
+        for k in 0..n {
+            for j in 0..l {
+                if j == 0 {
+                    out.push(row[k]);
+                    continue;
+                }
+                let frac = j as f64 / l as f64;
+                let mut s = 0.0;
+                let mut wsum = 0.0;
+                for m in -(half as isize) + 1..=half as isize {
+                    let idx = (k as isize + m).clamp(0, n as isize - 1) as usize;
+                    let x = frac - m as f64;
+                    let sinc = (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x);
+                    let z = (x / h).clamp(-1.0, 1.0);
+                    let win = 0.42
+                        + 0.5 * (std::f64::consts::PI * z).cos()
+                        + 0.08 * (2.0 * std::f64::consts::PI * z).cos();
+                    s += row[idx] * sinc * win;
+                    wsum += sinc * win;
+                }
+                out.push(s / wsum);
+            }
+        }
+        out
+    };
+    let u = interp(e.inputs().row(0).iter().copied().collect());
+    let y = interp(e.outputs().row(0).iter().copied().collect());
+    Experiment::new(
+        e.t0(),
+        e.dt() / l as f64,
+        nalgebra::DMatrix::from_row_slice(1, n * l, &u),
+        nalgebra::DMatrix::from_row_slice(1, n * l, &y),
+    )
+    .unwrap()
+}
+
+/// `GREY_SB` as in [`explore_silverbox`] plus `up=L`: every record resampled `L`× by
+/// band-limited interpolation, the model calibrated and run at the fine rate, scored at
+/// the original samples (state from the first 50 original samples' span).
+#[test]
+#[ignore]
+fn explore_silverbox_bandlimited() {
+    let all = std::env::var("GREY_SB").unwrap_or_default();
+    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    for item in all.split(';').filter(|s| !s.trim().is_empty()) {
+        let mut extra = Vec::new();
+        let mut substeps = None;
+        let mut l = 1usize;
+        for (key, v) in kv(item) {
+            match key.as_str() {
+                "q" => extra.push(SilverboxExtra::QuadraticSpring),
+                "ig" => extra.push(SilverboxExtra::InputGainVariation),
+                "sub" => substeps = Some(v as usize),
+                "dd" => extra.push(SilverboxExtra::DisplacementDamping),
+                "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
+                "vv" => extra.push(SilverboxExtra::QuadraticDrag),
+                "up" => l = v as usize,
+                "u2" => extra.push(SilverboxExtra::Monomial("u^2")),
+                "u3" => extra.push(SilverboxExtra::Monomial("u^3")),
+                "u2y" => extra.push(SilverboxExtra::Monomial("u^2*y")),
+                "uv" => extra.push(SilverboxExtra::Monomial("u*v")),
+                "uyv" => extra.push(SilverboxExtra::Monomial("u*y*v")),
+                "u2v" => extra.push(SilverboxExtra::Monomial("u^2*v")),
+                "uv2" => extra.push(SilverboxExtra::Monomial("u*v^2")),
+                "v3" => extra.push(SilverboxExtra::Monomial("v^3")),
+                "yv" => extra.push(SilverboxExtra::Monomial("y*v")),
+                "v2" => extra.push(SilverboxExtra::Monomial("v^2")),
+                "yv2" => extra.push(SilverboxExtra::Monomial("y*v^2")),
+                "q5" => extra.push(SilverboxExtra::QuinticSpring),
+                _ => panic!("unknown key {key}"),
+            }
+        }
+        let mut spec = silverbox_model(k, c, b, &extra).unwrap();
+        if let Some(substeps) = substeps {
+            spec.integrator = Integrator::Rk4 { substeps };
+        }
+        let d = data(Benchmark::Silverbox);
+        let w = Benchmark::Silverbox.init_window();
+        let est0 = d.estimation.experiments()[0].clone();
+        let est = upsample(&est0, l, 32);
+        let mut records = d.tests.clone();
+        records.extend(mmenn::benchmarks::load_extra(Benchmark::Silverbox, &d.dir).unwrap());
+        let tests: Vec<(String, Experiment)> = records
+            .iter()
+            .map(|t| (t.name.clone(), upsample(&t.data.experiments()[0], l, 32)))
+            .collect();
+        let clock = std::time::Instant::now();
+        let fit = match fit_grey(&spec, &est, &tests, w * l) {
+            Ok(f) => f,
+            Err(e) => {
+                println!("{item}: failed {e:#}");
+                continue;
+            }
+        };
+        let secs = clock.elapsed().as_secs_f64();
+        let at = |s: &[f64]| s.iter().step_by(l).copied().collect::<Vec<f64>>();
+        let y0: Vec<f64> = est0.outputs().row(0).iter().copied().collect();
+        let train = free_run(&spec, &fit.model, &est, &fit.x0)
+            .map(|s| 1e3 * rmse_after(&y0, &at(&s), w))
+            .unwrap_or(f64::NAN);
+        let mut line = format!("{item}: train {train:.4} mV ({secs:.1} s)");
+        for (t, rec) in fit.tests.iter().zip(&records) {
+            let y: Vec<f64> = rec.data.experiments()[0]
+                .outputs()
+                .row(0)
+                .iter()
+                .copied()
+                .collect();
+            match &t.sim {
+                Ok(s) => line += &format!(" | {} {:.4}", t.name, 1e3 * rmse_after(&y, &at(s), w)),
+                Err(m) => line += &format!(" | {} diverged {m}", t.name),
+            }
+        }
+        println!("{line}");
+        println!("    {}", terms(&fit));
     }
 }
