@@ -211,7 +211,8 @@ pub(crate) fn discretize_all(
         match hold {
             // Held inputs never read the ramp gain; drop a shared one.
             InterSample::Zoh => disc.ramp = None,
-            InterSample::Foh => {
+            // MME reads a band-limited input as linear between samples.
+            InterSample::Foh | InterSample::Bl => {
                 if disc.ramp.is_none() {
                     disc.ramp = Some(ramp_gain(model.a(), model.b(), disc.h)?);
                 }

@@ -362,7 +362,8 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         let k = j / g.substeps;
         let next = match g.hold {
             InterSample::Zoh => Vec::new(),
-            InterSample::Foh => self.input(e, k + 1),
+            // MME reads a band-limited input as linear between samples.
+            InterSample::Foh | InterSample::Bl => self.input(e, k + 1),
         };
         (self.input(e, k), next)
     }

@@ -159,7 +159,7 @@ pub fn update_model(
                 let ua = exp.inputs()[(row, k)];
                 xrows.push(match exp.intersample() {
                     InterSample::Zoh => ua,
-                    InterSample::Foh => {
+                    InterSample::Foh | InterSample::Bl => {
                         let ub = exp.inputs()[(row, (k + 1).min(exp.len() - 1))];
                         ua + frac * (ub - ua)
                     }

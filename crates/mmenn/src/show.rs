@@ -158,6 +158,7 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
             match model.intersample() {
                 sysid_core::InterSample::Zoh => "held, zoh",
                 sysid_core::InterSample::Foh => "linear, foh",
+                sysid_core::InterSample::Bl => "band-limited, bl",
             }
         ));
     }

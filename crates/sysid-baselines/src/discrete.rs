@@ -102,9 +102,11 @@ impl SampleStep {
     ) -> Result<Self> {
         // The held part is the same matrices (and bits) for either hold.
         let (ad, bd) = zoh(a, b, h)?;
+        // A band-limited input is read linear between samples here (an exact
+        // discretisation needs the whole record).
         let ramp = match hold {
             InterSample::Zoh => None,
-            InterSample::Foh => Some(ramp_gain(a, b, h)?),
+            InterSample::Foh | InterSample::Bl => Some(ramp_gain(a, b, h)?),
         };
         Ok(Self { ad, bd, ramp })
     }
@@ -174,7 +176,7 @@ impl StepDerivative {
                     d_ramp: None,
                 }
             }
-            InterSample::Foh => {
+            InterSample::Foh | InterSample::Bl => {
                 let (n, m) = (a.nrows(), b.ncols());
                 let s = n + 2 * m;
                 let mut big = DMatrix::zeros(2 * s, 2 * s);

@@ -230,14 +230,11 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
                 x[state] = y[row];
             }
             for j in start..k {
-                crate::integrate::integrate_sample(
+                crate::integrate::integrate_record_interval(
                     self,
-                    experiment.time(j),
-                    experiment.time(j + 1),
+                    experiment,
+                    j,
                     &mut x,
-                    experiment.input(j),
-                    experiment.input(j + 1),
-                    experiment.intersample(),
                     &self.integrator,
                     &mut ws,
                 )?;

@@ -13,7 +13,8 @@
 
 use nalgebra::DMatrix;
 
-use crate::dataset::InterSample;
+use crate::bandlimited::{BL_FACTOR, band_limited_grid};
+use crate::dataset::{Experiment, InterSample};
 use crate::dynamics::Dynamics;
 use crate::error::{CoreError, Result};
 use crate::tangent::{Rk4, StepInput};
@@ -98,6 +99,46 @@ impl InputPath for Ramp<'_> {
     }
     fn step(&self, j: usize, substeps: usize) -> StepInput<'_> {
         StepInput::ramp(self.ua, self.ub, j, substeps)
+    }
+}
+
+/// Band-limited: linear between the points of the interval's grid
+/// ([`crate::bandlimited`]).
+struct GridPath<'u> {
+    ta: f64,
+    span: f64,
+    points: &'u [f64],
+    per_interval: usize,
+}
+
+impl GridPath<'_> {
+    fn step_input(&self, from: f64, per: f64) -> StepInput<'_> {
+        StepInput::Grid {
+            points: self.points,
+            per_interval: self.per_interval,
+            from,
+            per,
+        }
+    }
+}
+
+impl InputPath for GridPath<'_> {
+    fn at<'a>(&'a self, t: f64, buf: &'a mut [f64]) -> &'a [f64] {
+        let m = self.points.len() / (self.per_interval + 1);
+        let s = ((t - self.ta) / self.span).clamp(0.0, 1.0) * self.per_interval as f64;
+        let i = (s.floor() as usize).min(self.per_interval - 1);
+        let w = s - i as f64;
+        let (a, z) = (
+            &self.points[i * m..(i + 1) * m],
+            &self.points[(i + 1) * m..(i + 2) * m],
+        );
+        for ((b, a), z) in buf.iter_mut().zip(a).zip(z) {
+            *b = a + w * (z - a);
+        }
+        &buf[..m]
+    }
+    fn step(&self, j: usize, substeps: usize) -> StepInput<'_> {
+        self.step_input(j as f64 / substeps as f64, 1.0 / substeps as f64)
     }
 }
 
@@ -203,7 +244,9 @@ pub fn integrate_interval<D: Dynamics + ?Sized>(
 
 /// Integrate from sample `t0` (input `ua`) to the next sample `t1` (input `ub`) with the
 /// input between them as `hold` says, updating `x` in place. With [`InterSample::Zoh`]
-/// this is [`integrate_interval`] with `ua` (`ub` unused).
+/// this is [`integrate_interval`] with `ua` (`ub` unused). Two samples cannot carry a
+/// band-limited reading: [`InterSample::Bl`] is linear here (use
+/// [`integrate_record_interval`], which reads the record's grid).
 #[allow(clippy::too_many_arguments)]
 pub fn integrate_sample<D: Dynamics + ?Sized>(
     f: &D,
@@ -218,7 +261,7 @@ pub fn integrate_sample<D: Dynamics + ?Sized>(
 ) -> Result<()> {
     match hold {
         InterSample::Zoh => interval_path(f, t0, t1, x, &Held(ua), method, ws),
-        InterSample::Foh => {
+        InterSample::Foh | InterSample::Bl => {
             if ws.u.len() < ua.len() {
                 ws.u.resize(ua.len(), 0.0);
             }
@@ -230,6 +273,44 @@ pub fn integrate_sample<D: Dynamics + ?Sized>(
             };
             interval_path(f, t0, t1, x, &ramp, method, ws)
         }
+    }
+}
+
+/// Integrate interval `k → k + 1` of `exp` with its input between the samples as the
+/// record says ([`Experiment::intersample`], the band-limited grid included), updating `x`.
+pub fn integrate_record_interval<D: Dynamics + ?Sized>(
+    f: &D,
+    exp: &Experiment,
+    k: usize,
+    x: &mut [f64],
+    method: &Integrator,
+    ws: &mut Workspace,
+) -> Result<()> {
+    let (ta, tb) = (exp.time(k), exp.time(k + 1));
+    match exp.band_limited_interval(k) {
+        Some(points) if exp.intersample() == InterSample::Bl => {
+            if ws.u.len() < exp.n_inputs() {
+                ws.u.resize(exp.n_inputs(), 0.0);
+            }
+            let path = GridPath {
+                ta,
+                span: tb - ta,
+                points,
+                per_interval: BL_FACTOR,
+            };
+            interval_path(f, ta, tb, x, &path, method, ws)
+        }
+        _ => integrate_sample(
+            f,
+            ta,
+            tb,
+            x,
+            exp.input(k),
+            exp.input(k + 1),
+            exp.intersample(),
+            method,
+            ws,
+        ),
     }
 }
 
@@ -396,12 +477,28 @@ pub fn simulate_with<D: Dynamics + ?Sized>(
     let mut ws = Workspace::new(n);
     out.column_mut(0).copy_from_slice(&x);
     let m = inputs.nrows();
+    let grid = (hold == InterSample::Bl).then(|| band_limited_grid(inputs));
+    if grid.is_some() {
+        ws.u.resize(m, 0.0);
+    }
     for k in 1..len {
         let ua = &inputs.as_slice()[(k - 1) * m..k * m];
         let ub = &inputs.as_slice()[k * m..(k + 1) * m];
         let ta = t0 + (k - 1) as f64 * dt;
         let tb = t0 + k as f64 * dt;
-        integrate_sample(f, ta, tb, &mut x, ua, ub, hold, method, &mut ws)?;
+        match &grid {
+            Some(g) => {
+                let first = (k - 1) * BL_FACTOR * m;
+                let path = GridPath {
+                    ta,
+                    span: tb - ta,
+                    points: &g[first..first + (BL_FACTOR + 1) * m],
+                    per_interval: BL_FACTOR,
+                };
+                interval_path(f, ta, tb, &mut x, &path, method, &mut ws)?;
+            }
+            None => integrate_sample(f, ta, tb, &mut x, ua, ub, hold, method, &mut ws)?,
+        }
         if let Some((state, value)) = x
             .iter()
             .enumerate()

@@ -39,6 +39,19 @@ pub enum StepInput<'u> {
         /// Interval fraction per step.
         per: f64,
     },
+    /// Read from a grid of the interval (band-limited input, [`InterSample::Bl`]): the
+    /// `per_interval + 1` points of `m` values each span the sample interval evenly; the
+    /// input is linear between them. `from` and `per` as for [`StepInput::Ramp`].
+    Grid {
+        /// The interval's grid points, `(per_interval + 1)·m` values.
+        points: &'u [f64],
+        /// Grid steps per sample interval.
+        per_interval: usize,
+        /// Interval fraction at the step's start.
+        from: f64,
+        /// Interval fraction per step.
+        per: f64,
+    },
 }
 
 impl StepInput<'_> {
@@ -54,6 +67,39 @@ impl StepInput<'_> {
                 }
                 &buf[..ua.len()]
             }
+            StepInput::Grid {
+                points,
+                per_interval,
+                from,
+                per,
+            } => {
+                let m = points.len() / (per_interval + 1);
+                let s = ((from + c * per) * per_interval as f64).clamp(0.0, per_interval as f64);
+                let i = (s.floor() as usize).min(per_interval - 1);
+                let w = s - i as f64;
+                let (a, z) = (
+                    &points[i * m..(i + 1) * m],
+                    &points[(i + 1) * m..(i + 2) * m],
+                );
+                for ((b, a), z) in buf.iter_mut().zip(a).zip(z) {
+                    *b = a + w * (z - a);
+                }
+                &buf[..m]
+            }
+        }
+    }
+
+    /// Number of input channels an interpolated step writes (0 for a held one, which
+    /// writes none).
+    pub fn interpolated_width(&self) -> usize {
+        match *self {
+            StepInput::Held(_) => 0,
+            StepInput::Ramp { ua, .. } => ua.len(),
+            StepInput::Grid {
+                points,
+                per_interval,
+                ..
+            } => points.len() / (per_interval + 1),
         }
     }
 
@@ -83,7 +129,9 @@ impl InterSample {
     ) -> StepInput<'u> {
         match self {
             InterSample::Zoh => StepInput::Held(ua),
-            InterSample::Foh => StepInput::ramp(ua, ub, j, substeps),
+            // Two samples cannot carry the band-limited reading: it needs the record
+            // ([`crate::Experiment::step_input`]); from two samples it is linear.
+            InterSample::Foh | InterSample::Bl => StepInput::ramp(ua, ub, j, substeps),
         }
     }
 }
@@ -153,10 +201,9 @@ impl Rk4 {
 
     /// Room for an interpolated input (allocates only the first time a longer one comes).
     fn fit_input(&mut self, input: &StepInput<'_>) {
-        if let StepInput::Ramp { ua, .. } = input
-            && self.u.len() < ua.len()
-        {
-            self.u.resize(ua.len(), 0.0);
+        let width = input.interpolated_width();
+        if self.u.len() < width {
+            self.u.resize(width, 0.0);
         }
     }
 

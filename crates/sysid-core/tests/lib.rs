@@ -2,6 +2,7 @@
 //! symbolic derivatives against finite differences) and of the term model's right-hand
 //! side and Jacobians, and of the RK4 step's tangents.
 
+mod band_limited;
 mod expr_props;
 mod tangent;
 mod term_model;

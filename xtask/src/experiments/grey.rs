@@ -831,6 +831,13 @@ pub enum SilverboxExtra {
     /// the Schroeder record's second half (0.3165 against 0.3261 mV) at a training free-run
     /// RMSE 0.3 % lower (0.2305 mV).
     InputGainVariation,
+    /// A measurement chain that is not quite linear, `y_meas = y + a2·y² + a3·y³`, written in
+    /// the measured coordinate: with the measured voltage as the position state its
+    /// derivative is `g'(y)·v`, so `y·v` and `y²·v` enter the position equation (the
+    /// acceleration's polynomial re-expands in the same coordinate). PNLSS's output
+    /// polynomial; Rule 5 of docs/decisions/silverbox-schroeder-rule.md.
+    #[cfg_attr(not(test), allow(dead_code))]
+    OutputPolynomial,
     /// A first-order measurement filter of this held time constant (s) on the output,
     /// `z' = (y − z)/τo`, the measured voltage being `z` (an anti-alias filter or output
     /// buffer acting on the measurement, not on the oscillator; Rule 3 of
@@ -927,11 +934,15 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
             SilverboxExtra::QuadraticDrag => ("v", "quadratic_drag", "v*abs(v)", 0.0),
             SilverboxExtra::Monomial(m) => ("v", "monomial", m, 0.0),
             SilverboxExtra::InputGainVariation => ("v", "input_gain_linear_in_y", "u*y", 0.0),
+            SilverboxExtra::OutputPolynomial => ("y", "measurement_quadratic", "y*v", 0.0),
             SilverboxExtra::Feedthrough(_) | SilverboxExtra::OutputFilter(_) => continue,
         });
     }
     if extra.contains(&SilverboxExtra::InputGainVariation) {
         specs.push(("v", "input_gain_quadratic_in_y", "u*y^2", 0.0));
+    }
+    if extra.contains(&SilverboxExtra::OutputPolynomial) {
+        specs.push(("y", "measurement_cubic", "y^2*v", 0.0));
     }
     if lag.is_some() {
         specs.push(("y", "feedthrough_in", "u", 0.0));

@@ -80,10 +80,9 @@ impl<'a, F: Dynamics> Shooter<'a, F> {
         b.x.copy_from_slice(x0);
         for (k, rk) in (w.start..w.end).zip(r.chunks_exact_mut(p)) {
             // Windows end at most at the last sample, so `k + 1` exists.
-            let (ua, ub) = (exp.input(k), exp.input(k + 1));
             let t = exp.t0() + k as f64 * exp.dt();
             for j in 0..self.substeps {
-                let input = exp.intersample().step_input(ua, ub, j, self.substeps);
+                let input = exp.step_input(k, j, self.substeps);
                 b.rk.step(model, t + j as f64 * h, h, &mut b.x, &input);
             }
             // NaN counts as diverged too.

@@ -173,11 +173,9 @@ impl<'a, 'o, D: ParametricDynamics> Calibration<'a, 'o, D> {
         let exp = &self.records[record];
         let substeps = self.substeps[record];
         let h = exp.dt() / substeps as f64;
-        let (ua, ub) = (exp.input(k - 1), exp.input(k));
-        let hold = exp.intersample();
         for j in 0..substeps {
             let t = exp.time(k - 1) + j as f64 * h;
-            let input = hold.step_input(ua, ub, j, substeps);
+            let input = exp.step_input(k - 1, j, substeps);
             match tangents {
                 Some(src) => {
                     self.rk
