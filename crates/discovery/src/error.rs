@@ -131,6 +131,21 @@ pub enum DiscoveryError {
         /// What the integrator reported.
         source: CoreError,
     },
+    /// The free run of a validation record failed under the one validation rule
+    /// ([`crate::validation`]): its initial-state fit failed from every start, the run
+    /// diverged or left finite values.
+    #[error(
+        "free run of validation record {record} (initial state fitted to its first {window} \
+         samples) failed: {source}"
+    )]
+    ValidationRun {
+        /// Index of the validation record.
+        record: usize,
+        /// Samples of the initial-state fit.
+        window: usize,
+        /// What the judge reported.
+        source: CoreError,
+    },
     /// A calibration stopped where it started: the solver ended without moving the cost,
     /// at a rank-deficient Jacobian ([`sysid_core::Termination::NoProgress`]). The start
     /// is a stationary point of a degenerate problem (e.g. a state at a term's singular

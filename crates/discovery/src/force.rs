@@ -38,10 +38,9 @@
 //! the assumed model with given force terms ([`ForceProblem::build`]).
 
 use nalgebra::DMatrix;
-use sysid_core::judge::{InitialRule, JudgeOptions, Observation};
 use sysid_core::{
     Dataset, Expr, GreyboxData, GreyboxFit, GreyboxOptions, MmeEstimate, PhysicalModel,
-    estimate_parameters, judge_free_run,
+    estimate_parameters,
 };
 
 use crate::catalogue::{Effect, round_significant};
@@ -524,34 +523,17 @@ fn colour_inflation<D>(fit: &GreyboxFit<D>, data: &Dataset, c: &DMatrix<f64>) ->
     ratios.into_iter().fold(1.0, f64::max).sqrt()
 }
 
-/// Free-run cost `(1/M) Σ r²/R` of `model` on `data`, initial states fitted to the first
-/// `window` samples of every record.
+/// Free-run cost `(1/M) Σ r²/R` of `model` on `data` by the one validation rule
+/// ([`crate::validation`]: initial states fitted to the first `window` samples of every
+/// record, RK4 steps for a stiff model); an error naming the record when a run fails.
 pub fn validation_cost(
     model: &PhysicalModel,
     data: &Dataset,
     noise_variance: &[f64],
     window: usize,
 ) -> crate::Result<f64> {
-    let obs = Observation::outputs(model.linear());
-    let rule = InitialRule::Fit {
-        window: Some(window),
-    };
-    let (mut sum, mut count) = (0.0, 0usize);
-    for exp in data.experiments() {
-        // RK4 steps for a stiff model (a steep friction law), 4 otherwise.
-        let judge = JudgeOptions {
-            integrator: sysid_core::auto_rk4(model, exp, &obs.matrix, 4, 1e12)?,
-            ..JudgeOptions::default()
-        };
-        let judged = judge_free_run(model, exp, &obs, &rule, &judge)?;
-        for (name, r) in obs.names.iter().zip(noise_variance) {
-            if let Some(m) = judged.channels.get(name) {
-                sum += m.rmse * m.rmse / r * m.samples as f64;
-                count += m.samples;
-            }
-        }
-    }
-    Ok(sum / count.max(1) as f64)
+    crate::validation::validation_run(model, model.linear(), data, window, noise_variance, true)
+        .map(|run| run.cost)
 }
 
 /// The force-space discovery (module doc).

@@ -22,6 +22,7 @@ mod term_set;
 #[cfg(test)]
 mod test_support;
 mod transfer;
+pub mod validation;
 pub mod workflow;
 
 pub use augment::{

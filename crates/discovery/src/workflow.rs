@@ -44,7 +44,7 @@ pub use report::{Ambiguity, AssumedEntry, NamedEffect, Round};
 pub use steps::d_rms;
 use steps::{
     alternative_explanation, final_stand_in, first_estimate, free_run_states, noise_floor,
-    round_candidates, trim_ends, validation_cost, without, x0_of,
+    round_candidates, trim_ends, validation_rejection, without, x0_of,
 };
 
 /// Largest free-run cost `J = (1/M) Σ r²/R` (1 for a right model and right noise
@@ -511,6 +511,22 @@ fn run_planned<M: Mme + Sync>(
         // that. So this shortcut applies to a given `R` only.
         if config.noise_given && refined.cost[1] > CONFIRM_COST && refined.cost[1] < refined.cost[0]
         {
+            // Kept without MME's proof, but not without the validation check.
+            if let Some(why) = validation.and_then(|v| {
+                validation_rejection(
+                    &current,
+                    &augmented,
+                    v,
+                    config.x0_window,
+                    &est.noise_variance,
+                )
+            }) {
+                rounds.push(round(refined.steps, calibrated, refined.cost, Some(why)));
+                effects.truncate(effects_before_round);
+                added.truncate(added_before_round);
+                any_rejected = true;
+                break;
+            }
             rounds.push(round(
                 refined.steps,
                 calibrated,
@@ -564,17 +580,17 @@ fn run_planned<M: Mme + Sync>(
             rejection = Some(format!(
                 "d̂ did not shrink: mean square / floor² {ms_before:.4e} → {ms_after:.4e}"
             ));
-        } else if let (Some(v), Some(guesses)) = (validation, &val_x0) {
-            // Both models judged alike: initial states of every validation record fitted
-            // by free-run error from the same starts.
-            let r = &result.noise_variance;
-            let vb = validation_cost(&current, v, guesses, r);
-            let va = validation_cost(&augmented, v, guesses, r);
-            if va >= vb {
-                rejection = Some(format!(
-                    "validation free-run error did not fall: (1/M) Σ r²/R {vb:.4e} → {va:.4e}"
-                ));
-            }
+        } else if let Some(v) = validation {
+            // Both models judged alike, by the rule the report judges them by
+            // (`crate::validation`): a free run that diverges or does not improve on the
+            // model it augments rejects the round.
+            rejection = validation_rejection(
+                &current,
+                &augmented,
+                v,
+                config.x0_window,
+                &result.noise_variance,
+            );
         }
         let accepted = rejection.is_none();
         rounds.push(round(refined.steps, calibrated, refined.cost, rejection));
@@ -791,3 +807,6 @@ fn run_planned<M: Mme + Sync>(
         stand_in_note,
     })
 }
+
+#[cfg(test)]
+mod tests;

@@ -337,10 +337,11 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
     move |source| MmennError::Core { context, source }
 }
 
-/// Free run of a model over the first record of `data`, judged by the one judge
-/// (`sysid_core::judge_free_run`: initial state fitted to the first `window` samples,
-/// every sample scored — the numbers `predict` and `compare` give for the same model);
-/// fit % and RMSE per output, and the simulated outputs.
+/// Free run of a model over the first record of `data`, judged by discovery's validation
+/// rule (`discovery::validation`, the rule its acceptance check judges a round by: initial
+/// state fitted to the first `window` samples, every sample scored — through
+/// `sysid_core::judge_free_run`, the numbers `predict` and `compare` give for the same
+/// model); fit % and RMSE per output, and the simulated outputs.
 fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap, DMatrix<f64>)> {
     free_run_gap_of(model, model.linear(), data, window, false)
 }
@@ -356,23 +357,8 @@ fn free_run_gap_of<D: sysid_core::Dynamics>(
     stiff_aware: bool,
 ) -> Result<(Gap, DMatrix<f64>)> {
     let exp = &data.experiments()[0];
-    let obs = sysid_core::judge::Observation::outputs(linear);
-    let mut judge = sysid_core::judge::JudgeOptions::default();
-    if stiff_aware {
-        // RK4 steps for a stiff model (a steep friction law), 4 otherwise.
-        judge.integrator = sysid_core::auto_rk4(model, exp, &obs.matrix, 4, 1e12)
-            .map_err(core("choosing the RK4 steps of the free run"))?;
-    }
-    let judged = sysid_core::judge_free_run(
-        model,
-        exp,
-        &obs,
-        &sysid_core::judge::InitialRule::Fit {
-            window: Some(window),
-        },
-        &judge,
-    )
-    .map_err(core("judging the free run"))?;
+    let judged = discovery::validation::judge_record(model, linear, exp, window, stiff_aware)
+        .map_err(core("judging the free run"))?;
     let mut gap = Gap::default();
     for (name, m) in &judged.channels {
         gap.fit_percent.insert(name.clone(), m.fit_percent);

@@ -40,25 +40,42 @@ pub(super) fn free_run_states(
     )
 }
 
-/// Free-run cost `(1/M) Σ r²/R` of `model` over every record of `data`, with initial
-/// states fitted by free-run error on each record (from `guesses` and from the data, the
-/// lowest cost wins, see [`crate::augment::fit_initial_states`]); infinite when every
-/// fit fails or diverges.
-pub(super) fn validation_cost(
-    model: &TermModel,
+/// The validation check of a round (the rule of [`crate::validation`]: initial state of
+/// every record fitted to its first `window` samples, free run over the whole record,
+/// `(1/M) Σ r²/R` with the noise variance `noise`): why `augmented` is rejected against
+/// `current`, the model it augments, or `None` when it passes. It is rejected when its
+/// free run fails on a record (diverges, or its initial state cannot be fitted) — the
+/// reason names the record and the failure, no cost — or when its cost is not below
+/// `current`'s. When `current`'s own run fails, `augmented`'s succeeding passes.
+pub(super) fn validation_rejection(
+    current: &TermModel,
+    augmented: &TermModel,
     data: &Dataset,
-    guesses: &[Vec<f64>],
+    window: usize,
     noise: &[f64],
-) -> f64 {
-    let config = CalibrationConfig {
-        weights: OutputWeights::NoiseVariance(noise.to_vec()),
-        ..RefineConfig::default().calibration
+) -> Option<String> {
+    let run = |m: &TermModel| {
+        crate::validation::validation_run(m, m.linear(), data, window, noise, false)
     };
-    crate::augment::fit_initial_states(model, data, &[guesses], &config)
-        .ok()
-        .map(|fit| fit.cost_after)
-        .filter(|c| c.is_finite())
-        .unwrap_or(f64::INFINITY)
+    let after = match run(augmented) {
+        Ok(r) => r,
+        Err(e) => {
+            return Some(format!(
+                "the augmented model fails on the validation data: {e}"
+            ));
+        }
+    };
+    let before = run(current).ok()?;
+    (after.cost >= before.cost).then(|| {
+        format!(
+            "validation free-run error did not fall (initial state fitted to the first \
+             {window} samples of every record): (1/M) Σ r²/R {:.4e} → {:.4e}; fit {} → {}",
+            before.cost,
+            after.cost,
+            before.fit_summary(),
+            after.fit_summary(),
+        )
+    })
 }
 
 /// RMS of MME's `d̂` per corrected equation, by name.
