@@ -512,13 +512,28 @@ pub fn run_compare_with_progress(
     out: &Path,
     progress: &dyn ProgressSink,
 ) -> Result<CompareSummary> {
+    run_compare_outcome(data_paths, model_path, val_paths, opts, out, progress).map(|o| o.summary)
+}
+
+/// [`run_compare_with_progress`], returning everything it computed: the summary, and the
+/// MME/NN fit ([`CompareOutcome::fit`], whose
+/// [`FitSummary::decision_lines`](crate::fit::FitSummary::decision_lines) the command line
+/// prints as `mmenn fit` does).
+pub fn run_compare_outcome(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    val_paths: &[PathBuf],
+    opts: &CompareOptions,
+    out: &Path,
+    progress: &dyn ProgressSink,
+) -> Result<CompareOutcome> {
     let loaded = LoadedModel::read(model_path)?;
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &loaded.spec)?;
     let outcome = compute_compare_with_progress(&data, &loaded, val.as_ref(), opts, progress)?;
     progress.report(&crate::progress::Progress::new(EVALUATION, 0, None));
     write_compare(&outcome, out)?;
     progress.finish(EVALUATION);
-    Ok(outcome.summary)
+    Ok(outcome)
 }
 
 /// Each model's predicted outputs on one record (`p × N`), by row label.

@@ -533,8 +533,9 @@ pub fn compute_fit(
             guard::GuardCandidate::PhysicsAlone,
             guard::zero_network(&network)?,
         ),
-        (guard::GuardCandidate::Network, before_refinement),
+        (guard::GuardCandidate::Network, before_refinement.clone()),
     ];
+    let refined = network.clone();
     if refinement.is_some() {
         candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
@@ -582,13 +583,25 @@ pub fn compute_fit(
         None => None,
     };
     let validation = validation_j.as_ref().map(FreeRunReport::of);
-    // The refined network's validation free run (the guard judged it there, whether or
-    // not it was kept).
-    if let (Some(r), Some(_)) = (refinement.as_mut(), &validation) {
-        r.validation_fit_after = guard_report
-            .score(guard::GuardCandidate::Refined)
-            .filter(|s| s.failure.is_none())
-            .map(|s| s.fit_percent.clone());
+    // Whether trajectory training helped on the validation record: the networks before
+    // and after it judged as the kept model is (the one judge, the kept model's domain),
+    // so the kept one's numbers are the validation report's, and both are judged one way
+    // (the guard judges each with the domain its stress check gave it, which may differ).
+    if let (Some(r), Some(v)) = (refinement.as_mut(), &val) {
+        let fits = |net: &Mlp| {
+            hybrid_loaded(&spec, net, &x0, exp0.dt(), opts.substeps, kept_domain)
+                .and_then(|(_, loaded)| judge_outputs(&loaded, v, opts.x0_window))
+                .ok()
+                .map(|j| {
+                    j.channels
+                        .into_iter()
+                        .map(|(k, m)| (k, m.fit_percent))
+                        .collect()
+                })
+        };
+        r.validation_fit_before = fits(&before_refinement);
+        r.validation_fit_after = fits(&refined);
+        r.validation_domain = Some(kept_domain);
     }
     let d_network = network.predict(&x_train)?;
     let w_by_correction = lin

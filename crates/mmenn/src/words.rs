@@ -60,6 +60,14 @@ pub fn numbers(values: &[f64]) -> String {
     format!("[{}]", v.join(", "))
 }
 
+/// What a network does outside the box of its training pairs, in words.
+pub fn network_domain(d: nn::Domain) -> &'static str {
+    match d {
+        nn::Domain::Hold => "network held at its training box",
+        nn::Domain::Extrapolate => "network extrapolating outside its training box",
+    }
+}
+
 /// What the free-run metrics of a report mean (Markdown paragraph).
 pub const METRICS_MEANING: &str = "\n*Fit %* = 100·(1 − ‖y − ŷ‖ / ‖y − mean(y)‖): 100 is a \
 perfect match, 0 is no better than the record's mean, negative is worse. *R²* = 1 − \
@@ -126,5 +134,6 @@ mod tests {
         assert_eq!(named_values(&m), "v = 5.2500e0");
         assert_eq!(numbers(&[1.0, -0.5]), "[1.0000e0, -5.0000e-1]");
         assert!(!score_kind(condmon::ScoreKind::VoteShare).contains("Vote"));
+        assert!(!network_domain(nn::Domain::Hold).contains("Hold"));
     }
 }

@@ -1,6 +1,7 @@
 //! Integration tests of the facade: every workflow end to end through files.
 
 mod band_limited;
+mod cli;
 mod compare;
 mod discover;
 mod examples;

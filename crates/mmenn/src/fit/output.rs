@@ -7,7 +7,7 @@ use nn::SweepRow;
 use sysid_core::Experiment;
 
 use super::{
-    FitOutcome, FitSummary, NetworkInputs, NetworkSelection, Training, d_figures,
+    FitOutcome, FitSummary, GuardCandidate, NetworkInputs, NetworkSelection, Training, d_figures,
     network_variables, row,
 };
 use crate::atomic::{ensure_dir, write_atomic};
@@ -79,6 +79,79 @@ pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
     )?;
     crate::html::write_report(out, &fit_report(&o.summary))?;
     Ok(())
+}
+
+impl FitSummary {
+    /// What the trajectory training, the guard and the stress check decided, one line
+    /// each, as the terminal shows them (`mmenn fit` and `mmenn compare` print the same
+    /// lines): the trajectory training and, with validation data, the validation free-run
+    /// fit before and after it, both with the kept model's domain (the rule stated); the
+    /// kept model and its domain, and why; the network-domain decision (a stress-check
+    /// line per network candidate under `DomainPolicy::Checked`).
+    pub fn decision_lines(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        if let Some(r) = &self.refinement {
+            lines.push(format!(
+                "trajectory training: {} steps, objective {:.4e} -> {:.4e}",
+                r.report.iterations,
+                r.report.initial_train_objective(),
+                r.report.final_train_objective()
+            ));
+            match (
+                &r.validation_fit_before,
+                &r.validation_fit_after,
+                r.validation_domain,
+            ) {
+                (Some(b), Some(a), Some(d)) => {
+                    for (name, before) in b {
+                        lines.push(format!(
+                            "  validation free-run fit of {name}: {before:.2} % -> {:.2} % \
+                             ({}, the kept model's domain)",
+                            a.get(name).copied().unwrap_or(f64::NAN),
+                            crate::words::network_domain(d)
+                        ));
+                    }
+                }
+                (_, _, Some(_)) => lines.push(format!("  {}", r.validation_failure())),
+                _ => {}
+            }
+        }
+        let kept_domain = match self.guard.chosen {
+            GuardCandidate::PhysicsAlone => String::new(),
+            _ => format!(" ({})", crate::words::network_domain(self.network_domain)),
+        };
+        lines.push(format!(
+            "kept: {}{kept_domain} — {} (judged free-run on {})",
+            self.guard.chosen.describe(),
+            self.guard.reason,
+            self.guard.held_out
+        ));
+        // The guard's errors judge each network with its own domain: say where that is
+        // not the kept model's.
+        let own: Vec<String> = self
+            .guard
+            .candidates
+            .iter()
+            .filter_map(|c| {
+                c.domain.filter(|d| *d != self.network_domain).map(|d| {
+                    format!(
+                        "{}: {}",
+                        c.candidate.describe(),
+                        crate::words::network_domain(d)
+                    )
+                })
+            })
+            .collect();
+        if !own.is_empty() {
+            lines.push(format!(
+                "  (the guard's errors judge each network with the domain its stress check \
+                 gave it; {})",
+                own.join("; ")
+            ));
+        }
+        lines.extend(self.guard.domain.lines());
+        lines
+    }
 }
 
 fn compare_figure(

@@ -10,7 +10,7 @@ use nn::{Mlp, ShootingRecord, TrajectoryConfig, TrajectoryReport};
 use serde::Serialize;
 use sysid_core::{Dataset, MmeEstimate};
 
-use super::{FitOptions, hybrid_loaded, judge_outputs};
+use super::FitOptions;
 use crate::error::Result;
 use crate::model_file::ModelSpec;
 
@@ -51,10 +51,18 @@ pub struct TrajectorySummary {
     /// windows, in units of each channel's standard deviation).
     pub report: TrajectoryReport,
     /// Free-run fit % per output channel on the validation record with the network
-    /// trained on `d̂` only (when validation data are given).
+    /// trained on `d̂` only (when validation data are given and its free run did not
+    /// fail), judged as the kept model is: the one free-run judge, the network's domain
+    /// [`TrajectorySummary::validation_domain`].
     pub validation_fit_before: Option<BTreeMap<String, f64>>,
-    /// The same with the network trained on trajectories (also in the validation report).
+    /// The same with the network trained on trajectories (the validation report's numbers
+    /// when it was kept).
     pub validation_fit_after: Option<BTreeMap<String, f64>>,
+    /// What both networks did outside their training box in those validation free runs:
+    /// the kept model's domain (`None` without validation data). Under
+    /// `DomainPolicy::Checked` the guard judges each candidate with the domain its stress
+    /// check gave it, which may differ; these two numbers are judged one way.
+    pub validation_domain: Option<nn::Domain>,
 }
 
 impl TrajectorySummary {
@@ -75,6 +83,12 @@ impl TrajectorySummary {
             r.final_train_objective(),
         );
         if let (Some(b), Some(a)) = (&self.validation_fit_before, &self.validation_fit_after) {
+            if let Some(d) = self.validation_domain {
+                s.push_str(&format!(
+                    "\nBoth validation free runs with the kept model's domain ({}).\n",
+                    crate::words::network_domain(d)
+                ));
+            }
             s.push_str(
                 "\n| channel | validation fit % before | after | helped |\n|---|---|---|---|\n",
             );
@@ -85,10 +99,23 @@ impl TrajectorySummary {
                     "| {name} | {before:.2} | {after:.2} | {verdict} |\n"
                 ));
             }
+        } else if self.validation_domain.is_some() {
+            s.push_str(&format!("\n{}\n", self.validation_failure()));
         } else {
             s.push_str("\nNo validation data given: whether it helped is not judged.\n");
         }
         s
+    }
+
+    /// Which validation free run failed, in words (when validation data were given and
+    /// one of the two has no numbers).
+    pub(crate) fn validation_failure(&self) -> String {
+        let which = match (&self.validation_fit_before, &self.validation_fit_after) {
+            (None, None) => "of the network before and after it",
+            (None, Some(_)) => "of the network before it",
+            _ => "of the network after it",
+        };
+        format!("The validation free run {which} failed: whether it helped is not judged.")
     }
 }
 
@@ -107,8 +134,8 @@ pub(super) fn shooting<'a>(data: &'a Dataset, est: &'a MmeEstimate) -> Vec<Shoot
 
 /// Train `network` on the training records' trajectories (`train`, from [`shooting`] or
 /// pieces of it), windows starting from MME's `x̂`; windows of the validation records (with MME's `x̂` of them) decide when to stop,
-/// when given. The validation free-run fit % of the `d̂`-trained network is recorded
-/// first, to say later whether the trajectory training helped.
+/// when given. Whether it helped on the validation record is judged after the guard,
+/// with the kept model's domain (`compute_fit`).
 pub(super) fn train_network_on_trajectories(
     spec: &ModelSpec,
     network: &mut Mlp,
@@ -118,29 +145,6 @@ pub(super) fn train_network_on_trajectories(
     opts: &FitOptions,
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<TrajectorySummary> {
-    // Judged as `fit` judges the final model: the one free-run judge on the first
-    // validation record.
-    let before = match val {
-        Some((_, v)) => {
-            let dt = v.experiments()[0].dt();
-            let (_, loaded) = hybrid_loaded(
-                spec,
-                network,
-                x0,
-                dt,
-                opts.substeps,
-                opts.network_domain.initial(),
-            )?;
-            let j = judge_outputs(&loaded, v, opts.x0_window)?;
-            Some(
-                j.channels
-                    .into_iter()
-                    .map(|(k, m)| (k, m.fit_percent))
-                    .collect(),
-            )
-        }
-        None => None,
-    };
     let config = TrajectoryConfig {
         substeps: opts.substeps,
         ..opts.trajectory
@@ -170,7 +174,8 @@ pub(super) fn train_network_on_trajectories(
     network.clone_from(model.correction().network());
     Ok(TrajectorySummary {
         report,
-        validation_fit_before: before,
+        validation_fit_before: None,
         validation_fit_after: None,
+        validation_domain: None,
     })
 }

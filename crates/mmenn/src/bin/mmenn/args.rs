@@ -20,7 +20,8 @@ pub(crate) struct Cli {
     #[arg(long, global = true)]
     pub(crate) debug: bool,
     /// Replace an existing --out folder even when it holds another command's results or
-    /// files mmenn did not write (never one holding an input file).
+    /// files mmenn did not write (never one holding an input file). `show` and `monitor
+    /// classify` write no folder and refuse it.
     #[arg(long, global = true)]
     pub(crate) force: bool,
     /// Print no progress (bars on a terminal, periodic lines otherwise) on stderr.

@@ -484,29 +484,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     if let Some(v) = &s.validation {
         print_free_run("validation data", v);
     }
-    if let Some(r) = &s.refinement {
-        outln!(
-            "trajectory training: {} steps, objective {:.4e} -> {:.4e}",
-            r.report.iterations,
-            r.report.initial_train_objective(),
-            r.report.final_train_objective()
-        );
-        if let (Some(b), Some(a)) = (&r.validation_fit_before, &r.validation_fit_after) {
-            for (name, before) in b {
-                outln!(
-                    "  validation free-run fit of {name}: {before:.2} % -> {:.2} %",
-                    a.get(name).copied().unwrap_or(f64::NAN)
-                );
-            }
-        }
-    }
-    outln!(
-        "kept: {} — {} (judged free-run on {})",
-        s.guard.chosen.describe(),
-        s.guard.reason,
-        s.guard.held_out
-    );
-    for line in s.guard.domain.lines() {
+    for line in s.decision_lines() {
         outln!("{line}");
     }
     outln!("wrote {} files into {}", s.files.len(), args.out.display());
@@ -591,15 +569,10 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     let staged = stage(&a.out, "compare", force, &inputs)?;
     let data = prepared(&a.data, &a.prep, staged.path())?;
     let val = prepared(&a.val, &a.prep, &staged.path().join("val"))?;
-    let s = mmenn::compare::run_compare_with_progress(
-        &data,
-        &a.model,
-        &val,
-        &opts,
-        staged.path(),
-        progress,
-    )?;
+    let outcome =
+        mmenn::compare::run_compare_outcome(&data, &a.model, &val, &opts, staged.path(), progress)?;
     staged.commit()?;
+    let s = &outcome.summary;
     for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
         outln!("{} — {}:", t.title(), t.horizon());
         for row in t.rows() {
@@ -632,6 +605,19 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     }
     for f in &s.residual_failures {
         outln!("residual analysis of {} failed {}", f.model, f.reason);
+    }
+    // The MME/NN's choices, in `fit`'s words; its rows above are the kept model's.
+    let f = &outcome.fit.summary;
+    outln!(
+        "MME/NN ({}; its rows above are the kept model, {}):",
+        a.out.join("mme_nn").display(),
+        match f.guard.chosen {
+            mmenn::fit::GuardCandidate::PhysicsAlone => "physics alone",
+            _ => mmenn::words::network_domain(f.network_domain),
+        }
+    );
+    for line in f.decision_lines() {
+        outln!("  {line}");
     }
     outln!("wrote {} files into {}", s.files.len(), a.out.display());
     Ok(())
@@ -843,9 +829,30 @@ fn budget_ran_out(e: &anyhow::Error) -> bool {
     })
 }
 
+/// `--force` replaces an existing `--out` folder: a command that writes none refuses it
+/// as a bad argument (exit status 2, clap's error) rather than ignoring it.
+fn refuse_force(cli: &Cli) -> std::result::Result<(), clap::Error> {
+    let command = match &cli.command {
+        Command::Show(_) => "show",
+        Command::Monitor(MonitorCommand::Classify(_)) => "monitor classify",
+        _ => return Ok(()),
+    };
+    if !cli.force {
+        return Ok(());
+    }
+    use clap::CommandFactory as _;
+    Err(Cli::command().error(
+        clap::error::ErrorKind::ArgumentConflict,
+        format!("--force has no effect with `{command}`: it writes nothing"),
+    ))
+}
+
 #[allow(clippy::print_stderr)]
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Err(e) = refuse_force(&cli) {
+        e.exit()
+    }
     let force = cli.force;
     let progress = Reporter::new(cli.quiet);
     let result = match cli.command {
