@@ -832,19 +832,32 @@ fn budget_ran_out(e: &anyhow::Error) -> bool {
 /// `--force` replaces an existing `--out` folder: a command that writes none refuses it
 /// as a bad argument (exit status 2, clap's error) rather than ignoring it.
 fn refuse_force(cli: &Cli) -> std::result::Result<(), clap::Error> {
-    let command = match &cli.command {
-        Command::Show(_) => "show",
-        Command::Monitor(MonitorCommand::Classify(_)) => "monitor classify",
+    let path: &[&str] = match &cli.command {
+        Command::Show(_) => &["show"],
+        Command::Monitor(MonitorCommand::Classify(_)) => &["monitor", "classify"],
         _ => return Ok(()),
     };
     if !cli.force {
         return Ok(());
     }
     use clap::CommandFactory as _;
-    Err(Cli::command().error(
-        clap::error::ErrorKind::ArgumentConflict,
-        format!("--force has no effect with `{command}`: it writes nothing"),
-    ))
+    let message = format!(
+        "--force has no effect with `{}`: it writes nothing",
+        path.join(" ")
+    );
+    // The error carries the subcommand's usage line.
+    let kind = clap::error::ErrorKind::ArgumentConflict;
+    let mut root = Cli::command();
+    root.build();
+    Err(
+        match path
+            .iter()
+            .try_fold(&mut root, |c, name| c.find_subcommand_mut(name))
+        {
+            Some(sub) => sub.error(kind, message),
+            None => Cli::command().error(kind, message),
+        },
+    )
 }
 
 #[allow(clippy::print_stderr)]
