@@ -105,13 +105,9 @@ pub struct GreyFit {
 
 /// A single-input single-output record as a dataset with the given channel names.
 pub fn record(exp: &Experiment, len: usize, hold: InterSample) -> Result<Dataset> {
-    let len = len.min(exp.len());
-    let e = Experiment::new(
-        exp.t0(),
-        exp.dt(),
-        exp.inputs().columns(0, len).into_owned(),
-        exp.outputs().columns(0, len).into_owned(),
-    )?;
+    // A window of the record, so a band-limited input near its end is read from the
+    // record's later inputs (the protocol gives the whole test input), not held.
+    let e = exp.window(0, len.min(exp.len()))?;
     Ok(
         Dataset::new(vec![Channel::new("u")], vec![Channel::new("y")], vec![e])?
             .with_intersample(hold),
@@ -965,7 +961,9 @@ pub fn silverbox_model(k: f64, c: f64, b: f64, extra: &[SilverboxExtra]) -> Resu
     Ok(GreySpec {
         model,
         free,
-        intersample: InterSample::Foh,
+        // The input read band-limited between samples (Rule 5 of
+        // docs/decisions/silverbox-schroeder-rule.md).
+        intersample: InterSample::Bl,
         integrator: Integrator::Rk4 {
             substeps: match lag.into_iter().chain(filter).reduce(f64::min) {
                 Some(tau) => (SILVERBOX_DT / (2.1 * tau)).ceil() as usize,
