@@ -122,7 +122,12 @@ pub enum StartTrajectory {
     /// outputs (`x = C⁺ỹ`, unmeasured directions 0, a missing sample keeps the previous
     /// value), with `d = 0`. Not a trajectory of the model, so the first Gauss–Newton step
     /// is taken in full; its closed-loop rollout keeps the model near the data even on long
-    /// records.
+    /// records. When that first step finds no finite rollout (an unmeasured state at 0,
+    /// where a term such as `√|h|` has no usable slope), the estimator replaces this start
+    /// by a fitted one: the measured directions as here, the directions the outputs do not
+    /// determine from the model's open-loop run from the initial state whose free run fits
+    /// the first 200 samples. Where the data-based start works, nothing changes; when the
+    /// fitted start fails too, the error ([`crate::MmeError::StartFailed`]) names both.
     #[default]
     FromData,
     /// Given initial states, one per experiment (`n` each); the start is the open-loop

@@ -158,6 +158,23 @@ pub enum MmeError {
         /// What went wrong.
         what: &'static str,
     },
+    /// Neither start of the nonlinear estimator led to a finite trajectory: the
+    /// data-based start ([`crate::StartTrajectory::FromData`]) gave no finite rollout,
+    /// and the fitted start that replaces it then (the model's run from initial states
+    /// fitted to the first outputs, measured directions kept from the data) failed too.
+    #[error(
+        "experiment {experiment}: the nonlinear estimator found no start: from the data, \
+         {data_start}; then from the model run from initial states fitted to the first \
+         outputs, {fitted_start} (give initial states, or a model that stays finite there)"
+    )]
+    StartFailed {
+        /// Experiment index.
+        experiment: usize,
+        /// Why the data-based start failed.
+        data_start: Box<MmeError>,
+        /// Why the fitted start failed.
+        fitted_start: Box<MmeError>,
+    },
     /// The nonlinear model's trajectory diverged (non-finite or beyond the blow-up bound).
     #[error(
         "experiment {experiment}: nonlinear trajectory diverged at t = {time} s (state {state})"

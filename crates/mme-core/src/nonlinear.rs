@@ -264,6 +264,9 @@ struct NonlinearRun<'a, F> {
     history: Vec<IterationRecord>,
     termination: Termination,
     budget: sysid_core::Budget,
+    /// Per experiment: why the data-based start failed, once the fitted start has
+    /// replaced it (`None`: not replaced).
+    data_start_failure: Vec<Option<MmeError>>,
 }
 
 impl<'a, F: Dynamics> NonlinearRun<'a, F> {
@@ -286,6 +289,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             termination: Termination::MaxIterations,
             binding,
             budget: config.budget.clone(),
+            data_start_failure: vec![None; data.experiments().len()],
         };
         if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
@@ -553,6 +557,41 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         ))
     }
 
+    /// One Gauss–Newton step of experiment `e` from `cur` (cost `cost`, infinite for a
+    /// start that is not a rollout): the LQ optimum, then the Armijo line search over
+    /// closed-loop rollouts. Returns the accepted `(trajectory, cost, step length)`, if
+    /// any, and whether the predicted decrease is below the tolerance.
+    fn attempt(
+        &mut self,
+        e: usize,
+        cur: &Traj,
+        cost: f64,
+        w: &DMatrix<f64>,
+        inv_r: &[f64],
+    ) -> Result<(Option<(Traj, f64, f64)>, bool)> {
+        let tol = self.opts.cost_tolerance;
+        let (star, j_lq, _, _) = self.lq_step(e, cur, w, inv_r, LogDet::Skip)?;
+        let predicted = cost - j_lq;
+        // A NaN prediction counts as large.
+        let small = predicted <= tol * j_lq.abs().max(f64::MIN_POSITIVE);
+        let mut t = 1.0;
+        for _ in 0..=self.opts.max_halvings {
+            if let Some(tr) = self.rollout(e, cur, &star, t) {
+                let j_new = self.evaluate(e, &tr, w, inv_r).cost;
+                let enough = if cost.is_finite() {
+                    j_new <= cost - 1e-4 * t * predicted.max(0.0) && j_new < cost
+                } else {
+                    j_new.is_finite()
+                };
+                if enough {
+                    return Ok((Some((tr, j_new, t)), small));
+                }
+            }
+            t *= 0.5;
+        }
+        Ok((None, small))
+    }
+
     /// Closed-loop rollout at step length `t`; `None` if it diverges.
     fn rollout(&mut self, e: usize, cur: &Traj, star: &Traj, t: f64) -> Option<Traj> {
         let g = self.grids[e];
@@ -660,31 +699,32 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                         Some(self.opts.max_iterations),
                     )
                     .map_err(sysid_core::CoreError::from)?;
-                let cur = self.trajs[e].clone();
-                let (star, j_lq, _, _) = self.lq_step(e, &cur, w, inv_r, LogDet::Skip)?;
-                let predicted = *cost_e - j_lq;
-                // A NaN prediction counts as large.
-                let small = predicted <= tol * j_lq.abs().max(f64::MIN_POSITIVE);
-                small_prediction &= small;
-                let mut t = 1.0;
-                let mut accepted = None;
-                for _ in 0..=self.opts.max_halvings {
-                    if let Some(tr) = self.rollout(e, &cur, &star, t) {
-                        let j_new = self.evaluate(e, &tr, w, inv_r).cost;
-                        let enough = if cost_e.is_finite() {
-                            j_new <= *cost_e - 1e-4 * t * predicted.max(0.0) && j_new < *cost_e
-                        } else {
-                            j_new.is_finite()
-                        };
-                        if enough {
-                            accepted = Some((tr, j_new));
-                            break;
-                        }
-                    }
-                    t *= 0.5;
+                let mut cur = self.trajs[e].clone();
+                let (mut accepted, mut small) = self.attempt(e, &cur, *cost_e, w, inv_r)?;
+                if accepted.is_none() && !cur.consistent && self.data_start_failure[e].is_none()
+                {
+                    // The data-based start gave no finite rollout: replace it by the fitted
+                    // start (`start.rs`) and try again; errors name both starts.
+                    let g = self.grids[e];
+                    let data_start = MmeError::Breakdown {
+                        experiment: e,
+                        step: 0,
+                        time: g.t0,
+                        what: "no finite rollout found",
+                    };
+                    let both = |fitted: MmeError| MmeError::StartFailed {
+                        experiment: e,
+                        data_start: Box::new(data_start.clone()),
+                        fitted_start: Box::new(fitted),
+                    };
+                    cur = self.fitted_trajectory(e).map_err(both)?;
+                    self.trajs[e] = cur.clone();
+                    self.data_start_failure[e] = Some(data_start.clone());
+                    (accepted, small) = self.attempt(e, &cur, *cost_e, w, inv_r).map_err(both)?;
                 }
+                small_prediction &= small;
                 match accepted {
-                    Some((tr, j_new)) => {
+                    Some((tr, j_new, t)) => {
                         let dx0: f64 = (0..self.n_states())
                             .map(|i| (tr.x[i] - cur.x[i]).powi(2))
                             .sum();
@@ -732,11 +772,19 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
         for e in 0..experiments {
             let tr = self.trajs[e].clone();
             if !tr.consistent {
-                return Err(MmeError::Breakdown {
+                let no_rollout = MmeError::Breakdown {
                     experiment: e,
                     step: 0,
                     time: self.grids[e].t0,
                     what: "no finite rollout found",
+                };
+                return Err(match &self.data_start_failure[e] {
+                    Some(data_start) => MmeError::StartFailed {
+                        experiment: e,
+                        data_start: Box::new(data_start.clone()),
+                        fitted_start: Box::new(no_rollout),
+                    },
+                    None => no_rollout,
                 });
             }
             let ev = self.evaluate(e, &tr, w, inv_r);

@@ -11,5 +11,6 @@ mod msd;
 mod noise;
 mod nonlinear;
 mod robust;
+mod start;
 mod stiff;
 mod update;
