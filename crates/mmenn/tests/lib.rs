@@ -4,6 +4,7 @@ mod band_limited;
 mod cli;
 mod compare;
 mod discover;
+mod estimate_start;
 mod examples;
 mod fit;
 mod fit_guard;

@@ -64,7 +64,7 @@ fn folder(benchmark: Benchmark) -> Option<PathBuf> {
     }
 }
 
-fn tanks_folder() -> Option<PathBuf> {
+pub(crate) fn tanks_folder() -> Option<PathBuf> {
     folder(Benchmark::CascadedTanks)
 }
 

@@ -1,0 +1,170 @@
+//! `mmenn estimate` with a state the outputs do not determine: a Torricelli model of two
+//! cascaded tanks with only the lower level measured. MME's data-based start puts the
+//! upper level at 0, where `√|h1|` has no usable slope; the estimate stopped there with
+//! "numerical breakdown at t = 0 s (sub-step 0): no finite rollout found" until mme-core
+//! replaced such a start by a fitted one. The data come from a hand-written explicit
+//! Euler integrator that shares no code with the workspace.
+
+use std::path::PathBuf;
+
+use mmenn::data_file::{read_table, write_experiment};
+use mmenn::estimate::{EstimateOptions, run_estimate};
+use mmenn::sysid_core::{Channel, Dataset, Experiment, Termination};
+use nalgebra::DMatrix;
+
+/// Coefficients about those fitted to the Cascaded Tanks benchmark (V^½/s, 1/s).
+const K1: f64 = 0.0399;
+const K4: f64 = 0.0409;
+const K2: f64 = 0.0728;
+const K3: f64 = 0.0897;
+const TS: f64 = 4.0;
+const LEN: usize = 250;
+
+const MODEL: &str = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+C = [[0.0, 1.0]]
+outputs = ["y"]
+corrected = ["h1", "h2"]
+noise_variance = "auto"
+units = { h1 = "V", h2 = "V", u = "V", y = "V" }
+
+[[terms]]
+state = "h1"
+effect = "orifice_outflow"
+term = "sqrt(abs(h1))"
+coefficient = -0.0399
+
+[[terms]]
+state = "h1"
+effect = "pump"
+term = "u"
+coefficient = 0.0409
+
+[[terms]]
+state = "h2"
+effect = "orifice_inflow"
+term = "sqrt(abs(h1))"
+coefficient = 0.0728
+
+[[terms]]
+state = "h2"
+effect = "orifice_outflow"
+term = "sqrt(abs(h2))"
+coefficient = -0.0897
+"#;
+
+/// Input levels held 100 s; true levels by explicit Euler at 0.01 s from (6, 4) V; the
+/// lower level with a deterministic ±0.02 V pseudo-noise (a fixed linear congruential
+/// sequence). Returns the record and the true upper level.
+fn record() -> (Dataset, Vec<f64>) {
+    let levels = [3.2, 2.6, 3.9, 3.0, 3.6, 2.8, 4.0, 3.3, 2.5, 3.7];
+    let u: Vec<f64> = (0..LEN).map(|k| levels[(k / 25) % levels.len()]).collect();
+    let (mut h1, mut h2) = (6.0_f64, 4.0_f64);
+    let mut upper = Vec::with_capacity(LEN);
+    let mut y = Vec::with_capacity(LEN);
+    let mut state: u64 = 12345;
+    for &uk in &u {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let noise = 0.04 * ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5);
+        upper.push(h1);
+        y.push(h2 + noise);
+        for _ in 0..400 {
+            let q1 = h1.abs().sqrt();
+            let (d1, d2) = (-K1 * q1 + K4 * uk, K2 * q1 - K3 * h2.abs().sqrt());
+            h1 += 0.01 * d1;
+            h2 += 0.01 * d2;
+        }
+    }
+    let exp = Experiment::new(
+        0.0,
+        TS,
+        DMatrix::from_row_slice(1, LEN, &u),
+        DMatrix::from_row_slice(1, LEN, &y),
+    )
+    .unwrap();
+    let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("y")], vec![exp]).unwrap();
+    (data, upper)
+}
+
+#[test]
+fn estimate_with_an_unmeasured_torricelli_level_starts_from_the_fitted_state() {
+    let dir: PathBuf =
+        std::env::temp_dir().join(format!("mmenn-estimate-start-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (data, upper) = record();
+    write_experiment(&dir.join("data.csv"), &data, 0).unwrap();
+    std::fs::write(dir.join("model.toml"), MODEL).unwrap();
+    let s = run_estimate(
+        &[dir.join("data.csv")],
+        &dir.join("model.toml"),
+        &EstimateOptions::default(),
+        &dir.join("est"),
+    )
+    .unwrap();
+    // The W search's ending is not asserted: with the exact model the residuals stay
+    // below the noise at every W, so the covariance constraint is not bracketed.
+    assert!(
+        !matches!(
+            s.report.termination,
+            Some(Termination::LineSearchFailed | Termination::MaxIterations)
+        ),
+        "{:?}",
+        s.report
+    );
+    let table = read_table(&dir.join("est").join("estimate.csv")).unwrap();
+    let h1 = &table.columns[table.column_index("h1").unwrap()];
+    assert_eq!(h1.len(), LEN);
+    let rmse = (h1
+        .iter()
+        .zip(&upper)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        / LEN as f64)
+        .sqrt();
+    // Bound fixed before the first run: 0.5 V on a level of ~6–17 V, looser than the
+    // mme-core test's 0.3 V because W and the noise variance are estimated here.
+    assert!(rmse < 0.5, "RMSE of the upper level {rmse} V");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The case that was reported: the same model on the Cascaded Tanks estimation record
+/// (read in place; skipped when absent, as the other real-data tests). The upper level is
+/// never measured; it must come out as a level (positive) and the covariance constraint
+/// be met. When this was written: W converged in 5 evaluations, x̂1 in 4.1–18.0 V,
+/// residual-to-noise ratio 1.000.
+#[test]
+fn estimate_cascaded_tanks_torricelli_with_the_upper_level_unmeasured() {
+    let Some(folder) = crate::real_data::tanks_folder() else {
+        return;
+    };
+    let dir: PathBuf =
+        std::env::temp_dir().join(format!("mmenn-estimate-start-real-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("model.toml"), MODEL).unwrap();
+    let s = run_estimate(
+        &[folder.join("estimation.csv")],
+        &dir.join("model.toml"),
+        &EstimateOptions::default(),
+        &dir.join("est"),
+    )
+    .unwrap();
+    assert_eq!(
+        s.report.termination,
+        Some(Termination::Converged),
+        "{:?}",
+        s.report
+    );
+    assert!(
+        (s.residual_to_noise["y"] - 1.0).abs() < 0.1,
+        "ratio {}",
+        s.residual_to_noise["y"]
+    );
+    let table = read_table(&dir.join("est").join("estimate.csv")).unwrap();
+    let h1 = &table.columns[table.column_index("h1").unwrap()];
+    let low = h1.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(low > 0.0, "upper level down to {low} V");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
