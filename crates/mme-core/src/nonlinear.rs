@@ -210,6 +210,13 @@ struct Traj {
     consistent: bool,
 }
 
+/// A step the line search accepted: the rollout, its cost and the step length.
+struct Accepted {
+    traj: Traj,
+    cost: f64,
+    t: f64,
+}
+
 /// Where a model evaluation happens, to name a non-finite value.
 struct Where<'a> {
     experiment: usize,
@@ -559,8 +566,8 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
 
     /// One Gauss–Newton step of experiment `e` from `cur` (cost `cost`, infinite for a
     /// start that is not a rollout): the LQ optimum, then the Armijo line search over
-    /// closed-loop rollouts. Returns the accepted `(trajectory, cost, step length)`, if
-    /// any, and whether the predicted decrease is below the tolerance.
+    /// closed-loop rollouts. Returns the accepted step, if any, and whether the predicted
+    /// decrease is below the tolerance.
     fn attempt(
         &mut self,
         e: usize,
@@ -568,7 +575,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         cost: f64,
         w: &DMatrix<f64>,
         inv_r: &[f64],
-    ) -> Result<(Option<(Traj, f64, f64)>, bool)> {
+    ) -> Result<(Option<Accepted>, bool)> {
         let tol = self.opts.cost_tolerance;
         let (star, j_lq, _, _) = self.lq_step(e, cur, w, inv_r, LogDet::Skip)?;
         let predicted = cost - j_lq;
@@ -584,7 +591,14 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                     j_new.is_finite()
                 };
                 if enough {
-                    return Ok((Some((tr, j_new, t)), small));
+                    return Ok((
+                        Some(Accepted {
+                            traj: tr,
+                            cost: j_new,
+                            t,
+                        }),
+                        small,
+                    ));
                 }
             }
             t *= 0.5;
@@ -701,8 +715,7 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                     .map_err(sysid_core::CoreError::from)?;
                 let mut cur = self.trajs[e].clone();
                 let (mut accepted, mut small) = self.attempt(e, &cur, *cost_e, w, inv_r)?;
-                if accepted.is_none() && !cur.consistent && self.data_start_failure[e].is_none()
-                {
+                if accepted.is_none() && !cur.consistent && self.data_start_failure[e].is_none() {
                     // The data-based start gave no finite rollout: replace it by the fitted
                     // start (`start.rs`) and try again; errors name both starts.
                     let g = self.grids[e];
@@ -724,7 +737,11 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                 }
                 small_prediction &= small;
                 match accepted {
-                    Some((tr, j_new, t)) => {
+                    Some(Accepted {
+                        traj: tr,
+                        cost: j_new,
+                        t,
+                    }) => {
                         let dx0: f64 = (0..self.n_states())
                             .map(|i| (tr.x[i] - cur.x[i]).powi(2))
                             .sum();

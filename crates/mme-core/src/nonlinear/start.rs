@@ -86,14 +86,16 @@ impl<F: Dynamics> NonlinearRun<'_, F> {
     /// Gauss–Newton step is taken in full, as from the data-based start).
     pub(super) fn fitted_trajectory(&mut self, e: usize) -> Result<Traj> {
         let g = self.grids[e];
-        let (n, m) = (self.model.dynamics.n_states(), self.model.dynamics.n_inputs());
+        let (n, m) = (
+            self.model.dynamics.n_states(),
+            self.model.dynamics.n_inputs(),
+        );
         let p = self.binding.outputs.len();
         let exp = &self.data.experiments()[e];
         // The first samples as the model sees them (its inputs and outputs, in its order).
         let len = FIT_WINDOW.min(g.samples);
         let inputs = DMatrix::from_fn(m, len, |r, k| exp.inputs()[(self.binding.inputs[r], k)]);
-        let outputs =
-            DMatrix::from_fn(p, len, |r, k| exp.outputs()[(self.binding.outputs[r], k)]);
+        let outputs = DMatrix::from_fn(p, len, |r, k| exp.outputs()[(self.binding.outputs[r], k)]);
         let first = Experiment::new(g.t0, exp.dt(), inputs, outputs)?.with_intersample(g.hold);
         let fit = InitialStateFit {
             window: len,
