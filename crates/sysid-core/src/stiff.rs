@@ -186,7 +186,6 @@ pub fn probe_substeps<D: Dynamics + ?Sized>(
     let mut b = DMatrix::zeros(n, m);
     let mut x = x0.to_vec();
     let mut rk = Rk4::new(n, m, 0);
-    let hold = exp.intersample();
     let mut probe = StiffProbe {
         substeps: min,
         rate: 0.0,
@@ -195,7 +194,7 @@ pub fn probe_substeps<D: Dynamics + ?Sized>(
     };
     for k in 1..exp.len() {
         let t0 = exp.time(k - 1);
-        let (ua, ub) = (exp.input(k - 1), exp.input(k));
+        let ua = exp.input(k - 1);
         f.jacobians(t0, &x, ua, &mut a, &mut b);
         let rate = spectral_radius(&a).unwrap_or(0.0);
         if rate > probe.rate {
@@ -211,7 +210,7 @@ pub fn probe_substeps<D: Dynamics + ?Sized>(
                 t0 + j as f64 * h,
                 h,
                 &mut x,
-                &hold.step_input(ua, ub, j, s),
+                &exp.step_input(k - 1, j, s),
             );
         }
         if x.iter().any(|v| !v.is_finite() || v.abs() > blow_up) {

@@ -228,23 +228,16 @@ impl Propagator<'_> {
             }
         }
         let substeps = self.substeps.max(1);
-        let inputs = exp.inputs().as_slice();
-        let hold = exp.intersample();
         for k in 0..len.min(exp.len()) {
             if k > 0 {
-                let u = &inputs[(k - 1) * m..k * m];
-                // The last sample has no next one; a held input needs none.
-                let ub = if k < exp.len() {
-                    &inputs[k * m..(k + 1) * m]
-                } else {
-                    u
-                };
+                // The record's own reading between samples k − 1 and k (held, linear or
+                // band-limited).
                 let ta = exp.t0() + (k - 1) as f64 * exp.dt();
                 let tb = exp.t0() + k as f64 * exp.dt();
                 let h = (tb - ta) / substeps as f64;
                 for j in 0..substeps {
                     let t = ta + j as f64 * h;
-                    let input = hold.step_input(u, ub, j, substeps);
+                    let input = exp.step_input(k - 1, j, substeps);
                     rk.step_with_stage_tangents(&stage, t, h, &mut x, &mut s, &input);
                 }
                 if let Some((state, value)) = x
