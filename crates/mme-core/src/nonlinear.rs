@@ -24,6 +24,8 @@ use sysid_core::{
     SolveReport, Termination,
 };
 
+use sysid_core::bandlimited::BL_FACTOR;
+
 use crate::binding::{Binding, bind};
 use crate::config::{IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight, StartTrajectory};
 use crate::config::{check_iterations, check_noise, resolve_weight};
@@ -195,7 +197,18 @@ struct Grid {
 impl Grid {
     /// The input over sub-step `j` given the samples `ua = u_k`, `ub = u_{k+1}` of its
     /// interval `k = j / s` (`ub` is read only for a first-order hold).
+    ///
+    /// For a band-limited input `ua` is the interval's grid
+    /// ([`NonlinearRun::interval_inputs`]) and `ub` is empty.
     fn stage_input<'u>(&self, j: usize, ua: &'u [f64], ub: &'u [f64]) -> StepInput<'u> {
+        if self.hold == InterSample::Bl && ub.is_empty() {
+            return StepInput::Grid {
+                points: ua,
+                per_interval: BL_FACTOR,
+                from: (j % self.substeps) as f64 / self.substeps as f64,
+                per: 1.0 / self.substeps as f64,
+            };
+        }
         self.hold
             .step_input(ua, ub, j % self.substeps, self.substeps)
     }
@@ -367,16 +380,27 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
     }
 
     /// The samples `(u_k, u_{k+1})` around sub-step `j` of experiment `e`; the second is
-    /// empty for held inputs (never read).
+    /// empty for held inputs (never read). For a band-limited input, the interval's grid
+    /// points of the model's inputs (`BL_FACTOR + 1` points) and an empty second.
     fn interval_inputs(&self, e: usize, j: usize) -> (Vec<f64>, Vec<f64>) {
         let g = &self.grids[e];
         let k = j / g.substeps;
-        let next = match g.hold {
-            InterSample::Zoh => Vec::new(),
-            // MME reads a band-limited input as linear between samples.
-            InterSample::Foh | InterSample::Bl => self.input(e, k + 1),
-        };
-        (self.input(e, k), next)
+        let exp = &self.data.experiments()[e];
+        match g.hold {
+            InterSample::Zoh => (self.input(e, k), Vec::new()),
+            InterSample::Bl => match exp.band_limited_interval(k) {
+                Some(points) => {
+                    let m = exp.n_inputs();
+                    let grid = points
+                        .chunks_exact(m)
+                        .flat_map(|p| self.binding.inputs.iter().map(move |&row| p[row]))
+                        .collect();
+                    (grid, Vec::new())
+                }
+                None => (self.input(e, k), self.input(e, k + 1)),
+            },
+            InterSample::Foh => (self.input(e, k), self.input(e, k + 1)),
+        }
     }
 
     fn input(&self, e: usize, k: usize) -> Vec<f64> {

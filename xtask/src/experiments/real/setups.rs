@@ -169,8 +169,8 @@ pub(super) fn silverbox(mode: Mode, b: &mmenn::benchmarks::BenchmarkData) -> Res
         notes: vec![
             "Inputs band-limited between samples (`intersample = \"bl\"`: the windowed-sinc \
              reading of the samples, sysid_core::bandlimited; grey-box calibration, the \
-             network's trajectory training and every free run of the physics-first models; \
-             MME reads the input linear between samples). Chosen by Rule 5 of \
+             MME on it, the network's trajectory training and every free run of the \
+             physics-first models). Chosen by Rule 5 of \
              docs/decisions/silverbox-schroeder-rule.md on the Schroeder record's second half \
              (grey box 0.3062 against 0.3165 mV with linear interpolation, training 0.2235 \
              against 0.2305 mV, both with the records resampled 8×); the rule was written \
