@@ -171,18 +171,20 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              (explore_silverbox on 7a8efb5), so the training record does not pick the \
              extrapolation among them; without the quadratic spring the arrow is worse \
              (0.369 mV, training 0.2959 mV). The input between samples is not the cause \
-             either: the excitation reaches 200 Hz, a third of the sampling rate, where the \
-             linear interpolation every physics-first model here uses passes 69 % of a \
-             component's amplitude (sinc² of f/fs) and half of it at mid-interval; read as band-limited instead (every \
-             record resampled 8× by windowed-sinc interpolation, the model calibrated and run \
-             at the fine rate and scored at the recorded samples; a diagnosis, not a reported \
-             row) the reported structure fits the training record 3 % better (0.2235 against \
-             0.2305 mV) and scores 0.2791 mV on test_arrow_full, 0.2328 on test_multisine and \
-             0.3113 on schroeder80mV (against 0.2846, 0.2390 and 0.3218); without the input \
-             stage, which the band-limited input mostly replaces, 0.2251 mV training and \
-             0.2809 on the arrow (16×: 0.2247 and 0.2806; explore_silverbox_bandlimited on \
-             3703b19). So about 2 % of the arrow's error is the interpolation, not the 7 % the \
-             target asks for"
+             either. The excitation reaches 200 Hz, a third of the sampling rate, where the \
+             linear interpolation the physics-first models used until 8765874 passes 69 % of a \
+             component's amplitude (sinc² of f/fs) and half of it at mid-interval. Since then \
+             they read it band-limited (`intersample = \"bl\"`, chosen by Rule 5 of \
+             docs/decisions/silverbox-schroeder-rule.md on the Schroeder record's second half): \
+             the grey box's training RMSE went from 0.2305 to 0.2235 mV, test_arrow_full from \
+             0.2846 to 0.2791 mV and test_multisine from 0.2390 to 0.2328 mV, so about 2 % of \
+             the arrow's error was the interpolation, not the 7 % the target asks for. The \
+             hybrid on it, whose MME now reads the same input, gained more inside the \
+             training amplitude (test_multisine 0.2337 → 0.2172 mV; its guard's held-out \
+             score 0.2087 against the physics' 0.2227 mV) and lost on the arrow (0.2788 → \
+             0.2927 mV): held at its training box, its correction at the box's edge is not \
+             what the arrow's largest amplitudes need, and no training-range record shows \
+             that"
         }
         Benchmark::Emps => {
             "the published 2.64 mm was not measured on the test record: dynoNet's script scores \
