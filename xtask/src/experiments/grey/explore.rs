@@ -172,6 +172,49 @@ fn explore_emps() {
     }
 }
 
+/// One `GREY_SB` item: the extra terms, the RK4 sub-steps if given (`sub`), the
+/// resampling factor (`up`, 1 unless given; [`explore_silverbox_bandlimited`] only).
+fn silverbox_item(item: &str) -> (Vec<SilverboxExtra>, Option<usize>, usize) {
+    use SilverboxExtra::*;
+    let mut extra = Vec::new();
+    let mut substeps = None;
+    let mut l = 1usize;
+    for (key, v) in kv(item) {
+        extra.push(match key.as_str() {
+            "sub" => {
+                substeps = Some(v as usize);
+                continue;
+            }
+            "up" => {
+                l = v as usize;
+                continue;
+            }
+            "q" => QuadraticSpring,
+            "ig" => InputGainVariation,
+            "dd" => DisplacementDamping,
+            "q5" => QuinticSpring,
+            "ft" => Feedthrough(v),
+            "vv" => QuadraticDrag,
+            "v3" => Monomial("v^3"),
+            "yv" => Monomial("y*v"),
+            "v2" => Monomial("v^2"),
+            "yv2" => Monomial("y*v^2"),
+            "ya" => Monomial("y*abs(y)"),
+            "yav" => Monomial("abs(y)*v"),
+            "vay" => Monomial("abs(v)*y"),
+            "u2" => Monomial("u^2"),
+            "u3" => Monomial("u^3"),
+            "u2y" => Monomial("u^2*y"),
+            "uv" => Monomial("u*v"),
+            "uyv" => Monomial("u*y*v"),
+            "u2v" => Monomial("u^2*v"),
+            "uv2" => Monomial("u*v^2"),
+            _ => panic!("unknown key {key}"),
+        });
+    }
+    (extra, substeps, l)
+}
+
 #[test]
 #[ignore]
 fn explore_silverbox() {
@@ -179,27 +222,7 @@ fn explore_silverbox() {
     // The linear oscillator of the full run's ARX(2,2) start (docs/results).
     let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
     for item in all.split(';').filter(|s| !s.trim().is_empty()) {
-        let mut extra = Vec::new();
-        let mut substeps = None;
-        for (key, v) in kv(item) {
-            match key.as_str() {
-                "q" => extra.push(SilverboxExtra::QuadraticSpring),
-                "ig" => extra.push(SilverboxExtra::InputGainVariation),
-                "sub" => substeps = Some(v as usize),
-                "dd" => extra.push(SilverboxExtra::DisplacementDamping),
-                "q5" => extra.push(SilverboxExtra::QuinticSpring),
-                "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
-                "v3" => extra.push(SilverboxExtra::Monomial("v^3")),
-                "yv" => extra.push(SilverboxExtra::Monomial("y*v")),
-                "vv" => extra.push(SilverboxExtra::QuadraticDrag),
-                "v2" => extra.push(SilverboxExtra::Monomial("v^2")),
-                "yv2" => extra.push(SilverboxExtra::Monomial("y*v^2")),
-                "ya" => extra.push(SilverboxExtra::Monomial("y*abs(y)")),
-                "yav" => extra.push(SilverboxExtra::Monomial("abs(y)*v")),
-                "vay" => extra.push(SilverboxExtra::Monomial("abs(v)*y")),
-                _ => panic!("unknown key {key}"),
-            }
-        }
+        let (extra, substeps, _) = silverbox_item(item);
         let mut spec = silverbox_model(k, c, b, &extra).unwrap();
         if let Some(substeps) = substeps {
             spec.integrator = Integrator::Rk4 { substeps };
@@ -681,33 +704,7 @@ fn explore_silverbox_bandlimited() {
     let all = std::env::var("GREY_SB").unwrap_or_default();
     let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
     for item in all.split(';').filter(|s| !s.trim().is_empty()) {
-        let mut extra = Vec::new();
-        let mut substeps = None;
-        let mut l = 1usize;
-        for (key, v) in kv(item) {
-            match key.as_str() {
-                "q" => extra.push(SilverboxExtra::QuadraticSpring),
-                "ig" => extra.push(SilverboxExtra::InputGainVariation),
-                "sub" => substeps = Some(v as usize),
-                "dd" => extra.push(SilverboxExtra::DisplacementDamping),
-                "ft" => extra.push(SilverboxExtra::Feedthrough(v)),
-                "vv" => extra.push(SilverboxExtra::QuadraticDrag),
-                "up" => l = v as usize,
-                "u2" => extra.push(SilverboxExtra::Monomial("u^2")),
-                "u3" => extra.push(SilverboxExtra::Monomial("u^3")),
-                "u2y" => extra.push(SilverboxExtra::Monomial("u^2*y")),
-                "uv" => extra.push(SilverboxExtra::Monomial("u*v")),
-                "uyv" => extra.push(SilverboxExtra::Monomial("u*y*v")),
-                "u2v" => extra.push(SilverboxExtra::Monomial("u^2*v")),
-                "uv2" => extra.push(SilverboxExtra::Monomial("u*v^2")),
-                "v3" => extra.push(SilverboxExtra::Monomial("v^3")),
-                "yv" => extra.push(SilverboxExtra::Monomial("y*v")),
-                "v2" => extra.push(SilverboxExtra::Monomial("v^2")),
-                "yv2" => extra.push(SilverboxExtra::Monomial("y*v^2")),
-                "q5" => extra.push(SilverboxExtra::QuinticSpring),
-                _ => panic!("unknown key {key}"),
-            }
-        }
+        let (extra, substeps, l) = silverbox_item(item);
         let mut spec = silverbox_model(k, c, b, &extra).unwrap();
         if let Some(substeps) = substeps {
             spec.integrator = Integrator::Rk4 { substeps };
