@@ -475,8 +475,9 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     )?;
     staged.commit()?;
     outln!(
-        "network: {} hidden units (train MSE {:.3e}, test MSE {:.3e} of d)",
+        "network: {} hidden unit{} (train MSE {:.3e}, test MSE {:.3e} of d)",
         s.hidden,
+        if s.hidden == 1 { "" } else { "s" },
         s.chosen.train_mse,
         s.chosen.test_mse
     );
