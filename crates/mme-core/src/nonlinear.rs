@@ -192,16 +192,21 @@ struct Grid {
     steps: usize,
     /// How the inputs behave between samples.
     hold: InterSample,
+    /// The model's inputs per point of [`NonlinearRun::bound`]: `m`.
+    m: usize,
+    /// Whether [`NonlinearRun::bound`] holds the band-limited grid (`BL_FACTOR` points per
+    /// sample interval) rather than the samples.
+    band_limited: bool,
 }
 
 impl Grid {
     /// The input over sub-step `j` given the samples `ua = u_k`, `ub = u_{k+1}` of its
     /// interval `k = j / s` (`ub` is read only for a first-order hold).
     ///
-    /// For a band-limited input `ua` is the interval's grid
-    /// ([`NonlinearRun::interval_inputs`]) and `ub` is empty.
+    /// For a band-limited input `ua` is the interval's grid ([`Grid::interval`]) and `ub`
+    /// is empty.
     fn stage_input<'u>(&self, j: usize, ua: &'u [f64], ub: &'u [f64]) -> StepInput<'u> {
-        if self.hold == InterSample::Bl && ub.is_empty() {
+        if self.band_limited {
             return StepInput::Grid {
                 points: ua,
                 per_interval: BL_FACTOR,
@@ -211,6 +216,22 @@ impl Grid {
         }
         self.hold
             .step_input(ua, ub, j % self.substeps, self.substeps)
+    }
+
+    /// The inputs of sub-step `j`'s sample interval `k = j / s`, from the experiment's
+    /// bound inputs (no copy): `(u_k, u_{k+1})` (the second empty for held inputs, never
+    /// read), or the interval's `BL_FACTOR + 1` grid points and an empty second.
+    fn interval<'b>(&self, bound: &'b [f64], j: usize) -> (&'b [f64], &'b [f64]) {
+        let (k, m) = (j / self.substeps, self.m);
+        if self.band_limited {
+            let first = k * BL_FACTOR * m;
+            return (&bound[first..first + (BL_FACTOR + 1) * m], &[]);
+        }
+        let ua = &bound[k * m..(k + 1) * m];
+        match self.hold {
+            InterSample::Zoh => (ua, &[]),
+            InterSample::Foh | InterSample::Bl => (ua, &bound[(k + 1) * m..(k + 2) * m]),
+        }
     }
 }
 
@@ -277,6 +298,10 @@ struct NonlinearRun<'a, F> {
     data: &'a Dataset,
     binding: Binding,
     grids: Vec<Grid>,
+    /// Per experiment, the model's inputs in model order, point after point: the samples,
+    /// or the band-limited grid ([`Grid::band_limited`]); read by every sub-step without a
+    /// copy.
+    bound: Vec<Vec<f64>>,
     trajs: Vec<Traj>,
     opts: IterationOptions,
     rk: Rk4,
@@ -301,6 +326,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             model,
             data,
             grids: Vec::new(),
+            bound: Vec::new(),
             trajs: Vec::new(),
             opts: config.iterations,
             rk: Rk4::new(n, m, q),
@@ -351,6 +377,16 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             };
             crate::discretize::check_grid(e, exp.len(), s, n, q, true)?;
             let steps = (exp.len() - 1) * s;
+            let grid = match exp.intersample() {
+                InterSample::Bl => exp.band_limited_grid(),
+                InterSample::Zoh | InterSample::Foh => None,
+            };
+            let points = grid.unwrap_or(exp.inputs().as_slice());
+            let bound: Vec<f64> = points
+                .chunks_exact(exp.n_inputs().max(1))
+                .flat_map(|p| run.binding.inputs.iter().map(move |&row| p[row]))
+                .collect();
+            run.bound.push(bound);
             run.grids.push(Grid {
                 samples: exp.len(),
                 substeps: s,
@@ -358,6 +394,8 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 t0: exp.t0(),
                 steps,
                 hold: exp.intersample(),
+                m: run.binding.inputs.len(),
+                band_limited: grid.is_some(),
             });
             let traj = match &config.start {
                 StartTrajectory::FromData => run.data_trajectory(e),
@@ -377,30 +415,6 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             run.trajs.push(traj);
         }
         Ok(run)
-    }
-
-    /// The samples `(u_k, u_{k+1})` around sub-step `j` of experiment `e`; the second is
-    /// empty for held inputs (never read). For a band-limited input, the interval's grid
-    /// points of the model's inputs (`BL_FACTOR + 1` points) and an empty second.
-    fn interval_inputs(&self, e: usize, j: usize) -> (Vec<f64>, Vec<f64>) {
-        let g = &self.grids[e];
-        let k = j / g.substeps;
-        let exp = &self.data.experiments()[e];
-        match g.hold {
-            InterSample::Zoh => (self.input(e, k), Vec::new()),
-            InterSample::Bl => match exp.band_limited_interval(k) {
-                Some(points) => {
-                    let m = exp.n_inputs();
-                    let grid = points
-                        .chunks_exact(m)
-                        .flat_map(|p| self.binding.inputs.iter().map(move |&row| p[row]))
-                        .collect();
-                    (grid, Vec::new())
-                }
-                None => (self.input(e, k), self.input(e, k + 1)),
-            },
-            InterSample::Foh => (self.input(e, k), self.input(e, k + 1)),
-        }
     }
 
     fn input(&self, e: usize, k: usize) -> Vec<f64> {
@@ -460,7 +474,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         let mut offset = vec![0.0; g.steps * n];
         let mut xn = vec![0.0; n];
         for j in 0..g.steps {
-            let (ua, ub) = self.interval_inputs(e, j);
+            let (ua, ub) = g.interval(&self.bound[e], j);
             let t = g.t0 + j as f64 * g.h;
             let x = &traj.x[j * n..(j + 1) * n];
             let d = &traj.d[j * q..(j + 1) * q];
@@ -474,7 +488,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 t,
                 g.h,
                 x,
-                &g.stage_input(j, &ua, &ub),
+                &g.stage_input(j, ua, ub),
                 d,
                 &mut xn,
                 ph,
@@ -493,15 +507,8 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             if !map_ok {
                 // Name the equation: f itself at the step's start, when it is the culprit.
                 let mut f = vec![0.0; n];
-                let frac = (j % g.substeps) as f64 / g.substeps as f64;
-                let u0: Vec<f64> = if ub.is_empty() {
-                    ua.clone()
-                } else {
-                    ua.iter()
-                        .zip(&ub)
-                        .map(|(a, b)| a + frac * (b - a))
-                        .collect()
-                };
+                let mut buf = vec![0.0; g.m];
+                let u0 = g.stage_input(j, ua, ub).at(0.0, &mut buf).to_vec();
                 self.model.dynamics.rhs(t, x, &u0, &mut f);
                 at.check(&f, 1, |_| "f".to_string())?;
             }
@@ -652,7 +659,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 let fb: f64 = (0..n).map(|c| fg[c * q + a] * dev[c]).sum();
                 d[j * q + a] = base - fb;
             }
-            let (ua, ub) = self.interval_inputs(e, j);
+            let (ua, ub) = g.interval(&self.bound[e], j);
             let time = g.t0 + j as f64 * g.h;
             self.rk.step(
                 &self.model.dynamics,
@@ -660,7 +667,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 time,
                 g.h,
                 &mut xc,
-                &g.stage_input(j, &ua, &ub),
+                &g.stage_input(j, ua, ub),
                 &d[j * q..(j + 1) * q],
             );
             if xc

@@ -221,6 +221,15 @@ impl Experiment {
         }
     }
 
+    /// The whole band-limited grid of this record (`(N − 1)·BL_FACTOR + 1` points of `m`
+    /// values, point `i` at `t0 + i·dt/BL_FACTOR`) when it is read band-limited.
+    pub fn band_limited_grid(&self) -> Option<&[f64]> {
+        let (grid, offset) = self.fine.as_ref()?;
+        let m = self.n_inputs();
+        let points = (self.len().max(1) - 1) * BL_FACTOR + 1;
+        grid.get(offset * m..(offset + points) * m)
+    }
+
     /// The band-limited grid points of the interval from sample `k` to `k + 1`
     /// (`BL_FACTOR + 1` points of `m` values) when the record is read band-limited.
     pub fn band_limited_interval(&self, k: usize) -> Option<&[f64]> {

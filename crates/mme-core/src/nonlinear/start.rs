@@ -130,7 +130,7 @@ impl<F: Dynamics> NonlinearRun<'_, F> {
         let zero = vec![0.0; q];
         let mut cur = x0.to_vec();
         for j in 0..g.steps {
-            let (ua, ub) = self.interval_inputs(e, j);
+            let (ua, ub) = g.interval(&self.bound[e], j);
             let t = g.t0 + j as f64 * g.h;
             self.rk.step(
                 &self.model.dynamics,
@@ -138,7 +138,7 @@ impl<F: Dynamics> NonlinearRun<'_, F> {
                 t,
                 g.h,
                 &mut cur,
-                &g.stage_input(j, &ua, &ub),
+                &g.stage_input(j, ua, ub),
                 &zero,
             );
             if let Some(state) = cur
