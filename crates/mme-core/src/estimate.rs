@@ -3,13 +3,17 @@
 use std::time::Instant;
 
 use nalgebra::DMatrix;
-use sysid_core::{Dataset, ExperimentEstimate, LinearModel, MmeEstimate, SolveReport, Termination};
+use sysid_core::{
+    Dataset, ExperimentEstimate, InterSample, LinearModel, MmeEstimate, ModelNames, SolveReport,
+    Termination,
+};
 
 use crate::config::{MmeConfig, NoiseSpec, ResolvedWeight, check_noise, resolve_weight};
 use crate::error::Result;
 use crate::evaluate::{Solve, Summary};
 use crate::linear::LinearRun;
 use crate::noise::estimate_noise;
+use crate::nonlinear::NonlinearModel;
 use crate::result::{MmeOutput, NoiseMethod, NoiseReport};
 use crate::sweep::LogDet;
 use crate::tune_w::tune;
@@ -31,11 +35,30 @@ pub fn estimate(model: &LinearModel, data: &Dataset, config: &MmeConfig) -> Resu
 /// sample period, with the ramp term for first-order-hold experiments); estimate `R` if asked ([`crate::noise`]); find `W` if asked
 /// ([`crate::tune_w`]); run the exact sweep (private module `sweep`) at the final `(W, R)`.
 /// `report.termination` is `Exact` for a fixed `W`, otherwise the `W` search's ending.
+///
+/// A record read band-limited between samples ([`InterSample::Bl`]) has no exact
+/// discretisation per sample interval: such a dataset goes to the nonlinear estimator
+/// ([`crate::estimate_nonlinear_with_report`], RK4 sub-steps reading the record's grid)
+/// with the linear model as its dynamics.
 pub fn estimate_with_report(
     model: &LinearModel,
     data: &Dataset,
     config: &MmeConfig,
 ) -> Result<MmeOutput> {
+    if data
+        .experiments()
+        .iter()
+        .any(|e| e.intersample() == InterSample::Bl)
+    {
+        let names = ModelNames {
+            states: model.state_names().to_vec(),
+            inputs: model.input_names().to_vec(),
+            outputs: model.output_names().to_vec(),
+            corrections: model.correction_names().to_vec(),
+        };
+        let nl = NonlinearModel::new(model.clone(), model.c().clone(), model.e().clone(), names)?;
+        return crate::estimate_nonlinear_with_report(&nl, data, config);
+    }
     let mut clock = Phases::new();
     let weight = resolve_weight(&config.w, model.n_corrections())?;
     if let NoiseSpec::Given(v) = &config.noise_variance {

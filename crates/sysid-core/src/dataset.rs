@@ -31,9 +31,9 @@ pub enum InterSample {
     /// ([`crate::bandlimited`]), the reading of an input low-pass filtered below half the
     /// sampling rate — a multisine or filtered noise from a generator with a
     /// reconstruction filter. Linear interpolation passes only `sinc²(f/fs)` of a
-    /// component at frequency `f` (69 % at a third of the sampling rate). MME's
-    /// nonlinear estimator reads it band-limited; its linear estimator's exact
-    /// discretisation, and the linear baselines', read it as [`InterSample::Foh`].
+    /// component at frequency `f` (69 % at a third of the sampling rate). MME reads it
+    /// band-limited (a linear model's record goes to its nonlinear estimator); the linear
+    /// baselines' exact discretisations read it as [`InterSample::Foh`].
     Bl,
 }
 
