@@ -13,6 +13,31 @@ fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
 }
 
+/// The one-experiment dataset of `(u, y)` read as `hold` says, and the fixed-`W`
+/// configuration both tests use (`W = 1e-2`, noise variance 1e-8).
+fn record_and_config(
+    u: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    dt: f64,
+    hold: InterSample,
+) -> (sysid_core::Dataset, MmeConfig) {
+    let data = dataset(
+        &["u"],
+        &["x"],
+        vec![
+            Experiment::new(0.0, dt, u.clone(), y.clone())
+                .unwrap()
+                .with_intersample(hold),
+        ],
+    );
+    let config = MmeConfig {
+        w: WeightSpec::Scalar(1e-2),
+        noise_variance: NoiseSpec::Given(vec![1e-8]),
+        ..MmeConfig::default()
+    };
+    (data, config)
+}
+
 /// A multisine of 12 tones from 0.5 to 11 Hz (Schroeder phases), unit amplitude each.
 pub fn multisine(len: usize, dt: f64) -> DMatrix<f64> {
     DMatrix::from_fn(1, len, |_, k| {
@@ -56,20 +81,7 @@ fn first_order_hold_record_of_the_assumed_linear_model_needs_no_correction() {
     .unwrap();
     let y = DMatrix::from_fn(1, len, |_, k| truth[(0, k)]);
     let run = |hold: InterSample| {
-        let data = dataset(
-            &["u"],
-            &["x"],
-            vec![
-                Experiment::new(0.0, dt, u.clone(), y.clone())
-                    .unwrap()
-                    .with_intersample(hold),
-            ],
-        );
-        let config = MmeConfig {
-            w: WeightSpec::Scalar(1e-2),
-            noise_variance: NoiseSpec::Given(vec![1e-8]),
-            ..MmeConfig::default()
-        };
+        let (data, config) = record_and_config(&u, &y, dt, hold);
         estimate(&model, &data, &config).unwrap()
     };
     let foh = run(InterSample::Foh);
@@ -160,20 +172,7 @@ fn band_limited_record_of_the_assumed_model_needs_little_correction() {
     }
     let u = DMatrix::from_fn(1, len, |_, k| u_at(k as f64 * dt));
     let run = |hold: InterSample, via_linear: bool| {
-        let data = dataset(
-            &["u"],
-            &["x"],
-            vec![
-                Experiment::new(0.0, dt, u.clone(), y.clone())
-                    .unwrap()
-                    .with_intersample(hold),
-            ],
-        );
-        let config = MmeConfig {
-            w: WeightSpec::Scalar(1e-2),
-            noise_variance: NoiseSpec::Given(vec![1e-8]),
-            ..MmeConfig::default()
-        };
+        let (data, config) = record_and_config(&u, &y, dt, hold);
         let names = ModelNames {
             states: vec!["x".into(), "v".into()],
             inputs: vec!["u".into()],
