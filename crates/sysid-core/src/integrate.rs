@@ -124,18 +124,8 @@ impl GridPath<'_> {
 
 impl InputPath for GridPath<'_> {
     fn at<'a>(&'a self, t: f64, buf: &'a mut [f64]) -> &'a [f64] {
-        let m = self.points.len() / (self.per_interval + 1);
-        let s = ((t - self.ta) / self.span).clamp(0.0, 1.0) * self.per_interval as f64;
-        let i = (s.floor() as usize).min(self.per_interval - 1);
-        let w = s - i as f64;
-        let (a, z) = (
-            &self.points[i * m..(i + 1) * m],
-            &self.points[(i + 1) * m..(i + 2) * m],
-        );
-        for ((b, a), z) in buf.iter_mut().zip(a).zip(z) {
-            *b = a + w * (z - a);
-        }
-        &buf[..m]
+        let f = (t - self.ta) / self.span;
+        crate::tangent::grid_point(self.points, self.per_interval, f, buf)
     }
     fn step(&self, j: usize, substeps: usize) -> StepInput<'_> {
         self.step_input(j as f64 / substeps as f64, 1.0 / substeps as f64)

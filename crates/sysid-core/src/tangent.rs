@@ -72,20 +72,7 @@ impl StepInput<'_> {
                 per_interval,
                 from,
                 per,
-            } => {
-                let m = points.len() / (per_interval + 1);
-                let s = ((from + c * per) * per_interval as f64).clamp(0.0, per_interval as f64);
-                let i = (s.floor() as usize).min(per_interval - 1);
-                let w = s - i as f64;
-                let (a, z) = (
-                    &points[i * m..(i + 1) * m],
-                    &points[(i + 1) * m..(i + 2) * m],
-                );
-                for ((b, a), z) in buf.iter_mut().zip(a).zip(z) {
-                    *b = a + w * (z - a);
-                }
-                &buf[..m]
-            }
+            } => grid_point(points, per_interval, from + c * per, buf),
         }
     }
 
@@ -114,6 +101,28 @@ impl StepInput<'_> {
             per: 1.0 / substeps as f64,
         }
     }
+}
+
+/// The input at interval fraction `f` (clamped to `[0, 1]`) of an interval's grid
+/// (`per_interval + 1` points of `m` values; linear between points), written into `buf`.
+pub(crate) fn grid_point<'a>(
+    points: &[f64],
+    per_interval: usize,
+    f: f64,
+    buf: &'a mut [f64],
+) -> &'a [f64] {
+    let m = points.len() / (per_interval + 1);
+    let s = (f * per_interval as f64).clamp(0.0, per_interval as f64);
+    let i = (s.floor() as usize).min(per_interval - 1);
+    let w = s - i as f64;
+    let (a, z) = (
+        &points[i * m..(i + 1) * m],
+        &points[(i + 1) * m..(i + 2) * m],
+    );
+    for ((b, a), z) in buf.iter_mut().zip(a).zip(z) {
+        *b = a + w * (z - a);
+    }
+    &buf[..m]
 }
 
 // `InterSample` is the dataset's word; its RK4 input lives with the step.

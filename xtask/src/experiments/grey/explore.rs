@@ -501,7 +501,7 @@ fn explore_silverbox_schroeder() {
     // samples (Rule 5's B).
     let up: usize = std::env::var("SB_UP").map_or(1, |v| v.parse().unwrap());
     let (est_up, sch_up) = if up > 1 {
-        (upsample(est, up, 32), upsample(&sch, up, 32))
+        (upsample(est, up), upsample(&sch, up))
     } else {
         (est.clone(), sch.clone())
     };
@@ -651,46 +651,27 @@ fn explore_emps_window_rule() {
     }
 }
 
-/// `e` resampled `l`× by windowed-sinc interpolation (Blackman window, `half` samples each
-/// side; ends held): the band-limited reading of the samples between them. Every `l`-th
-/// sample is the original one.
-fn upsample(e: &Experiment, l: usize, half: usize) -> Experiment {
-    let n = e.len();
-    let interp = |row: Vec<f64>| -> Vec<f64> {
-        let mut out = Vec::with_capacity(n * l);
-        let h = half as f64;
-        for k in 0..n {
-            for j in 0..l {
-                if j == 0 {
-                    out.push(row[k]);
-                    continue;
-                }
-                let frac = j as f64 / l as f64;
-                let mut s = 0.0;
-                let mut wsum = 0.0;
-                for m in -(half as isize) + 1..=half as isize {
-                    let idx = (k as isize + m).clamp(0, n as isize - 1) as usize;
-                    let x = frac - m as f64;
-                    let sinc = (std::f64::consts::PI * x).sin() / (std::f64::consts::PI * x);
-                    let z = (x / h).clamp(-1.0, 1.0);
-                    let win = 0.42
-                        + 0.5 * (std::f64::consts::PI * z).cos()
-                        + 0.08 * (2.0 * std::f64::consts::PI * z).cos();
-                    s += row[idx] * sinc * win;
-                    wsum += sinc * win;
-                }
-                out.push(s / wsum);
-            }
-        }
-        out
+/// `e` resampled `l`× (`l` divides `BL_FACTOR`) by the library's band-limited reading
+/// (`sysid_core::bandlimited`: windowed sinc, ends held). Every `l`-th sample is the
+/// original one.
+fn upsample(e: &Experiment, l: usize) -> Experiment {
+    use mmenn::sysid_core::bandlimited::{BL_FACTOR, band_limited_grid};
+    assert!(BL_FACTOR.is_multiple_of(l), "up={l} must divide {BL_FACTOR}");
+    let pick = |m: &nalgebra::DMatrix<f64>| -> Vec<f64> {
+        let grid = band_limited_grid(m);
+        let step = BL_FACTOR / l;
+        let mut v: Vec<f64> = grid.iter().step_by(step).copied().collect();
+        // The grid ends at the last sample; the fine record holds it over its last interval.
+        let last = *v.last().unwrap_or(&0.0);
+        v.resize(e.len() * l, last);
+        v
     };
-    let u = interp(e.inputs().row(0).iter().copied().collect());
-    let y = interp(e.outputs().row(0).iter().copied().collect());
+    let (u, y) = (pick(e.inputs()), pick(e.outputs()));
     Experiment::new(
         e.t0(),
         e.dt() / l as f64,
-        nalgebra::DMatrix::from_row_slice(1, n * l, &u),
-        nalgebra::DMatrix::from_row_slice(1, n * l, &y),
+        nalgebra::DMatrix::from_row_slice(1, e.len() * l, &u),
+        nalgebra::DMatrix::from_row_slice(1, e.len() * l, &y),
     )
     .unwrap()
 }
@@ -712,12 +693,12 @@ fn explore_silverbox_bandlimited() {
         let d = data(Benchmark::Silverbox);
         let w = Benchmark::Silverbox.init_window();
         let est0 = d.estimation.experiments()[0].clone();
-        let est = upsample(&est0, l, 32);
+        let est = upsample(&est0, l);
         let mut records = d.tests.clone();
         records.extend(mmenn::benchmarks::load_extra(Benchmark::Silverbox, &d.dir).unwrap());
         let tests: Vec<(String, Experiment)> = records
             .iter()
-            .map(|t| (t.name.clone(), upsample(&t.data.experiments()[0], l, 32)))
+            .map(|t| (t.name.clone(), upsample(&t.data.experiments()[0], l)))
             .collect();
         let clock = std::time::Instant::now();
         let fit = match fit_grey(&spec, &est, &tests, w * l) {
