@@ -656,7 +656,10 @@ fn explore_emps_window_rule() {
 /// original one.
 fn upsample(e: &Experiment, l: usize) -> Experiment {
     use mmenn::sysid_core::bandlimited::{BL_FACTOR, band_limited_grid};
-    assert!(BL_FACTOR.is_multiple_of(l), "up={l} must divide {BL_FACTOR}");
+    assert!(
+        BL_FACTOR.is_multiple_of(l),
+        "up={l} must divide {BL_FACTOR}"
+    );
     let pick = |m: &nalgebra::DMatrix<f64>| -> Vec<f64> {
         let grid = band_limited_grid(m);
         let step = BL_FACTOR / l;
