@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub mod acquisition;
 pub mod bandlimited;
 pub mod budget;
 pub mod correlation;

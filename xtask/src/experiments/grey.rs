@@ -9,6 +9,7 @@ use anyhow::{Context, Result};
 use mmenn::discovery::{
     CalibrationConfig, InitialState, OutputWeights, calibrate, simulate_outputs,
 };
+use mmenn::sysid_core::acquisition::{AcquisitionFilter, AcquisitionOptions};
 use mmenn::sysid_core::{
     Channel, Dataset, Experiment, Integrator, InterSample, LinearModel, ModelNames, TermModel,
     TermSpec,
@@ -243,6 +244,106 @@ pub fn fit_grey(
         train_rmse_all,
         tests,
     })
+}
+
+/// Silverbox's acquisition filter (Rule 6 of docs/decisions/silverbox-schroeder-rule.md):
+/// one below 190 Hz, where the multisines and the arrow put their input, estimated in 5-Hz
+/// bands from 195 Hz to the Nyquist frequency.
+pub const SILVERBOX_ACQUISITION: AcquisitionOptions = AcquisitionOptions {
+    pass_below_hz: 190.0,
+    first_band_hz: 195.0,
+    band_hz: 5.0,
+};
+
+/// A calibrated grey box read through the acquisition filter its records share
+/// (`y = Ã·N(Ã⁻¹·u)`, [`mmenn::sysid_core::acquisition`]).
+pub struct FilteredGrey {
+    /// The filter, estimated from the grey box's training free run.
+    pub filter: AcquisitionFilter,
+    /// Training free-run RMSE through the filter (recorded units; state fitted to the
+    /// window, as on a test record).
+    pub train_rmse: f64,
+    /// Test runs through the filter, in the order given.
+    pub tests: Vec<GreyTest>,
+}
+
+/// Estimate the acquisition filter from `fit`'s training free run on `est` (coefficients as
+/// calibrated, not recalibrated) and run the training and test records through it.
+pub fn acquisition_filtered(
+    spec: &GreySpec,
+    fit: &GreyFit,
+    est: &Experiment,
+    tests: &[(String, Experiment)],
+    window: usize,
+    options: &AcquisitionOptions,
+) -> Result<FilteredGrey> {
+    let y: Vec<f64> = est.outputs().row(0).iter().copied().collect();
+    let sim = free_run(spec, &fit.model, est, &fit.x0)
+        .map_err(|e| anyhow::anyhow!("the grey box's training free run: {e}"))?;
+    let filter = AcquisitionFilter::estimate(&y, &sim, est.dt(), options)
+        .context("estimating the acquisition filter")?;
+    let train_rmse = filtered_run(spec, &fit.model, &filter, est, window)
+        .map_or(f64::NAN, |s| rmse_after(&y, &s, window));
+    let tests = tests
+        .iter()
+        .map(|(name, exp)| GreyTest {
+            name: name.clone(),
+            sim: filtered_run(spec, &fit.model, &filter, exp, window),
+        })
+        .collect();
+    Ok(FilteredGrey {
+        filter,
+        train_rmse,
+        tests,
+    })
+}
+
+/// `exp` through the filter's inverse: its input (and, with `output_too`, its output) as
+/// the system's own under the measurement model; otherwise the output as recorded.
+pub fn deconvolved(
+    filter: &AcquisitionFilter,
+    exp: &Experiment,
+    output_too: bool,
+) -> Result<Experiment> {
+    let inverse = |m: &DMatrix<f64>| {
+        let x: Vec<f64> = m.row(0).iter().copied().collect();
+        DMatrix::from_row_slice(1, x.len(), &filter.apply_inverse(&x))
+    };
+    let outputs = if output_too {
+        inverse(exp.outputs())
+    } else {
+        exp.outputs().clone()
+    };
+    Ok(
+        Experiment::new(exp.t0(), exp.dt(), inverse(exp.inputs()), outputs)?
+            .with_intersample(exp.intersample()),
+    )
+}
+
+/// One free run through the acquisition filter: the input deconvolved, the state fitted to
+/// the first `window` recorded outputs, the simulated output filtered.
+pub fn filtered_run(
+    spec: &GreySpec,
+    model: &TermModel,
+    filter: &AcquisitionFilter,
+    exp: &Experiment,
+    window: usize,
+) -> std::result::Result<Vec<f64>, String> {
+    let dec = deconvolved(filter, exp, false).map_err(|e| format!("{e:#}"))?;
+    filtered_run_from(spec, model, filter, &dec, window)
+}
+
+/// [`filtered_run`] on a record whose input is already deconvolved (a window of a longer
+/// deconvolved record).
+pub fn filtered_run_from(
+    spec: &GreySpec,
+    model: &TermModel,
+    filter: &AcquisitionFilter,
+    dec: &Experiment,
+    window: usize,
+) -> std::result::Result<Vec<f64>, String> {
+    let x0 = window_state(spec, model, dec, window).map_err(|e| format!("{e:#}"))?;
+    free_run(spec, model, dec, &x0).map(|s| filter.apply(&s))
 }
 
 /// The coefficients of `spec.free` that minimise the free-run error over `est` after its

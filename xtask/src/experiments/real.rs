@@ -24,6 +24,7 @@ use mmenn::fit::{FitOptions, InitialChoice, run_fit};
 use mmenn::model_file::{ModelSpec, NoiseVariance, write_model};
 use mmenn::plot::Figure;
 use mmenn::sysid_baselines::{LinearSsConfig, OeConfig, X0Policy, fit_linear_ss, fit_oe};
+use mmenn::sysid_core::acquisition::AcquisitionFilter;
 use mmenn::sysid_core::{
     Channel, Dataset, Experiment, InterSample, LinearModel, Model, ModelNames,
 };
@@ -37,10 +38,10 @@ mod hybrid;
 mod linear_ss;
 mod narx;
 mod notes;
-mod setups;
+pub(crate) mod setups;
 
-pub use grey_rows::ChosenGrey;
 use grey_rows::grey_rows;
+pub use grey_rows::{ACQUISITION, ChosenGrey};
 use linear_ss::linear_ss_rows;
 pub use notes::{LINEAR_BASELINE, anchors};
 use notes::{published_times, target_note};

@@ -174,6 +174,14 @@ fn explore_emps() {
 
 /// One `GREY_SB` item: the extra terms, the RK4 sub-steps if given (`sub`), the
 /// resampling factor (`up`, 1 unless given; [`explore_silverbox_bandlimited`] only).
+/// The reproduce run's start for Silverbox: the ARX(2, 2) oscillator of the training record.
+fn silverbox_guess() -> (f64, f64, f64) {
+    crate::experiments::real::setups::oscillator_guess(
+        &data(Benchmark::Silverbox).estimation.experiments()[0],
+    )
+    .unwrap()
+}
+
 fn silverbox_item(item: &str) -> (Vec<SilverboxExtra>, Option<usize>, usize) {
     use SilverboxExtra::*;
     let mut extra = Vec::new();
@@ -219,8 +227,7 @@ fn silverbox_item(item: &str) -> (Vec<SilverboxExtra>, Option<usize>, usize) {
 #[ignore]
 fn explore_silverbox() {
     let all = std::env::var("GREY_SB").unwrap_or_default();
-    // The linear oscillator of the full run's ARX(2,2) start (docs/results).
-    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    let (k, c, b) = silverbox_guess();
     for item in all.split(';').filter(|s| !s.trim().is_empty()) {
         let (extra, substeps, _) = silverbox_item(item);
         let mut spec = silverbox_model(k, c, b, &extra).unwrap();
@@ -337,7 +344,7 @@ fn explore_silverbox_schroeder() {
     let d = data(Benchmark::Silverbox);
     let est = &d.estimation.experiments()[0];
     let sch = schroeder();
-    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    let (k, c, b) = silverbox_guess();
     let stage = Feedthrough(SILVERBOX_STAGE_TAU);
     let all: Vec<(&str, Vec<SilverboxExtra>)> = vec![
         (
@@ -568,7 +575,7 @@ fn explore_silverbox_amplitude_coverage() {
         .experiments()[0]
         .clone();
     let y: Vec<f64> = arrow.outputs().row(0).iter().copied().collect();
-    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    let (k, c, b) = silverbox_guess();
     let spec = silverbox_model(k, c, b, &SILVERBOX_REPORTED).unwrap();
     let with_sch = std::env::var("SB_COVER").is_ok_and(|v| v == "1");
     let exps = if with_sch {
@@ -686,7 +693,7 @@ fn upsample(e: &Experiment, l: usize) -> Experiment {
 #[ignore]
 fn explore_silverbox_bandlimited() {
     let all = std::env::var("GREY_SB").unwrap_or_default();
-    let (k, c, b) = (1.8950e5, 3.8717e1, 1.5697e5);
+    let (k, c, b) = silverbox_guess();
     for item in all.split(';').filter(|s| !s.trim().is_empty()) {
         let (extra, substeps, l) = silverbox_item(item);
         let mut spec = silverbox_model(k, c, b, &extra).unwrap();

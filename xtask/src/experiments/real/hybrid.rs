@@ -261,8 +261,19 @@ fn hybrid_rows_inner(
     let work = ctx.work.join("real").join(b.folder()).join("hybrid");
     std::fs::create_dir_all(&work)?;
     let est = &data.estimation.experiments()[0];
+    // Where the grey box is read through its records' acquisition filter (Silverbox, Rule 6
+    // of docs/decisions/silverbox-schroeder-rule.md), the hybrid is built on the records
+    // deconvolved by it — the system's own input and output under the measurement model —
+    // and its free runs are read back through the filter.
+    let acquisition = grey.acquisition.as_ref();
+    let deconvolved = |e: &Experiment| -> Result<Experiment> {
+        match acquisition {
+            Some(f) => grey::deconvolved(f, e, true),
+            None => Ok(e.clone()),
+        }
+    };
     let est_csv = work.join("estimation.csv");
-    write_record(&est_csv, est, &output)?;
+    write_record(&est_csv, &deconvolved(est)?, &output)?;
     let model_toml = work.join("model.toml");
     write_model(&model_toml, &spec)?;
     let substeps = match gspec.integrator {
@@ -290,9 +301,13 @@ fn hybrid_rows_inner(
         let e = &test.data.experiments()[0];
         let y = row(e.outputs(), 0);
         let csv = work.join(format!("{}.csv", test.name));
-        write_record(&csv, e, &output)?;
+        write_record(&csv, &deconvolved(e)?, &output)?;
         let sim =
-            super::hybrid_output_domain(&model_json, &csv, &InitialChoice::Fit, window, &output);
+            super::hybrid_output_domain(&model_json, &csv, &InitialChoice::Fit, window, &output)
+                .map(|(v, domain)| match acquisition {
+                    Some(f) => (f.apply(&v), domain),
+                    None => (v, domain),
+                });
         match sim {
             Ok((v, domain)) => {
                 let rmse = rmse_after(&y, &v, window, scale);
@@ -422,7 +437,7 @@ fn hybrid_rows_inner(
         "{LABEL} ({OFFICIAL}): assumed model = the calibrated grey box ({chosen}, training \
          free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W by the covariance constraint: {}) on all {} training samples at full rate, correction on the {} \
          equation; network of {} hidden units picked by {} from a 1–{} × {} sweep on d̂; {refine}; {guard}; training free-run RMSE {train_rmse:.4} {unit} (from MME's x̂(t0)). \
-         Test: x0 fitted to the first {window} samples, free run over the whole record ({}). \
+         Test: x0 fitted to the first {window} samples, free run over the whole record ({}).{} \
          Time to accuracy: grey box {grey_seconds:.1} s, MME + network + refinement \
          {fit_seconds:.1} s wall, rayon pool of {} threads on 2 shared cores.",
         scale * gfit.train_rmse,
@@ -438,6 +453,14 @@ fn hybrid_rows_inner(
         eff.max_hidden,
         eff.inits,
         results.join("; "),
+        if acquisition.is_some() {
+            " Read through the acquisition filter of the grey-box row so marked: MME, the \
+             networks, the guard and the training RMSE above work on the records deconvolved \
+             by it (input and output), each test run's input is deconvolved and its output \
+             filtered back before it is scored against the recorded output"
+        } else {
+            ""
+        },
         rayon_threads(),
     ));
     // Built on the grey box: its calibration time counts too.

@@ -76,7 +76,7 @@ pub(super) fn tanks(_mode: Mode, b: &mmenn::benchmarks::BenchmarkData) -> Result
 /// Least-squares ARX(2, 2) of `y` on `u` turned into the continuous oscillator
 /// `y'' = −k y − c y' + b u` (poles `z = e^{sT}`, DC gain kept): the OE starting point for
 /// Silverbox.
-pub(super) fn oscillator_guess(exp: &Experiment) -> Result<(f64, f64, f64)> {
+pub(crate) fn oscillator_guess(exp: &Experiment) -> Result<(f64, f64, f64)> {
     let (u, y) = (row(exp.inputs(), 0), row(exp.outputs(), 0));
     let n = y.len();
     let phi = DMatrix::from_fn(n - 2, 4, |r, j| {
