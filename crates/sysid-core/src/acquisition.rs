@@ -41,7 +41,6 @@ const FIR_GRID: usize = 4 * FIR_HALF;
 /// The shared acquisition filter without its in-band delay (see the module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct AcquisitionFilter {
-    dt: f64,
     pass_below_hz: f64,
     /// Band centres (Hz) and the complex gain estimated there.
     bands: Vec<(f64, Complex<f64>)>,
@@ -128,20 +127,19 @@ impl AcquisitionFilter {
             });
         }
         Ok(Self {
-            dt,
             pass_below_hz,
             bands,
         })
     }
 
     /// A filter from given band gains (centres in Hz, increasing, above `pass_below_hz`).
-    pub fn from_bands(
-        dt: f64,
-        pass_below_hz: f64,
-        bands: Vec<(f64, Complex<f64>)>,
-    ) -> Result<Self> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(CoreError::BadSamplePeriod { dt });
+    pub fn from_bands(pass_below_hz: f64, bands: Vec<(f64, Complex<f64>)>) -> Result<Self> {
+        if !(pass_below_hz.is_finite() && pass_below_hz >= 0.0) {
+            return Err(CoreError::InvalidArgument {
+                name: "pass_below_hz",
+                value: pass_below_hz,
+                reason: "must be finite and non-negative",
+            });
         }
         let mut last = pass_below_hz;
         for &(f, g) in &bands {
@@ -155,7 +153,6 @@ impl AcquisitionFilter {
             last = f;
         }
         Ok(Self {
-            dt,
             pass_below_hz,
             bands,
         })
@@ -166,9 +163,9 @@ impl AcquisitionFilter {
         &self.bands
     }
 
-    /// The sample interval the filter was estimated at, s.
-    pub fn dt(&self) -> f64 {
-        self.dt
+    /// Below this frequency (Hz) the filter is one.
+    pub fn pass_below_hz(&self) -> f64 {
+        self.pass_below_hz
     }
 
     /// The filter's response at `f` Hz (`|f|` up to Nyquist): one up to `pass_below_hz`,
@@ -194,21 +191,25 @@ impl AcquisitionFilter {
         if negative { v.conj() } else { v }
     }
 
-    /// The record `x` (interval [`Self::dt`]) through the filter.
-    pub fn apply(&self, x: &[f64]) -> Vec<f64> {
-        convolve(&self.taps(false), x)
+    /// The record `x`, sampled every `dt` s, through the filter.
+    pub fn apply(&self, x: &[f64], dt: f64) -> Result<Vec<f64>> {
+        Ok(convolve(&self.taps(false, dt)?, x))
     }
 
-    /// The record `x` through the filter's inverse (the response's reciprocal).
-    pub fn apply_inverse(&self, x: &[f64]) -> Vec<f64> {
-        convolve(&self.taps(true), x)
+    /// The record `x`, sampled every `dt` s, through the filter's inverse (the response's
+    /// reciprocal).
+    pub fn apply_inverse(&self, x: &[f64], dt: f64) -> Result<Vec<f64>> {
+        Ok(convolve(&self.taps(true, dt)?, x))
     }
 
     /// FIR taps `h[−FIR_HALF ..= FIR_HALF]` of the response (or its reciprocal), sampled
     /// on a grid of `FIR_GRID` frequencies and Hann-windowed.
-    fn taps(&self, inverse: bool) -> Vec<f64> {
+    fn taps(&self, inverse: bool, dt: f64) -> Result<Vec<f64>> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(CoreError::BadSamplePeriod { dt });
+        }
         let l = FIR_GRID;
-        let fs = 1.0 / self.dt;
+        let fs = 1.0 / dt;
         let grid: Vec<Complex<f64>> = (0..=l / 2)
             .map(|k| {
                 let r = self.response(k as f64 * fs / l as f64);
@@ -216,7 +217,7 @@ impl AcquisitionFilter {
             })
             .collect();
         let half = FIR_HALF as isize;
-        (-half..=half)
+        Ok((-half..=half)
             .map(|n| {
                 let mut sum = grid[0].re + grid[l / 2].re * if n % 2 == 0 { 1.0 } else { -1.0 };
                 for (k, g) in grid.iter().enumerate().take(l / 2).skip(1) {
@@ -226,7 +227,7 @@ impl AcquisitionFilter {
                 let w = 0.5 * (1.0 + (std::f64::consts::PI * n as f64 / (half + 1) as f64).cos());
                 w * sum / l as f64
             })
-            .collect()
+            .collect())
     }
 }
 
@@ -387,14 +388,17 @@ mod tests {
                 (c, truth(c))
             })
             .collect();
-        let filter = AcquisitionFilter::from_bands(dt, 100.0, bands).unwrap();
+        let filter = AcquisitionFilter::from_bands(100.0, bands).unwrap();
         let n = 6000;
         for f in [60.0, 137.3, 181.0, 210.0] {
             let x: Vec<f64> = (0..n)
                 .map(|i| (std::f64::consts::TAU * f * i as f64 * dt).cos())
                 .collect();
             let r = filter.response(f);
-            for (out, g) in [(filter.apply(&x), r), (filter.apply_inverse(&x), r.inv())] {
+            for (out, g) in [
+                (filter.apply(&x, dt).unwrap(), r),
+                (filter.apply_inverse(&x, dt).unwrap(), r.inv()),
+            ] {
                 // Away from the ends (held there), the output is the tone times the response.
                 let err = (2000..4000)
                     .map(|i| {

@@ -307,15 +307,17 @@ pub fn deconvolved(
 ) -> Result<Experiment> {
     let inverse = |m: &DMatrix<f64>| {
         let x: Vec<f64> = m.row(0).iter().copied().collect();
-        DMatrix::from_row_slice(1, x.len(), &filter.apply_inverse(&x))
+        filter
+            .apply_inverse(&x, exp.dt())
+            .map(|v| DMatrix::from_row_slice(1, x.len(), &v))
     };
     let outputs = if output_too {
-        inverse(exp.outputs())
+        inverse(exp.outputs())?
     } else {
         exp.outputs().clone()
     };
     Ok(
-        Experiment::new(exp.t0(), exp.dt(), inverse(exp.inputs()), outputs)?
+        Experiment::new(exp.t0(), exp.dt(), inverse(exp.inputs())?, outputs)?
             .with_intersample(exp.intersample()),
     )
 }
@@ -343,7 +345,8 @@ pub fn filtered_run_from(
     window: usize,
 ) -> std::result::Result<Vec<f64>, String> {
     let x0 = window_state(spec, model, dec, window).map_err(|e| format!("{e:#}"))?;
-    free_run(spec, model, dec, &x0).map(|s| filter.apply(&s))
+    free_run(spec, model, dec, &x0)
+        .and_then(|s| filter.apply(&s, dec.dt()).map_err(|e| format!("{e}")))
 }
 
 /// The coefficients of `spec.free` that minimise the free-run error over `est` after its

@@ -304,9 +304,9 @@ fn hybrid_rows_inner(
         write_record(&csv, &deconvolved(e)?, &output)?;
         let sim =
             super::hybrid_output_domain(&model_json, &csv, &InitialChoice::Fit, window, &output)
-                .map(|(v, domain)| match acquisition {
-                    Some(f) => (f.apply(&v), domain),
-                    None => (v, domain),
+                .and_then(|(v, domain)| match acquisition {
+                    Some(f) => Ok((f.apply(&v, e.dt())?, domain)),
+                    None => Ok((v, domain)),
                 });
         match sim {
             Ok((v, domain)) => {
