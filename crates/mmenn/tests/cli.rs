@@ -243,3 +243,39 @@ fn show_and_monitor_classify_refuse_force() {
     assert!(!dir.join("mon").exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `simulate --list` and `discover --list-effects` only print: `--force` (before or after
+/// the subcommand) is refused as for `show`, naming the command and its flag, before
+/// anything is printed; without it they list as before.
+#[test]
+fn list_commands_refuse_force() {
+    let dir = scratch("force-list");
+    let refused = |args: &[&str], command: &str| {
+        let out = mmenn(&dir, args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(&format!(
+                "--force has no effect with `{command}`: it writes nothing"
+            )),
+            "{args:?}: {err}"
+        );
+        assert!(out.stdout.is_empty(), "{args:?}");
+    };
+    refused(&["simulate", "--list", "--force"], "simulate --list");
+    refused(&["--force", "simulate", "--list"], "simulate --list");
+    refused(
+        &["discover", "--list-effects", "--force"],
+        "discover --list-effects",
+    );
+    refused(
+        &["--force", "discover", "--list-effects"],
+        "discover --list-effects",
+    );
+    let listed = stdout_of(&mmenn(&dir, &["simulate", "--list"]));
+    assert!(listed.contains("msd_cubic"), "{listed}");
+    let effects = stdout_of(&mmenn(&dir, &["discover", "--list-effects"]));
+    assert!(!effects.trim().is_empty());
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

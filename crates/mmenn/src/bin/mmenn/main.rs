@@ -830,12 +830,17 @@ fn budget_ran_out(e: &anyhow::Error) -> bool {
     })
 }
 
-/// `--force` replaces an existing `--out` folder: a command that writes none refuses it
-/// as a bad argument (exit status 2, clap's error) rather than ignoring it.
+/// `--force` replaces an existing `--out` folder: a command that writes none (`show`,
+/// `monitor classify`, and `simulate --list` / `discover --list-effects`, which only
+/// print) refuses it as a bad argument (exit status 2, clap's error) rather than
+/// ignoring it.
 fn refuse_force(cli: &Cli) -> std::result::Result<(), clap::Error> {
-    let path: &[&str] = match &cli.command {
-        Command::Show(_) => &["show"],
-        Command::Monitor(MonitorCommand::Classify(_)) => &["monitor", "classify"],
+    // The subcommand path (for clap's usage line) and the flag that makes it write nothing.
+    let (path, flag): (&[&str], Option<&str>) = match &cli.command {
+        Command::Show(_) => (&["show"], None),
+        Command::Monitor(MonitorCommand::Classify(_)) => (&["monitor", "classify"], None),
+        Command::Simulate(a) if a.list => (&["simulate"], Some("--list")),
+        Command::Discover(a) if a.list_effects => (&["discover"], Some("--list-effects")),
         _ => return Ok(()),
     };
     if !cli.force {
@@ -844,7 +849,11 @@ fn refuse_force(cli: &Cli) -> std::result::Result<(), clap::Error> {
     use clap::CommandFactory as _;
     let message = format!(
         "--force has no effect with `{}`: it writes nothing",
-        path.join(" ")
+        path.iter()
+            .copied()
+            .chain(flag)
+            .collect::<Vec<_>>()
+            .join(" ")
     );
     // The error carries the subcommand's usage line.
     let kind = clap::error::ErrorKind::ArgumentConflict;
