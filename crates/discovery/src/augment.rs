@@ -20,8 +20,10 @@
 //! standard errors) stand in for the adaptive integrator, for a term whose derivative does
 //! not build, and from the first non-finite sensitivity on.
 //! A trial step whose simulation diverges counts as a failed step. A stage stops when an
-//! accepted step lowers `J` by at most `tolerance·J`, when no damping gives a descent (a
-//! stationary point, reported as converged), or after `max_iterations` Jacobians. A
+//! accepted step lowers `J` by at most `tolerance·J` (converged), when no damping gives a
+//! descent (reported as [`sysid_core::Termination::NoDescent`], not as converged: a
+//! stationary point to working precision, or a Jacobian that does not describe the
+//! residuals), or after `max_iterations` Jacobians. A
 //! calibration none of whose stages moved `J`, ending at a rank-deficient Jacobian, stopped
 //! where it started ([`sysid_core::Termination::NoProgress`]): an error
 //! ([`DiscoveryError::NoProgress`]), not a calibrated model.
@@ -141,7 +143,10 @@ pub struct Calibration {
     pub coefficient_std: Vec<f64>,
     /// Accepted iterations.
     pub iterations: Vec<IterationRecord>,
-    /// Why the solver stopped.
+    /// Why the solver's last stage stopped, as the solver reported it (e.g. `Converged`;
+    /// `NoDescent` when no damped step lowered the cost, a stationary point to working
+    /// precision rather than a convergence test met; `MaxIterations`; `Exact` with
+    /// nothing to calibrate). A caller that accepts several names each one it accepts.
     pub termination: Termination,
     /// Free-run simulations run.
     pub evaluations: usize,
@@ -562,7 +567,8 @@ pub fn calibrate(
     let mut iterations = Vec::new();
     let mut termination = Termination::Exact;
     // Until a stage moves the cost each one is asked whether it stopped where it started;
-    // a later stage that finds nothing to do (warm-started at a moved point) has converged.
+    // a later stage that finds nothing to do (warm-started at a moved point) reports how
+    // it ended (converged, or no descent), not a failure.
     let mut ask = true;
     let mut rank = None;
     for &fraction in &config.horizons {
@@ -666,10 +672,11 @@ struct StageEnd {
 }
 
 /// One Levenberg–Marquardt solve ([`sysid_core::least_squares`]) at the problem's current
-/// horizon, from `theta`; its accepted steps are appended to `iterations`. A stage that
-/// finds no descent at any damping ends at a stationary point, reported as converged —
-/// unless `ask_no_progress` and it never moved from a rank-deficient start
-/// ([`Termination::NoProgress`], [`LmSettings::no_progress`]).
+/// horizon, from `theta`; its accepted steps are appended to `iterations`. The solver's
+/// termination is reported as it is: a stage that finds no descent at any damping ends
+/// [`Termination::NoDescent`] (never relabelled as converged) — or, when
+/// `ask_no_progress` and it never moved from a rank-deficient start,
+/// [`Termination::NoProgress`] ([`LmSettings::no_progress`]).
 fn lm_stage(
     problem: &mut Problem<'_>,
     theta: Vec<f64>,
@@ -702,13 +709,9 @@ fn lm_stage(
             ..*step
         });
     }
-    let termination = match solution.report.termination {
-        Termination::NoDescent => Termination::Converged,
-        t => t,
-    };
     Ok(StageEnd {
         theta: solution.theta,
-        termination,
+        termination: solution.report.termination,
         moved: solution.report.moved(),
         rank: solution.report.rank,
     })
