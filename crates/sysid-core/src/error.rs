@@ -175,7 +175,10 @@ pub enum CoreError {
         len: usize,
     },
     /// A parameter estimator was given a model with nothing to estimate.
-    #[error("the model has no free parameters (all {parameters} are fixed): nothing to estimate")]
+    #[error(
+        "the model has no free parameters (all {parameters} are fixed, or held by equal bounds): \
+         nothing to estimate"
+    )]
     NoFreeParameters {
         /// Parameters of the model.
         parameters: usize,

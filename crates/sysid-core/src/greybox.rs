@@ -22,12 +22,15 @@
 //! estimates, their uncertainty and the fit always come from the free-run solve.
 //!
 //! **Bounds** by a change of variable (`greybox/transform.rs`): a parameter whose optimum lies on
-//! its bound is reported there ([`ActiveBound`]) and held fixed in the covariance.
+//! its bound is reported there ([`ActiveBound`]) and held fixed in the covariance (no σ,
+//! no column in the rank). A free parameter with equal bounds is held at that value out
+//! of the solver and reported on its (lower) bound the same way.
 //!
 //! **Uncertainty.** With `J` the Jacobian of the weighted residuals along the physical
-//! parameters and the start states at the optimum, `N` residuals, `P` estimated
-//! quantities and `s² = ‖r‖²/(N − P)`, the covariance is `s²·(JᵀJ)⁻¹` (Gauss–Newton,
-//! scaled by the residual variance, so a misstated noise variance scales out). Columns
+//! parameters (those on a bound left out) and the start states at the optimum, `N`
+//! residuals, `P` its columns and `s² = ‖r‖²/(N − P)`, the covariance is `s²·(JᵀJ)⁻¹`
+//! (Gauss–Newton, scaled by the residual variance, so a misstated noise variance scales
+//! out). Columns
 //! are normalised before the eigen-decomposition; a direction whose eigenvalue is below
 //! `1e-12` of the largest is not identifiable, and every parameter with a share in such a
 //! direction gets no σ ([`ParameterEstimate::sigma`] `None`; the rank is reported). The
@@ -179,7 +182,8 @@ pub struct StageReport {
 pub struct GreyboxFit<D> {
     /// The model with the estimated parameter values.
     pub model: D,
-    /// The free parameters' estimates, in the model's order.
+    /// The free parameters' estimates, in the model's order (one held by equal bounds
+    /// among them, on its bound).
     pub parameters: Vec<ParameterEstimate>,
     /// Correlations of the free parameters (NaN in the row and column of one without σ).
     pub correlation: DMatrix<f64>,
@@ -189,8 +193,8 @@ pub struct GreyboxFit<D> {
     pub x0_sigma: Vec<Vec<f64>>,
     /// The solves, in order; the last is the free run the estimates come from.
     pub stages: Vec<StageReport>,
-    /// `s² = ‖r‖²/(N − P)` of the final free run (1 when the noise variances are right
-    /// and the model explains the data).
+    /// `s² = ‖r‖²/(N − P)` of the final free run, `P` the estimated quantities not on a
+    /// bound (1 when the noise variances are right and the model explains the data).
     pub residual_variance_ratio: f64,
     /// Rank of the normalised `JᵀJ` and the number of its columns.
     pub rank: (usize, usize),
@@ -240,7 +244,12 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     observer: GreyboxObserver<'_>,
 ) -> Result<GreyboxFit<D>> {
     let n = model.n_states();
-    let (free, transforms, z0) = free_parameters(model)?;
+    let Free {
+        free,
+        transforms,
+        z: z0,
+        pinned,
+    } = free_parameters(model)?;
     validate(model, data, opts)?;
     let weight: Vec<f64> = data.noise_variance.iter().map(|v| 1.0 / v.sqrt()).collect();
     let x0 = start_states(data, n)?;
@@ -375,34 +384,62 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     let mut jac = DMatrix::zeros(rows, dim);
     crate::least_squares::LeastSquaresProblem::jacobian(&mut problem, &theta, &[], &mut jac)?;
     let cost = stages[stages.len() - 1].report.final_cost();
-    let ratio = cost / (rows.saturating_sub(dim)).max(1) as f64;
+    // A parameter on its bound is held there: no column of the covariance, no share in the
+    // rank, and not an estimated quantity in `s²`'s degrees of freedom.
     let keep: Vec<usize> = (0..dim)
         .filter(|&j| j >= nf || bounds[j].is_none())
         .collect();
+    let ratio = cost / (rows.saturating_sub(keep.len())).max(1) as f64;
     let (cov, rank) = covariance(&jac, &keep, ratio);
 
     let estimated = problem.model_at(&theta)?;
-    let mut parameters = Vec::with_capacity(nf);
-    for (fi, &j) in free.iter().enumerate() {
+    // Every free parameter in the model's order: the solver's column of each one it moved
+    // (`None` for one held by equal bounds, which stays at its value, on its bound).
+    let mut listed: Vec<(usize, Option<usize>)> = free
+        .iter()
+        .enumerate()
+        .map(|(fi, &j)| (j, Some(fi)))
+        .chain(pinned.iter().map(|&j| (j, None)))
+        .collect();
+    listed.sort_by_key(|&(j, _)| j);
+    let mut parameters = Vec::with_capacity(listed.len());
+    for &(j, column) in &listed {
         let p = &model.parameters()[j];
-        let var = cov[(fi, fi)];
-        parameters.push(ParameterEstimate {
-            name: p.name.clone(),
-            index: j,
-            start: p.value,
-            value: transforms[fi].value(theta[fi]),
-            sigma: (var.is_finite() && bounds[fi].is_none()).then(|| var.sqrt()),
-            lower: p.lower,
-            upper: p.upper,
-            active_bound: bounds[fi],
+        parameters.push(match column {
+            Some(fi) => {
+                let var = cov[(fi, fi)];
+                ParameterEstimate {
+                    name: p.name.clone(),
+                    index: j,
+                    start: p.value,
+                    value: transforms[fi].value(theta[fi]),
+                    sigma: (var.is_finite() && bounds[fi].is_none()).then(|| var.sqrt()),
+                    lower: p.lower,
+                    upper: p.upper,
+                    active_bound: bounds[fi],
+                }
+            }
+            None => ParameterEstimate {
+                name: p.name.clone(),
+                index: j,
+                start: p.value,
+                value: p.value,
+                sigma: None,
+                lower: p.lower,
+                upper: p.upper,
+                active_bound: Some(ActiveBound::Lower),
+            },
         });
     }
-    let mut correlation = DMatrix::from_element(nf, nf, f64::NAN);
-    for a in 0..nf {
-        for b in 0..nf {
-            let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
+    let mut correlation = DMatrix::from_element(listed.len(), listed.len(), f64::NAN);
+    for (a, &(_, ca)) in listed.iter().enumerate() {
+        for (b, &(_, cb)) in listed.iter().enumerate() {
+            let (Some(ca), Some(cb)) = (ca, cb) else {
+                continue;
+            };
+            let d = (cov[(ca, ca)] * cov[(cb, cb)]).sqrt();
             if d.is_finite() && d > 0.0 {
-                correlation[(a, b)] = cov[(a, b)] / d;
+                correlation[(a, b)] = cov[(ca, cb)] / d;
             }
         }
     }
@@ -462,12 +499,23 @@ fn record_substeps<D: ParametricDynamics>(
 
 /// The free parameters' indices, their transforms and starting `z`. Errors: none free, a
 /// start outside its bounds.
-fn free_parameters<D: ParametricDynamics>(
-    model: &D,
-) -> Result<(Vec<usize>, Vec<Transform>, Vec<f64>)> {
+/// The free parameters the solver moves (their indices, transforms and starting `z`)
+/// and those held by equal bounds (`lower == upper`, so the value is the bound).
+struct Free {
+    free: Vec<usize>,
+    transforms: Vec<Transform>,
+    z: Vec<f64>,
+    pinned: Vec<usize>,
+}
+
+/// A free parameter with `lower == upper` is held at that value, out of the solver (no
+/// column, no share in the rank, the covariance or `s²`'s degrees of freedom) and
+/// reported on its bound without σ.
+fn free_parameters<D: ParametricDynamics>(model: &D) -> Result<Free> {
     let mut free = Vec::new();
     let mut transforms = Vec::new();
     let mut z = Vec::new();
+    let mut pinned = Vec::new();
     for (j, p) in model.parameters().iter().enumerate() {
         if p.estimation != Estimation::Free {
             continue;
@@ -480,6 +528,11 @@ fn free_parameters<D: ParametricDynamics>(
                 upper: p.upper,
             });
         }
+        // The bounds were checked around the value: `upper <= lower` is `lower == upper`.
+        if p.upper <= p.lower {
+            pinned.push(j);
+            continue;
+        }
         let (t, z0) = Transform::new(p.lower, p.upper, p.value);
         free.push(j);
         transforms.push(t);
@@ -490,7 +543,12 @@ fn free_parameters<D: ParametricDynamics>(
             parameters: model.parameters().len(),
         });
     }
-    Ok((free, transforms, z))
+    Ok(Free {
+        free,
+        transforms,
+        z,
+        pinned,
+    })
 }
 
 fn validate<D: ParametricDynamics>(

@@ -186,9 +186,28 @@ fn linear_in_parameters_matches_ordinary_least_squares() {
     }
 }
 
+/// The start state's least squares with `b` held at `b_held`: `x0 = mean(y_k − b·s_k)`,
+/// its σ `√(SSE/(N − 1)/N)` (one estimated quantity).
+fn x0_with_b_held(exp: &Experiment, b_held: f64) -> (f64, f64) {
+    let mut s = 0.0;
+    let mut rest = Vec::with_capacity(N);
+    for k in 0..N {
+        rest.push(exp.outputs()[(0, k)] - b_held * s);
+        s += DT * exp.input(k)[0];
+    }
+    let mean = rest.iter().sum::<f64>() / N as f64;
+    let sse: f64 = rest.iter().map(|v| (v - mean).powi(2)).sum();
+    (mean, (sse / (N - 1) as f64 / N as f64).sqrt())
+}
+
+/// `b` in `[0, 1]` while the unconstrained optimum is 1.69 (the closed form): `b` ends on
+/// its upper bound without σ, the rank counts the start state only, and the start state
+/// and its σ are the closed form's with `b` held at 1 (one estimated quantity in `s²`).
 #[test]
 fn an_optimum_beyond_a_bound_is_reported_on_it() {
     let records = [record()];
+    let (beta, _) = closed_form(&records[0]);
+    assert!(beta[1] > 1.5, "{beta}");
     let c = DMatrix::from_element(1, 1, 1.0);
     let nv = [NOISE * NOISE / 3.0];
     let model = integrator(0.0, 1.0, 0.5);
@@ -198,8 +217,83 @@ fn an_optimum_beyond_a_bound_is_reported_on_it() {
     assert_eq!(p.active_bound, Some(ActiveBound::Upper), "{p:?}");
     assert!((p.value - 1.0).abs() < 1e-5, "{p:?}");
     assert!(p.sigma.is_none());
-    // The start state is still estimated, with its σ.
-    assert!(fit.x0_sigma[0][0].is_finite());
+    assert_eq!(fit.rank, (1, 1));
+    assert!(fit.correlation[(0, 0)].is_nan());
+    let (x0, sigma) = x0_with_b_held(&records[0], 1.0);
+    // b is 1 to ~1e-13 here (cos z below 1e-3 and the solve converged on it), so x0 is
+    // the closed form's to the solver's precision; σ to the relative 1e-6 of the point.
+    assert!((fit.x0[0][0] - x0).abs() < 1e-6, "{:?} vs {x0}", fit.x0);
+    assert!(
+        (fit.x0_sigma[0][0] - sigma).abs() < 1e-4 * sigma,
+        "σ {:?} vs {sigma}",
+        fit.x0_sigma
+    );
+}
+
+/// `ẋ = a·b·u` with `a` free but held by equal bounds `[0.5, 0.5]` and `b` unbounded:
+/// only the product is in the data, and an unbounded `a` would make the estimate a valley.
+/// `a` is held at 0.5, reported on its bound without σ and outside the rank; `b` is the
+/// closed form's slope over 0.5 with its σ over 0.5 (`a` used to be moved by the solver
+/// past its bounds: an error).
+#[test]
+fn a_parameter_with_equal_bounds_is_held_on_them() {
+    let records = [record()];
+    let (beta, cov) = closed_form(&records[0]);
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [NOISE * NOISE / 3.0];
+    let names = ModelNames {
+        states: vec!["x".into()],
+        inputs: vec!["u".into()],
+        outputs: vec!["x".into()],
+        corrections: Vec::new(),
+    };
+    let linear = LinearModel::with_names(
+        DMatrix::zeros(1, 1),
+        DMatrix::zeros(1, 1),
+        DMatrix::from_element(1, 1, 1.0),
+        DMatrix::zeros(1, 0),
+        names,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut a = Parameter::new("a", 0.5);
+    a.lower = 0.5;
+    a.upper = 0.5;
+    let term = PhysicalTerm {
+        state: 0,
+        into: None,
+        effect: "gain",
+        term: "a*b*u",
+        coefficient: 1.0,
+    };
+    let model = PhysicalModel::new(linear, vec![a, Parameter::new("b", 1.0)], &[term], None)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let fit = estimate_parameters(&model, &data(&c, &records, &nv), &GreyboxOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let [a, b] = &fit.parameters[..] else {
+        panic!("{:?}", fit.parameters)
+    };
+    assert_eq!((a.name.as_str(), b.name.as_str()), ("a", "b"));
+    assert_eq!(a.value.to_bits(), 0.5f64.to_bits(), "{a:?}");
+    assert_eq!(a.active_bound, Some(ActiveBound::Lower), "{a:?}");
+    assert!(a.sigma.is_none(), "{a:?}");
+    // b and the start state: the two estimated quantities, both determined.
+    assert_eq!(fit.rank, (2, 2));
+    assert_eq!(fit.stages[0].estimated, 2);
+    assert!(b.active_bound.is_none());
+    assert!(
+        (b.value - beta[1] / 0.5).abs() < 1e-6 * beta[1].abs(),
+        "{b:?} vs {beta}"
+    );
+    let sigma = b.sigma.unwrap_or(f64::NAN);
+    let want = cov[(1, 1)].sqrt() / 0.5;
+    assert!((sigma - want).abs() < 1e-4 * want, "σ {sigma} vs {want}");
+    assert!(
+        (fit.x0[0][0] - beta[0]).abs() < 1e-6,
+        "{:?} vs {beta}",
+        fit.x0
+    );
+    assert!(fit.correlation[(0, 0)].is_nan() && fit.correlation[(0, 1)].is_nan());
+    assert!((fit.correlation[(1, 1)] - 1.0).abs() < 1e-12);
 }
 
 #[test]
@@ -389,7 +483,12 @@ fn the_shooting_jacobian_is_the_derivative_of_the_residuals() {
     let y = DMatrix::from_fn(1, n_samples, |_, k| xs[(0, k)] + 0.01 * (k as f64).sin());
     let records = [Experiment::new(0.0, 0.05, u, y).unwrap_or_else(|e| panic!("{e}"))];
     let c = DMatrix::from_row_slice(1, 2, &[1.0, 0.0]);
-    let (free, transforms, z) = free_parameters(&model).unwrap_or_else(|e| panic!("{e}"));
+    let Free {
+        free,
+        transforms,
+        z,
+        ..
+    } = free_parameters(&model).unwrap_or_else(|e| panic!("{e}"));
     let segments = shooting_segments(&records, 20);
     assert_eq!(segments.len(), 3);
     let mut problem = Calibration::new(

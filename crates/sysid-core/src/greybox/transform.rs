@@ -42,8 +42,8 @@ impl Transform {
                 let limit = std::f64::consts::FRAC_PI_2 - NUDGE;
                 (Transform::Interval { lo, hi }, z.clamp(-limit, limit))
             }
-            // lo == hi: a parameter pinned by its bounds is not free in any useful sense;
-            // the identity keeps it where it is and the covariance reports it.
+            // lo == hi: the grey-box estimation holds such a parameter at its value, out
+            // of the solver (`free_parameters`), so no transform of it is ever used.
             (true, true) => (Transform::Identity, p0),
             (true, false) => {
                 let s = scale(p0 - lo);
