@@ -175,6 +175,48 @@ fn unidentifiable_rigid_body_parameters_are_reported_as_such() {
     assert!(report.contains("Not identifiable"), "{report}");
 }
 
+/// The masses stated by equal bounds (`bounds = [v, v]`, free) instead of `fixed = true`:
+/// they are held at their values and reported on their bound without σ, outside the rank
+/// (the rest as with the masses fixed: rank 12 of 12), instead of being moved past their
+/// bounds by the solver (an error).
+#[test]
+fn parameters_held_by_equal_bounds_are_reported_on_them() {
+    let dir = scratch("pinned");
+    let text = perturbed(true)
+        .replace(
+            "m1 = { value = 0.45, unit = \"kg\", bounds = [0.01, 5.0] }",
+            "m1 = { value = 0.45, unit = \"kg\", bounds = [0.45, 0.45] }",
+        )
+        .replace(
+            "m2 = { value = 0.25, unit = \"kg\", bounds = [0.01, 5.0] }",
+            "m2 = { value = 0.25, unit = \"kg\", bounds = [0.25, 0.25] }",
+        );
+    assert!(text.contains("[0.45, 0.45]") && text.contains("[0.25, 0.25]"));
+    let model = write(&dir, "start.toml", &text);
+    let outcome = run_greyest(
+        &model,
+        &[fixture("est.csv")],
+        &GreyestOptions::default(),
+        &dir.join("out"),
+        &NoProgress,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(outcome.summary.rank, (12, 12));
+    for (name, mass) in [("m1", 0.45), ("m2", 0.25)] {
+        let p = outcome.parameter(name).unwrap_or_else(|| panic!("{name}"));
+        assert_eq!(p.value.to_bits(), f64::to_bits(mass), "{p:?}");
+        assert_eq!((p.sigma, p.active_bound), (None, Some("lower")), "{p:?}");
+    }
+    for (name, truth) in &TRUTH {
+        let p = outcome.parameter(name).unwrap_or_else(|| panic!("{name}"));
+        assert!(p.sigma.is_some() && p.active_bound.is_none(), "{p:?}");
+        assert!((p.value - truth).abs() < 0.05 * truth, "{p:?}");
+    }
+    let report = std::fs::read_to_string(dir.join("out/report.md")).unwrap_or_default();
+    assert!(report.contains("— (on its lower bound)"), "{report}");
+    assert!(!report.contains("Not identifiable"), "{report}");
+}
+
 #[allow(clippy::result_large_err)] // the facade's own error type, as its workflows return it
 fn run(model_text: &str, data: &[PathBuf], dir: &Path) -> mmenn::Result<()> {
     let model = write(dir, "model.toml", model_text);
