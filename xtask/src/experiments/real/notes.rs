@@ -138,7 +138,8 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              that distortion, so the model is read as `Ã·N(Ã⁻¹·u)` with Ã estimated from the \
              training record per 5-Hz band. Of the grey box's 0.2791-mV error on \
              test_arrow_full, 0.1245 mV RMS lay above 200 Hz (0.2498 mV below it), growing \
-             with the amplitude (36 % of the error power at the arrow's top lay at 200–250 Hz). \
+             with the amplitude (36 % of the error power at the arrow's top lay at 200–250 Hz; \
+             measured on the grey box's free runs of 59ff347). \
              Before it: test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
              free-run error (0.2311 mV); on test_arrow_full the grey box's error is 0.227 mV up \
              to sample 29 049, where the output first exceeds the largest training amplitude \
