@@ -337,11 +337,14 @@ fn core(context: &'static str) -> impl FnOnce(sysid_core::CoreError) -> MmennErr
     move |source| MmennError::Core { context, source }
 }
 
-/// Free run of a model over the first record of `data`, judged by discovery's validation
-/// rule (`discovery::validation`, the rule its acceptance check judges a round by: initial
-/// state fitted to the first `window` samples, every sample scored — through
-/// `sysid_core::judge_free_run`, the numbers `predict` and `compare` give for the same
-/// model); fit % and RMSE per output, and the simulated outputs.
+/// Free run of a model over every record of `data`, judged by discovery's validation
+/// rule (`discovery::validation`, the rule its acceptance check judges a round by: each
+/// record's initial state fitted to its first `window` samples, every sample scored —
+/// through `sysid_core::judge_free_run`, the numbers `predict` and `compare` give for the
+/// same model); fit % and RMSE per output pooled over the records (squared errors summed
+/// over every record's samples, `sysid_core::score_rows` on the records side by side; for
+/// one record the record's own numbers), and the simulated outputs of the first record
+/// (the one the figures draw).
 fn free_run_gap(model: &TermModel, data: &Dataset, window: usize) -> Result<(Gap, DMatrix<f64>)> {
     free_run_gap_of(model, model.linear(), data, window, false)
 }
@@ -356,15 +359,40 @@ fn free_run_gap_of<D: sysid_core::Dynamics>(
     window: usize,
     stiff_aware: bool,
 ) -> Result<(Gap, DMatrix<f64>)> {
-    let exp = &data.experiments()[0];
-    let judged = discovery::validation::judge_record(model, linear, exp, window, stiff_aware)
-        .map_err(core("judging the free run"))?;
+    let names = linear.output_names();
+    let total: usize = data.experiments().iter().map(|e| e.len()).sum();
+    // Every record's measured and simulated outputs side by side.
+    let mut measured = DMatrix::from_element(names.len(), total, f64::NAN);
+    let mut simulated = DMatrix::from_element(names.len(), total, f64::NAN);
+    let mut first: Option<DMatrix<f64>> = None;
+    let mut at = 0;
+    for exp in data.experiments() {
+        let judged = discovery::validation::judge_record(model, linear, exp, window, stiff_aware)
+            .map_err(core("judging the free run"))?;
+        let len = exp.len();
+        measured.columns_mut(at, len).copy_from(exp.outputs());
+        simulated.columns_mut(at, len).copy_from(&judged.outputs);
+        at += len;
+        if first.is_none() {
+            first = Some(judged.outputs);
+        }
+    }
+    let channels = sysid_core::score_rows(names, &measured, &simulated, 0)
+        .map_err(core("scoring the free run"))?;
     let mut gap = Gap::default();
-    for (name, m) in &judged.channels {
+    for (name, m) in &channels {
         gap.fit_percent.insert(name.clone(), m.fit_percent);
         gap.rmse.insert(name.clone(), m.rmse);
     }
-    Ok((gap, judged.outputs))
+    let first = first.ok_or(MmennError::Core {
+        context: "judging the free run",
+        source: sysid_core::CoreError::TooFewSamples {
+            what: "records",
+            found: 0,
+            needed: 1,
+        },
+    })?;
+    Ok((gap, first))
 }
 
 /// Run the discovery workflow and write `discovery.json`, `model.discovered.toml`,
@@ -599,6 +627,102 @@ mod tests {
             before: gap(before),
             after: gap(after),
         }
+    }
+
+    /// A record of `ẋ = −0.7·x + u` (`x` measured, no noise) from `x(0) = 0.3` under the
+    /// ZOH input `amplitude·sin(ω t)`, integrated by hand with the exact ZOH step.
+    fn scalar_record(amplitude: f64, omega: f64, n: usize) -> sysid_core::Experiment {
+        let (a, dt) = (-0.7_f64, 0.05);
+        let decay = (a * dt).exp();
+        let u: Vec<f64> = (0..n)
+            .map(|k| amplitude * (omega * k as f64 * dt).sin())
+            .collect();
+        let mut x = vec![0.3; n];
+        for k in 1..n {
+            x[k] = decay * x[k - 1] + (decay - 1.0) / a * u[k - 1];
+        }
+        sysid_core::Experiment::new(
+            0.0,
+            dt,
+            DMatrix::from_row_slice(1, n, &u),
+            DMatrix::from_row_slice(1, n, &x),
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// The gap of a dataset of several records pools them: squared errors summed over
+    /// every record's samples give the RMSE, and over the pooled spread the fit %; the
+    /// simulated outputs returned are the first record's. The assumed `ẋ = −x + u` misses
+    /// the truth `ẋ = −0.7·x + u` far more on the second record (five times the input), so
+    /// judging the first record alone gives other numbers.
+    #[test]
+    fn the_free_run_gap_pools_every_record() {
+        let names = sysid_core::ModelNames {
+            states: vec!["x".into()],
+            inputs: vec!["u".into()],
+            outputs: vec!["x".into()],
+            corrections: vec!["x".into()],
+        };
+        let one = |v: f64| DMatrix::from_element(1, 1, v);
+        let linear =
+            sysid_core::LinearModel::with_names(one(-1.0), one(1.0), one(1.0), one(1.0), names)
+                .unwrap_or_else(|e| panic!("{e}"));
+        let model = TermModel::new(linear, vec![]).unwrap_or_else(|e| panic!("{e}"));
+        let records = vec![scalar_record(0.2, 0.9, 600), scalar_record(1.0, 0.4, 900)];
+        let data = Dataset::new(
+            vec![sysid_core::Channel::new("u")],
+            vec![sysid_core::Channel::new("x")],
+            records.clone(),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let window = 50;
+        let (gap, y) = free_run_gap(&model, &data, window).unwrap_or_else(|e| panic!("{e}"));
+
+        // Each record judged alone by the validation rule, pooled by hand.
+        let (mut sse, mut n, mut sum, mut sum_sq) = (0.0, 0usize, 0.0, 0.0);
+        let mut first_alone = None;
+        for exp in &records {
+            let j = discovery::validation::judge_record(&model, model.linear(), exp, window, false)
+                .unwrap_or_else(|e| panic!("{e}"));
+            let m = &j.channels["x"];
+            sse += m.rmse * m.rmse * m.samples as f64;
+            n += m.samples;
+            for &v in exp.outputs().iter() {
+                sum += v;
+                sum_sq += v * v;
+            }
+            first_alone.get_or_insert((m.rmse, m.fit_percent, j.outputs));
+        }
+        let nf = n as f64;
+        let sst = sum_sq - sum * sum / nf;
+        let (rmse, fit) = ((sse / nf).sqrt(), 100.0 * (1.0 - (sse / sst).sqrt()));
+        let (rmse_first, fit_first, y_first) = first_alone.unwrap_or_else(|| panic!("no record"));
+        assert!(
+            (gap.rmse["x"] - rmse).abs() <= 1e-9 * rmse,
+            "{} vs {rmse}",
+            gap.rmse["x"]
+        );
+        assert!(
+            (gap.fit_percent["x"] - fit).abs() <= 1e-6,
+            "{} vs {fit}",
+            gap.fit_percent["x"]
+        );
+        // Not the first record's numbers.
+        assert!(
+            rmse > 2.0 * rmse_first,
+            "pooled {rmse} vs first {rmse_first}"
+        );
+        assert!(
+            (fit - fit_first).abs() > 1.0,
+            "pooled {fit} vs first {fit_first}"
+        );
+        // The figures' outputs: the first record's free run.
+        assert_eq!(y.shape(), y_first.shape());
+        assert!(
+            y.iter()
+                .zip(y_first.iter())
+                .all(|(a, b)| (a - b).abs() <= 1e-12)
+        );
     }
 
     #[test]

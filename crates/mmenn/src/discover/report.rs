@@ -14,9 +14,9 @@ use crate::plot::{Figure, Panels, Series};
 
 /// The simulated outputs of the assumed and the discovered model on one record.
 pub(super) struct GapRun<'a> {
-    /// The record (its first experiment is drawn).
+    /// The records (the first experiment is drawn).
     pub data: &'a Dataset,
-    /// Its fit % and RMSE before and after.
+    /// Their fit % and RMSE before and after, pooled over every record.
     pub gap: &'a GapPair,
     /// Assumed model's free-run outputs (`p × N`).
     pub before: DMatrix<f64>,
@@ -139,6 +139,13 @@ fn gap_figures(
     let mut files = Vec::new();
     let exp = &run.data.experiments()[0];
     let t = exp.times();
+    // The fit % in the legends pools every record (the gap's rule); the first is drawn.
+    let records = run.data.experiments().len();
+    let which = if records > 1 {
+        format!("{which} record 1 of {records}; fit % over all")
+    } else {
+        format!("{which} record")
+    };
     for (i, name) in spec.linear.output_names().iter().enumerate() {
         let fit = |g: &super::Gap| g.fit_percent.get(name).copied().unwrap_or(f64::NAN);
         let (fit_b, fit_a) = (fit(&run.gap.before), fit(&run.gap.after));
@@ -156,7 +163,7 @@ fn gap_figures(
         };
         let file = format!("gap_{tag}{name}.svg");
         Panels::time_with_residuals(
-            format!("{name}: free-run simulation before and after discovery ({which} record)"),
+            format!("{name}: free-run simulation before and after discovery ({which})"),
             y_label,
             vec![
                 Series::points("measured", t.clone(), measured.clone()),
