@@ -235,6 +235,9 @@ struct Judged {
     runs: Vec<(String, DMatrix<f64>)>,
     /// The hybrid model with the initial state its judgement found (residual analysis).
     hybrid: HybridModel,
+    /// The hybrid's judged outputs on the first record (through its acquisition filter,
+    /// when it has one: its residuals are those).
+    hybrid_outputs: DMatrix<f64>,
     /// Models whose free run failed on this dataset (no row).
     failures: Vec<Failure>,
 }
@@ -333,11 +336,13 @@ fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> R
     };
     hybrid.x0 = j.x0.clone();
     table.push("MME/NN", evaluation(&j, &names))?;
+    let hybrid_outputs = j.outputs.clone();
     runs.push(("MME/NN".to_string(), j.outputs));
     Ok(Judged {
         table,
         runs,
         hybrid,
+        hybrid_outputs,
         failures,
     })
 }
@@ -588,7 +593,9 @@ pub fn compute_compare_with_progress(
     let lin = spec.linear.clone();
     let data = &data.clone().with_intersample(spec.intersample);
     let val = val.map(|v| v.clone().with_intersample(spec.intersample));
-    let given = (loaded.kind != ModelKind::Assumed).then_some(loaded);
+    // A model file with an acquisition filter is more than its linear part: it gets its
+    // own row, judged through the filter.
+    let given = (loaded.kind != ModelKind::Assumed || spec.acquisition.is_some()).then_some(loaded);
     let window = opts.fit.x0_window;
     let oe_config = OeConfig {
         free: opts.oe_free.clone().unwrap_or_else(|| default_free(&spec)),
@@ -722,7 +729,7 @@ pub fn compute_compare_with_progress(
     // The models whose free run failed on the data the residuals are analysed on.
     let mut res_failed: Vec<String> = est.failures.iter().map(|f| f.model.clone()).collect();
     failures.extend(est.failures);
-    let (validation, validation_runs, hybrid_res, res_data) = match &val {
+    let (validation, validation_runs, (hybrid_res, hybrid_outputs), res_data) = match &val {
         Some(v) => {
             let j = judge_all("validation", &scope("validation", v), v, &models)?;
             res_failed = j.failures.iter().map(|f| f.model.clone()).collect();
@@ -730,11 +737,16 @@ pub fn compute_compare_with_progress(
             (
                 Some(j.table),
                 Some((v.experiments()[0].clone(), j.runs)),
-                j.hybrid,
+                (j.hybrid, j.hybrid_outputs),
                 v,
             )
         }
-        None => (None, None, est.hybrid.clone(), data),
+        None => (
+            None,
+            None,
+            (est.hybrid.clone(), est.hybrid_outputs.clone()),
+            data,
+        ),
     };
     let ran = |label: &str| !res_failed.iter().any(|f| f == label);
     let rc = ResidualConfig::default();
@@ -778,9 +790,24 @@ pub fn compute_compare_with_progress(
             residual_analysis(poly, res_data, 0, Horizon::FreeRun, &rc),
         );
     }
+    // Through an acquisition filter the hybrid's residuals are those of its judged
+    // (filtered) outputs; otherwise of its free run from the judged state (the same run).
     analyse(
         "MME/NN",
-        residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc),
+        if fit.model.spec()?.acquisition.is_some() {
+            sysid_baselines::analyse_prediction(
+                &sysid_core::Prediction {
+                    horizon: Horizon::FreeRun,
+                    outputs: hybrid_outputs,
+                    initial_samples: 0,
+                },
+                res_data,
+                0,
+                &rc,
+            )
+        } else {
+            residual_analysis(&hybrid_res, res_data, 0, Horizon::FreeRun, &rc)
+        },
     );
     let judge_rule = format!(
         "the one free-run judge: initial state fitted by least squares to the first {window} samples (from the minimum-norm solution of C x = y(t0)), every sample scored (the rule and numbers of `mmenn predict`)"
@@ -789,8 +816,13 @@ pub fn compute_compare_with_progress(
         "assumed model".to_string(),
         format!(
             "{}{judge_rule}",
-            if loaded.kind == ModelKind::Assumed {
+            if loaded.kind == ModelKind::Assumed && spec.acquisition.is_none() {
                 String::new()
+            } else if loaded.kind == ModelKind::Assumed {
+                format!(
+                    "the model file without its acquisition filter (read through it in the \
+                     '{GIVEN_MODEL_ROW}' row); "
+                )
             } else {
                 format!(
                     "the linear part of the model file (its {} named terms{} are in the '{GIVEN_MODEL_ROW}' row); ",

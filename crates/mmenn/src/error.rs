@@ -203,6 +203,25 @@ pub enum ModelProblem {
         /// The step that needs the state-space form.
         what: &'static str,
     },
+    /// The `[acquisition]` table is malformed.
+    #[error("{key}{}: {reason}", row.map(|r| format!(", row {r}")).unwrap_or_default())]
+    Acquisition {
+        /// The key (`acquisition.pass_below_hz`, `acquisition.bands`).
+        key: &'static str,
+        /// The band row (0-based), for `bands`.
+        row: Option<usize>,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A step that does not read the `[acquisition]` table was given a model with one.
+    #[error(
+        "{what} does not read the [acquisition] table yet (fit, predict, compare and show \
+         do): its numbers would ignore the filter, so take the table out for this step"
+    )]
+    AcquisitionUnread {
+        /// The step.
+        what: &'static str,
+    },
     /// The file is none of the models mmenn writes (a model-file TOML, with or without
     /// `[[terms]]`, or `fit`'s `model.json`).
     #[error("not a model mmenn reads: {why}")]
@@ -346,6 +365,24 @@ pub enum MmennError {
         /// Samples in the record.
         len: usize,
     },
+    /// A record judged or fitted through a model's acquisition filter misses a sample.
+    #[error(
+        "the model's [acquisition] filter needs every sample of channel '{channel}', but \
+         sample {sample} (0-based) is missing: the filter's inverse would spread it over the \
+         filter's length"
+    )]
+    AcquisitionMissing {
+        /// The channel.
+        channel: String,
+        /// The first missing sample.
+        sample: usize,
+    },
+    /// k-step prediction was asked of a model with an acquisition filter.
+    #[error(
+        "k-step prediction (--horizon) is not defined through the model's [acquisition] \
+         filter, which acts on whole records (non-causal): predict it free-run"
+    )]
+    AcquisitionKStep,
     /// A real benchmark's data folder is in none of the places searched.
     #[error(
         "benchmark data '{benchmark}' not found (looked in: {searched:?}); pass --data-dir or set MMENN_DATA_DIR"

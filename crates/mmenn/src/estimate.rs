@@ -368,6 +368,7 @@ pub fn run_estimate_with(
 ) -> Result<EstimateSummary> {
     let clock = Instant::now();
     let spec = crate::model::LoadedModel::read(model_path)?.spec;
+    spec.refuse_acquisition("estimate", model_path)?;
     let data = read_dataset(
         data_paths,
         spec.linear.input_names(),
@@ -417,6 +418,7 @@ fn compute_estimate_owned(
     opts: &EstimateOptions,
     robust: Option<&mme_core::RobustConfig>,
 ) -> Result<EstimateOutcome> {
+    spec.refuse_acquisition("estimate", Path::new("<model>"))?;
     let mut phases = BTreeMap::new();
     // MME follows the model file's inputs-between-samples setting.
     let data = data.with_intersample(spec.intersample);

@@ -454,8 +454,25 @@ pub fn compute_fit(
     // MME runs, not after.
     spec.refuse_mechanics("fit", Path::new("<model>"))?;
     let mut spec = spec.clone();
-    let data = &data.clone().with_intersample(spec.intersample);
-    let val = val.map(|v| v.clone().with_intersample(spec.intersample));
+    // The measurement model (`[acquisition]`): MME, the network sweep, the guard and the
+    // trajectory training work on the records deconvolved by the filter (inputs and
+    // outputs), with the model between the filters (`spec`, without it); the written
+    // model carries the filter, and the train and validation judgements read the
+    // recorded records through it, as `predict` does.
+    let acquisition = spec.acquisition.take();
+    let recorded = data.clone().with_intersample(spec.intersample);
+    let recorded_val = val.map(|v| v.clone().with_intersample(spec.intersample));
+    let (data, val) = match &acquisition {
+        Some(f) => (
+            crate::acquisition::deconvolved_dataset(f, &recorded)?,
+            recorded_val
+                .as_ref()
+                .map(|v| crate::acquisition::deconvolved_dataset(f, v))
+                .transpose()?,
+        ),
+        None => (recorded.clone(), recorded_val.clone()),
+    };
+    let data = &data;
     let config = mme_config(&spec, &opts.estimate);
     let mut result = crate::progress::stage(progress, "MME estimate", || {
         estimate_spec(&spec, data, &config)
@@ -574,11 +591,13 @@ pub fn compute_fit(
             domain_check,
         )?,
     };
+    // The model as written: with the acquisition filter, judged on the recorded records.
+    spec.acquisition = acquisition;
     let (file, loaded) =
         hybrid_loaded(&spec, &network, &x0, exp0.dt(), opts.substeps, kept_domain)?;
-    let train_j = judge_outputs(&loaded, data, opts.x0_window)?;
+    let train_j = judge_outputs(&loaded, &recorded, opts.x0_window)?;
     let train = FreeRunReport::of(&train_j);
-    let validation_j = match &val {
+    let validation_j = match &recorded_val {
         Some(v) => Some(judge_outputs(&loaded, v, opts.x0_window)?),
         None => None,
     };
@@ -587,7 +606,7 @@ pub fn compute_fit(
     // and after it judged as the kept model is (the one judge, the kept model's domain),
     // so the kept one's numbers are the validation report's, and both are judged one way
     // (the guard judges each with the domain its stress check gave it, which may differ).
-    if let (Some(r), Some(v)) = (refinement.as_mut(), &val) {
+    if let (Some(r), Some(v)) = (refinement.as_mut(), &recorded_val) {
         let fits = |net: &Mlp| {
             hybrid_loaded(&spec, net, &x0, exp0.dt(), opts.substeps, kept_domain)
                 .and_then(|(_, loaded)| judge_outputs(&loaded, v, opts.x0_window))
@@ -647,8 +666,8 @@ pub fn compute_fit(
         chosen,
         train: train_j,
         validation: validation_j,
-        train_record: exp0.clone(),
-        validation_record: val.as_ref().map(|v| v.experiments()[0].clone()),
+        train_record: recorded.experiments()[0].clone(),
+        validation_record: recorded_val.as_ref().map(|v| v.experiments()[0].clone()),
         d_train,
         d_network,
         x_train,

@@ -224,6 +224,7 @@ pub fn compute_greyest(
     opts: &GreyestOptions,
     progress: &dyn ProgressSink,
 ) -> Result<GreyestOutcome> {
+    model.spec.refuse_acquisition("greyest", &model.path)?;
     let physical = physical_of(model)?;
     let lin = &model.spec.linear;
     let (variances, weighting) = match &model.spec.noise_variance {

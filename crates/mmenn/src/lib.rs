@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub mod acquisition;
 pub mod atomic;
 pub mod benchmarks;
 pub mod compare;

@@ -21,6 +21,11 @@
 //! - **scored window**: every sample of the record (the fitting window is not skipped),
 //!   missing measurements skipped;
 //! - **metrics**: fit %, R², RMSE and error variance per judged channel.
+//!
+//! A model whose file has an `[acquisition]` table ([`crate::acquisition`]) is judged
+//! through it: the record's inputs and outputs pass through the filter's inverse, the
+//! initial state is fitted and the model run on that record, and the simulated channels
+//! pass through the filter before they are scored against the *recorded* outputs.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -251,6 +256,20 @@ impl LoadedModel {
         self.spec.intersample
     }
 
+    /// The filter the records' channels share (`[acquisition]`), if the model has one.
+    pub fn acquisition(&self) -> Option<&sysid_core::acquisition::AcquisitionFilter> {
+        self.spec.acquisition.as_ref()
+    }
+
+    /// `exp` as the model runs on it: through the acquisition filter's inverse (inputs and
+    /// outputs, named `outputs` in errors) when the model has one, else as it is.
+    pub fn record_for_model(&self, exp: &Experiment, outputs: &[String]) -> Result<Experiment> {
+        match self.acquisition() {
+            Some(f) => crate::acquisition::deconvolved(f, exp, outputs),
+            None => Ok(exp.clone()),
+        }
+    }
+
     /// The state the file stores (a hybrid model's training `x̂(t0)`), if any.
     pub fn stored_state(&self) -> Option<&[f64]> {
         self.hybrid.as_ref().map(|h| h.x0.as_slice())
@@ -319,6 +338,10 @@ pub fn evaluation(j: &Judgement, names: &[String]) -> sysid_baselines::Evaluatio
 /// [`sysid_core::judge_free_run`] on a loaded model: the record's inputs held as the model
 /// says, its integrator, its stored state as a second start (rule in the module
 /// documentation). `exp`'s output rows are the channels of `obs`, in order.
+///
+/// With an acquisition filter, the judgement's states are the model's on the deconvolved
+/// record, its `outputs` the simulated channels through the filter, and its metrics those
+/// outputs against `exp`'s recorded outputs.
 pub fn judge_free_run(
     model: &LoadedModel,
     exp: &Experiment,
@@ -326,12 +349,28 @@ pub fn judge_free_run(
     rule: &InitialRule,
 ) -> Result<Judgement> {
     let exp = exp.clone().with_intersample(model.intersample());
-    sysid_core::judge_free_run(&model.dynamics, &exp, obs, rule, &model.judge_options())
-        .map_err(core("judging the model free-run"))
+    let inner = model.record_for_model(&exp, &obs.names)?;
+    let mut j =
+        sysid_core::judge_free_run(&model.dynamics, &inner, obs, rule, &model.judge_options())
+            .map_err(core("judging the model free-run"))?;
+    if let Some(f) = model.acquisition() {
+        j.outputs = crate::acquisition::filter_rows(f, &j.outputs, exp.dt(), false)?;
+        if !obs.names.is_empty() {
+            j.channels = sysid_core::score(&obs.names, &exp, &j.outputs, 0)
+                .map_err(core("scoring the model through its acquisition filter"))?;
+        }
+        j.x0_rule.push_str(
+            ", on the record's inputs and outputs deconvolved by the model's acquisition \
+             filter; the simulated outputs passed through the filter are scored against the \
+             recorded ones",
+        );
+    }
+    Ok(j)
 }
 
 /// [`sysid_core::judge_k_step`] on a loaded model, beside `free` (from [`judge_free_run`]
-/// on the same record).
+/// on the same record). A model with an acquisition filter has no k-step prediction
+/// ([`MmennError::AcquisitionKStep`]: the filter acts on whole records).
 pub fn judge_k_step(
     model: &LoadedModel,
     exp: &Experiment,
@@ -339,6 +378,9 @@ pub fn judge_k_step(
     k: usize,
     free: &Judgement,
 ) -> Result<Judgement> {
+    if model.acquisition().is_some() {
+        return Err(MmennError::AcquisitionKStep);
+    }
     let exp = exp.clone().with_intersample(model.intersample());
     sysid_core::judge_k_step(&model.dynamics, &exp, obs, k, free, &model.judge_options())
         .map_err(core("k-step prediction"))

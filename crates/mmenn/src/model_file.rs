@@ -6,7 +6,9 @@
 //! transfer between two equations `into`; `coefficient` defaults to 1), and for physical
 //! models `[parameters]` (`name = { value, unit, bounds, fixed }`, usable by name in every
 //! expression) and `[mechanics]` (`q`, `qdot`, `mass`, `forces`: the mass-matrix form,
-//! whose states are `q` then `qdot` when `states` is left out). `A` and `B` are zero when
+//! whose states are `q` then `qdot` when `states` is left out), and `[acquisition]`
+//! (`pass_below_hz`, `bands` of `[centre Hz, real, imaginary]`: the filter the record's
+//! input and output channels share, [`crate::acquisition`]). `A` and `B` are zero when
 //! left out.
 
 use std::collections::BTreeMap;
@@ -14,11 +16,13 @@ use std::path::Path;
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
+use sysid_core::acquisition::AcquisitionFilter;
 use sysid_core::{
     Estimation, InterSample, LinearModel, MechanicsSpec, ModelNames, Parameter, PhysicalModel,
     PhysicalTerm, TermModel, TermSpec,
 };
 
+use crate::acquisition::AcquisitionToml;
 use crate::atomic::write_atomic;
 use crate::error::{MmennError, ModelProblem, Result};
 
@@ -68,6 +72,21 @@ impl ModelSpec {
                 line: None,
                 column: None,
                 problem: ModelProblem::Mechanical { what },
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// `Err` naming the step `what` and the file `path` when the model has an
+    /// `[acquisition]` table that the step would ignore (`estimate`, `greyest`, `monitor`:
+    /// their numbers would not be read through the filter as `predict`'s are).
+    pub fn refuse_acquisition(&self, what: &'static str, path: &Path) -> Result<()> {
+        match self.acquisition {
+            Some(_) => Err(MmennError::Model {
+                path: path.to_path_buf(),
+                line: None,
+                column: None,
+                problem: ModelProblem::AcquisitionUnread { what },
             }),
             None => Ok(()),
         }
@@ -248,6 +267,10 @@ pub struct ModelSpec {
     pub parameters: Vec<ParameterEntry>,
     /// The mass-matrix part (`[mechanics]`), if any.
     pub mechanics: Option<MechanicsEntry>,
+    /// The filter the records' input and output channels share (`[acquisition]`), if
+    /// any: every command that judges the model reads the records through it
+    /// ([`crate::acquisition`]).
+    pub acquisition: Option<AcquisitionFilter>,
 }
 
 fn is_zoh(hold: &InterSample) -> bool {
@@ -290,6 +313,8 @@ struct ModelToml {
     parameters: BTreeMap<String, ParameterToml>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     mechanics: Option<MechanicsEntry>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    acquisition: Option<AcquisitionToml>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
 }
@@ -544,6 +569,11 @@ fn build(mut raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
             sigma: p.sigma,
         })
         .collect();
+    let acquisition = raw
+        .acquisition
+        .as_ref()
+        .map(AcquisitionToml::filter)
+        .transpose()?;
     let spec = ModelSpec {
         linear,
         noise_variance,
@@ -552,6 +582,7 @@ fn build(mut raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
         intersample: raw.intersample,
         parameters,
         mechanics: raw.mechanics,
+        acquisition,
     };
     if spec.is_physical() {
         spec.physical_model()?;
@@ -725,6 +756,7 @@ pub fn format_model(spec: &ModelSpec) -> Result<String> {
         intersample: spec.intersample,
         parameters,
         mechanics: spec.mechanics.clone(),
+        acquisition: spec.acquisition.as_ref().map(AcquisitionToml::of),
         terms: spec.terms.clone(),
     };
     toml::to_string(&raw).map_err(|e| MmennError::Model {

@@ -209,6 +209,7 @@ pub fn train_monitor(
     out: &Path,
 ) -> Result<MonitorFile> {
     let spec = crate::model::LoadedModel::read(model_path)?.spec;
+    spec.refuse_acquisition("monitor", model_path)?;
     let records = classes
         .iter()
         .map(|(name, files)| {
@@ -241,6 +242,7 @@ pub fn compute_monitor(
     spec: &ModelSpec,
     opts: &MonitorOptions,
 ) -> Result<MonitorFile> {
+    spec.refuse_acquisition("monitor", Path::new("<model>"))?;
     let mut samples = Vec::new();
     let mut labels = Vec::new();
     for (label, (_, records)) in classes.iter().enumerate() {

@@ -4,6 +4,12 @@
 //! and every model output column the record has, and optionally k steps ahead beside it.
 //! Writes `prediction.csv` (states, outputs, k-step columns), `prediction.json`, a figure
 //! per judged channel and `report.md`.
+//!
+//! A model with an `[acquisition]` table ([`crate::acquisition`]) runs on the record's
+//! inputs and outputs deconvolved by the filter; its states in `prediction.csv` are the
+//! model's there, its outputs (and a judged state's `<state>_acquired` column) pass
+//! through the filter, and those are scored against the recorded outputs. It has no
+//! k-step prediction.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -318,13 +324,18 @@ pub fn compute_predict_record_with(
             window: opts.x0_window,
         },
     };
+    if opts.horizon.is_some() && model.acquisition().is_some() {
+        return Err(crate::error::MmennError::AcquisitionKStep);
+    }
+    // The record the model runs on: through its acquisition filter's inverse, if it has one.
+    let inner = model.record_for_model(&exp, &obs.names)?;
     let requested = substeps;
-    let (mut model, mut substeps) = with_substeps(model, &exp, &obs, &rule, requested)?;
+    let (mut model, mut substeps) = with_substeps(model, &inner, &obs, &rule, requested)?;
     let mut free = judge_free_run(&model, &exp, &obs, &rule)?;
     // The judged start may need more steps than the probe's (a stiff model, a start far
     // from the measured one): probe it and judge again.
     if let (Some(s), Substeps::Auto { min }) = (substeps, requested) {
-        let again = probe_count(&model, &exp, &free.x0, min)?;
+        let again = probe_count(&model, &inner, &free.x0, min)?;
         if again > s {
             model.integrator = sysid_core::Integrator::Rk4 { substeps: again };
             free = judge_free_run(&model, &exp, &obs, &rule)?;
@@ -355,7 +366,11 @@ pub fn compute_predict_record_with(
             rescore(ks)?;
         }
     }
-    let y = lin.c() * &free.states;
+    // The model's outputs as recorded: through its acquisition filter, if it has one.
+    let y = match model.acquisition() {
+        Some(f) => crate::acquisition::filter_rows(f, &(lin.c() * &free.states), exp.dt(), false)?,
+        None => lin.c() * &free.states,
+    };
     let mut columns = vec![("t".to_string(), exp.times())];
     for (i, s) in lin.state_names().iter().enumerate() {
         columns.push((s.clone(), free.states.row(i).iter().copied().collect()));
@@ -363,6 +378,18 @@ pub fn compute_predict_record_with(
     for (i, o) in lin.output_names().iter().enumerate() {
         if !lin.state_names().contains(o) {
             columns.push((o.clone(), y.row(i).iter().copied().collect()));
+        }
+    }
+    // A judged state read through the acquisition filter (what is scored) beside the
+    // state itself.
+    if model.acquisition().is_some() {
+        for (i, name) in obs.names.iter().enumerate() {
+            if lin.state_names().contains(name) {
+                columns.push((
+                    format!("{name}_acquired"),
+                    free.outputs.row(i).iter().copied().collect(),
+                ));
+            }
         }
     }
     // The measured channels and the free run's error beside them (NaN where missing).
@@ -396,7 +423,7 @@ pub fn compute_predict_record_with(
         scored: free.scored,
         substeps,
         k_step,
-        network_domain: NetworkDomainReport::of(model, &exp, &free.states),
+        network_domain: NetworkDomainReport::of(model, &inner, &free.states),
         files,
     };
     Ok(PredictOutcome {

@@ -8,6 +8,9 @@
 //! the generalized forces `F` (the `forces` expressions plus the terms on rate
 //! equations, which are generalized forces there).
 //!
+//! A model with an `[acquisition]` table prints its filter: the pass band, then each
+//! band's centre, gain and phase in degrees.
+//!
 //! The model files hold no uncertainties for term coefficients; a discovered model's ±σ come from the
 //! `discovery.json` written beside it by `mmenn discover` (σ = half the 95 % interval of
 //! the free-run calibrated coefficient / 1.96), when that file is there.
@@ -250,12 +253,36 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
             h.substeps
         ));
     }
+    if let Some(f) = &spec.acquisition {
+        lines.extend(acquisition_lines(f));
+    }
     if !spec.terms.is_empty() && sigmas.is_empty() {
         lines.push(if spec.parameters.iter().any(|p| p.sigma.is_some()) {
             "(term coefficients without ±σ: the ±σ above are the parameters')".into()
         } else {
             "(no ±σ: the file holds none and no discovery.json is beside it)".into()
         });
+    }
+    lines
+}
+
+/// The `[acquisition]` filter: its pass band, then each band's centre, gain and phase
+/// (degrees).
+pub fn acquisition_lines(f: &sysid_core::acquisition::AcquisitionFilter) -> Vec<String> {
+    let n = f.bands().len();
+    let mut lines = vec![format!(
+        "acquisition filter Ã on inputs and outputs (judged as y = Ã·N(Ã⁻¹·u)): one below {} Hz, \
+         {n} band{} above",
+        number(f.pass_below_hz()),
+        if n == 1 { "" } else { "s" }
+    )];
+    for &(c, g) in f.bands() {
+        lines.push(format!(
+            "  {} Hz: gain {}, phase {}°",
+            number(c),
+            number(g.norm()),
+            number(g.arg().to_degrees())
+        ));
     }
     lines
 }

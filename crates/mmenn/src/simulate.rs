@@ -33,6 +33,7 @@ pub fn assumed_model_spec(sim: &SimulatedData) -> ModelSpec {
         intersample: sysid_core::InterSample::Zoh,
         parameters: Vec::new(),
         mechanics: None,
+        acquisition: None,
     }
 }
 

@@ -94,6 +94,7 @@ pub fn write_spec(path: &Path, linear: &LinearModel, hold: InterSample) {
         intersample: hold,
         parameters: Vec::new(),
         mechanics: None,
+        acquisition: None,
     };
     write_model(path, &spec).unwrap();
 }

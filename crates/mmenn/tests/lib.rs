@@ -1,5 +1,6 @@
 //! Integration tests of the facade: every workflow end to end through files.
 
+mod acquisition;
 mod band_limited;
 mod cli;
 mod compare;

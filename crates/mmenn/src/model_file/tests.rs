@@ -253,3 +253,140 @@ fn syntax_errors_carry_line_and_column() {
         other => panic!("expected unknown key error, got {other:?}"),
     }
 }
+
+/// `[acquisition]`: parsed into the filter with its numbers exactly, written back and read
+/// again unchanged, absent when the model has none; every malformed table is a typed error
+/// naming the key and, for a band, the row.
+#[test]
+fn acquisition_table_round_trips_and_malformed_ones_name_key_and_row() {
+    let with = |table: &str| format!("{SPEC_EXAMPLE}\n[acquisition]\n{table}\n");
+    let good = with(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.90, -0.46], [207.5, 0.72, -0.55]]   # centre Hz, re, im",
+    );
+    let spec = parse_model(Path::new("m.toml"), &good).unwrap();
+    let f = spec.acquisition.as_ref().expect("the filter is read");
+    assert_eq!(f.pass_below_hz().to_bits(), 190.0_f64.to_bits());
+    let expected = [(202.5, 0.90, -0.46), (207.5, 0.72, -0.55)];
+    assert_eq!(f.bands().len(), 2);
+    for (&(c, g), &(ec, er, ei)) in f.bands().iter().zip(&expected) {
+        assert_eq!(
+            [c.to_bits(), g.re.to_bits(), g.im.to_bits()],
+            [f64::to_bits(ec), f64::to_bits(er), f64::to_bits(ei)]
+        );
+    }
+    let written = format_model(&spec).unwrap();
+    assert!(written.contains("[acquisition]"), "{written}");
+    let again = parse_model(Path::new("m.toml"), &written).unwrap();
+    assert_eq!(spec, again);
+    // No table: none read, none written.
+    let plain = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
+    assert!(plain.acquisition.is_none());
+    assert!(!format_model(&plain).unwrap().contains("acquisition"));
+
+    let expect =
+        |table: &str, key: &str, row: Option<usize>, words: &str| match problem(&with(table)) {
+            ModelProblem::Acquisition {
+                key: k,
+                row: r,
+                reason,
+            } => {
+                assert_eq!((k, r), (key, row), "{table}: {reason}");
+                assert!(reason.contains(words), "{table}: {reason}");
+            }
+            other => panic!("{table}: {other:?}"),
+        };
+    let bands = "acquisition.bands";
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46], [202.5, 0.7, -0.5]]",
+        bands,
+        Some(1),
+        "previous row",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[210.0, 0.9, -0.46], [205.0, 0.7, -0.5]]",
+        bands,
+        Some(1),
+        "previous row",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[190.0, 0.9, -0.46]]",
+        bands,
+        Some(0),
+        "pass_below_hz",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[180.0, 0.9, -0.46]]",
+        bands,
+        Some(0),
+        "pass_below_hz",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46], [207.5, nan, -0.5]]",
+        bands,
+        Some(1),
+        "finite",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[inf, 0.9, -0.46]]",
+        bands,
+        Some(0),
+        "finite",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46], [207.5, 0.7]]",
+        bands,
+        Some(1),
+        "expected 3",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46, 1.0]]",
+        bands,
+        Some(0),
+        "expected 3",
+    );
+    // A response through zero (here from one at the pass band to −1) has no inverse.
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, -1.0, 0.0]]",
+        bands,
+        Some(0),
+        "zero",
+    );
+    expect(
+        "pass_below_hz = nan\nbands = [[202.5, 0.9, -0.46]]",
+        "acquisition.pass_below_hz",
+        None,
+        "finite",
+    );
+    expect(
+        "pass_below_hz = -1.0\nbands = [[202.5, 0.9, -0.46]]",
+        "acquisition.pass_below_hz",
+        None,
+        "non-negative",
+    );
+    // An unknown key, and a missing one, are syntax errors naming them, with the line.
+    for (table, word) in [
+        (
+            "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46]]\ngain = 1.0",
+            "gain",
+        ),
+        ("bands = [[202.5, 0.9, -0.46]]", "pass_below_hz"),
+    ] {
+        match parse_model(Path::new("m.toml"), &with(table)) {
+            Err(MmennError::Model {
+                problem: ModelProblem::Syntax { message },
+                line,
+                ..
+            }) => {
+                assert!(message.contains(word), "{message}");
+                assert!(line.is_some(), "{message}");
+            }
+            other => panic!("{table}: {other:?}"),
+        }
+    }
+    // The message names the key and row.
+    let text = problem(&with(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46], [207.5, 0.7]]",
+    ))
+    .to_string();
+    assert!(text.contains("acquisition.bands, row 1"), "{text}");
+}
