@@ -566,6 +566,7 @@ fn oe_hybrid_rows(
             intersample: s.intersample,
             parameters: Vec::new(),
             mechanics: None,
+            acquisition: None,
         },
     )?;
     let (max_hidden, inits) = match ctx.mode {

@@ -153,6 +153,7 @@ fn model_spec(spec: &grey::GreySpec, fit: &grey::GreyFit, noise: f64) -> ModelSp
         intersample: spec.intersample,
         parameters: Vec::new(),
         mechanics: None,
+        acquisition: None,
     }
 }
 
