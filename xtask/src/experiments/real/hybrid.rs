@@ -257,24 +257,20 @@ fn hybrid_rows_inner(
     // The grey box the table reports, calibrated once (its calibration wall time below is
     // that of all its candidates).
     let (gspec, gfit, chosen, grey_seconds) = (&grey.spec, &grey.fit, &grey.name, grey.seconds);
-    let spec = model_spec(gspec, gfit, eff.noise);
+    let mut spec = model_spec(gspec, gfit, eff.noise);
+    // Where the grey box is read through its records' acquisition filter (Silverbox, Rule 6
+    // of docs/decisions/silverbox-schroeder-rule.md), the model file carries it: `fit`
+    // builds the hybrid on the records deconvolved by it (the system's own input and output
+    // under the measurement model) and every scored run is read back through it, so
+    // `mmenn predict` on the written model gives these numbers.
+    spec.acquisition = grey.acquisition.clone();
+    let acquisition = spec.acquisition.is_some();
     let output = spec.linear.output_names()[0].clone();
     let work = ctx.work.join("real").join(b.folder()).join("hybrid");
     std::fs::create_dir_all(&work)?;
     let est = &data.estimation.experiments()[0];
-    // Where the grey box is read through its records' acquisition filter (Silverbox, Rule 6
-    // of docs/decisions/silverbox-schroeder-rule.md), the hybrid is built on the records
-    // deconvolved by it — the system's own input and output under the measurement model —
-    // and its free runs are read back through the filter.
-    let acquisition = grey.acquisition.as_ref();
-    let deconvolved = |e: &Experiment| -> Result<Experiment> {
-        match acquisition {
-            Some(f) => grey::deconvolved(f, e, true),
-            None => Ok(e.clone()),
-        }
-    };
     let est_csv = work.join("estimation.csv");
-    write_record(&est_csv, &deconvolved(est)?, &output)?;
+    write_record(&est_csv, est, &output)?;
     let model_toml = work.join("model.toml");
     write_model(&model_toml, &spec)?;
     let substeps = match gspec.integrator {
@@ -302,13 +298,9 @@ fn hybrid_rows_inner(
         let e = &test.data.experiments()[0];
         let y = row(e.outputs(), 0);
         let csv = work.join(format!("{}.csv", test.name));
-        write_record(&csv, &deconvolved(e)?, &output)?;
+        write_record(&csv, e, &output)?;
         let sim =
-            super::hybrid_output_domain(&model_json, &csv, &InitialChoice::Fit, window, &output)
-                .and_then(|(v, domain)| match acquisition {
-                    Some(f) => Ok((f.apply(&v, e.dt())?, domain)),
-                    None => Ok((v, domain)),
-                });
+            super::hybrid_output_domain(&model_json, &csv, &InitialChoice::Fit, window, &output);
         match sim {
             Ok((v, domain)) => {
                 let rmse = rmse_after(&y, &v, window, scale);
@@ -454,11 +446,13 @@ fn hybrid_rows_inner(
         eff.max_hidden,
         eff.inits,
         results.join("; "),
-        if acquisition.is_some() {
-            " Read through the acquisition filter of the grey-box row so marked: MME, the \
-             networks, the guard and the training RMSE above work on the records deconvolved \
-             by it (input and output), each test run's input is deconvolved and its output \
-             filtered back before it is scored against the recorded output"
+        if acquisition {
+            " Read through the acquisition filter of the grey-box row so marked, which the \
+             model file carries (its [acquisition] table): MME, the networks and the guard \
+             work on the records deconvolved by it (input and output), and every scored run \
+             (the training RMSE above and each test run) has its input deconvolved and its \
+             output filtered back before it is scored against the recorded output, so \
+             `mmenn predict` on the written model gives these numbers"
         } else {
             ""
         },
