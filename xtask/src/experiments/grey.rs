@@ -298,26 +298,12 @@ pub fn acquisition_filtered(
     })
 }
 
-/// `exp` through the filter's inverse: its input (and, with `output_too`, its output) as
-/// the system's own under the measurement model; otherwise the output as recorded.
-pub fn deconvolved(
-    filter: &AcquisitionFilter,
-    exp: &Experiment,
-    output_too: bool,
-) -> Result<Experiment> {
-    let inverse = |m: &DMatrix<f64>| {
-        let x: Vec<f64> = m.row(0).iter().copied().collect();
-        filter
-            .apply_inverse(&x, exp.dt())
-            .map(|v| DMatrix::from_row_slice(1, x.len(), &v))
-    };
-    let outputs = if output_too {
-        inverse(exp.outputs())?
-    } else {
-        exp.outputs().clone()
-    };
+/// `exp` with its input through the filter's inverse (the system's own input under the
+/// measurement model) and its output as recorded.
+pub fn deconvolved(filter: &AcquisitionFilter, exp: &Experiment) -> Result<Experiment> {
+    let u = mmenn::acquisition::filter_rows(filter, exp.inputs(), exp.dt(), true)?;
     Ok(
-        Experiment::new(exp.t0(), exp.dt(), inverse(exp.inputs())?, outputs)?
+        Experiment::new(exp.t0(), exp.dt(), u, exp.outputs().clone())?
             .with_intersample(exp.intersample()),
     )
 }
@@ -331,7 +317,7 @@ pub fn filtered_run(
     exp: &Experiment,
     window: usize,
 ) -> std::result::Result<Vec<f64>, String> {
-    let dec = deconvolved(filter, exp, false).map_err(|e| format!("{e:#}"))?;
+    let dec = deconvolved(filter, exp).map_err(|e| format!("{e:#}"))?;
     filtered_run_from(spec, model, filter, &dec, window)
 }
 

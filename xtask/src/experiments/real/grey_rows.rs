@@ -371,7 +371,7 @@ fn acquisition_rows(
             .ok()
             .and_then(|x0| grey::free_run(spec, &fit.model, &half, &x0).ok())
             .and_then(|s| rmse_after(&y, &s, window, scale));
-        let dec = grey::deconvolved(&filtered.filter, e, false)?.window(start, e.len())?;
+        let dec = grey::deconvolved(&filtered.filter, e)?.window(start, e.len())?;
         let through = grey::filtered_run_from(spec, &fit.model, &filtered.filter, &dec, window)
             .ok()
             .and_then(|s| rmse_after(&y, &s, window, scale));
