@@ -80,6 +80,7 @@ pub enum TrainState {
 }
 
 /// A test record's free run.
+#[derive(Clone)]
 pub struct GreyTest {
     /// Official test record name.
     pub name: String,
@@ -306,6 +307,53 @@ pub fn deconvolved(filter: &AcquisitionFilter, exp: &Experiment) -> Result<Exper
         Experiment::new(exp.t0(), exp.dt(), u, exp.outputs().clone())?
             .with_intersample(exp.intersample()),
     )
+}
+
+/// The grey box recalibrated on the records' own signals under the measurement model (Rule 7
+/// of docs/decisions/silverbox-schroeder-rule.md): coefficients and training state by
+/// free-run output error on `est` deconvolved by `filter` in both channels, one stage over
+/// the whole record, warm-started at `fit`'s. Returns the model and its training state.
+pub fn recalibrated_through(
+    spec: &GreySpec,
+    fit: &GreyFit,
+    filter: &AcquisitionFilter,
+    est: &Experiment,
+) -> Result<(TermModel, Vec<f64>)> {
+    let dec = mmenn::acquisition::deconvolved(filter, est, &["y".to_string()])?;
+    let data = record(&dec, dec.len(), spec.intersample)?;
+    let cal = calibrate(
+        &fit.model,
+        &data,
+        std::slice::from_ref(&fit.x0),
+        &CalibrationConfig {
+            horizons: vec![1.0],
+            ..calibration(spec)
+        },
+    )
+    .context("grey-box calibration on the deconvolved training record")?;
+    Ok((cal.model, cal.x0[0].clone()))
+}
+
+/// RMSE (recorded units) of a free run through the filter over `exp` from sample `start`
+/// on, its state fitted to the `window` samples from `start` (the filter applied to the
+/// whole record first, so the stretch's input is read with its history).
+pub fn rmse_through_from(
+    spec: &GreySpec,
+    model: &TermModel,
+    filter: &AcquisitionFilter,
+    exp: &Experiment,
+    start: usize,
+    window: usize,
+) -> Option<f64> {
+    let dec = deconvolved(filter, exp)
+        .ok()?
+        .window(start, exp.len())
+        .ok()?;
+    let y: Vec<f64> = dec.outputs().row(0).iter().copied().collect();
+    filtered_run_from(spec, model, filter, &dec, window)
+        .ok()
+        .map(|s| rmse_after(&y, &s, window))
+        .filter(|v| v.is_finite())
 }
 
 /// One free run through the acquisition filter: the input deconvolved, the state fitted to
