@@ -5,9 +5,17 @@
 //! Writes `prediction.csv` (states, outputs, k-step columns), `prediction.json`, a figure
 //! per judged channel and `report.md`.
 //!
+//! `prediction.csv` has `t`, a column per state, a column per model output that is not a
+//! state, then per judged channel `<name>`: `<name>_predicted` (the free run's value that
+//! is scored), `<name>_measured` and `<name>_error` (= `<name>_measured` −
+//! `<name>_predicted`), then the k-step columns (`<name>_<k>step`). Compare
+//! `<name>_predicted` with `<name>_measured`: a judged channel that is a state also has its
+//! column `<name>`, the state itself, which is not what is scored when the model has an
+//! acquisition filter.
+//!
 //! A model with an `[acquisition]` table ([`crate::acquisition`]) runs on the record's
 //! inputs and outputs deconvolved by the filter; its states in `prediction.csv` are the
-//! model's there, its outputs (and a judged state's `<state>_acquired` column) pass
+//! model's there (not filtered), its outputs (and every `<name>_predicted` column) pass
 //! through the filter, and those are scored against the recorded outputs. It has no
 //! k-step prediction.
 
@@ -217,7 +225,9 @@ pub struct PredictOutcome {
     /// The free-run judgement (states `n × N`, judged channels `p × N`).
     pub free: Judgement,
     /// What `prediction.csv` holds: `t`, every state, every output that is not a state,
-    /// then the k-step columns (`<channel>_<k>step`), as (header, values) pairs.
+    /// then per judged channel `<channel>_predicted` (the scored value),
+    /// `<channel>_measured` and `<channel>_error`, then the k-step columns
+    /// (`<channel>_<k>step`), as (header, values) pairs.
     pub columns: Vec<(String, Vec<f64>)>,
     /// A title for its figures (what kind of model).
     pub model_kind: ModelKind,
@@ -380,26 +390,18 @@ pub fn compute_predict_record_with(
             columns.push((o.clone(), y.row(i).iter().copied().collect()));
         }
     }
-    // A judged state read through the acquisition filter (what is scored) beside the
-    // state itself.
-    if model.acquisition().is_some() {
-        for (i, name) in obs.names.iter().enumerate() {
-            if lin.state_names().contains(name) {
-                columns.push((
-                    format!("{name}_acquired"),
-                    free.outputs.row(i).iter().copied().collect(),
-                ));
-            }
-        }
-    }
-    // The measured channels and the free run's error beside them (NaN where missing).
+    // Per judged channel: the free run's value that is scored (through the acquisition
+    // filter, if the model has one; a judged state's own column is the state itself), the
+    // measured channel and the error between them (NaN where missing).
     for (i, name) in obs.names.iter().enumerate() {
+        let predicted: Vec<f64> = free.outputs.row(i).iter().copied().collect();
         let measured: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
         let error: Vec<f64> = measured
             .iter()
-            .zip(free.outputs.row(i).iter())
+            .zip(&predicted)
             .map(|(m, p)| m - p)
             .collect();
+        columns.push((format!("{name}_predicted"), predicted));
         columns.push((format!("{name}_measured"), measured));
         columns.push((format!("{name}_error"), error));
     }
@@ -542,6 +544,13 @@ fn table(channels: &BTreeMap<String, ChannelMetrics>) -> String {
     s
 }
 
+/// Which columns of `prediction.csv` the metrics compare (`report.md`).
+const SCORED_COLUMNS: &str = "\nIn `prediction.csv` the metrics compare `<channel>_predicted` (the \
+     free run's value that is scored; with an `[acquisition]` table, through the filter) with \
+     `<channel>_measured`; `<channel>_error` is their difference. A column named by a state \
+     holds the model's state (with an `[acquisition]` table, on the deconvolved record, not \
+     filtered): compare `<channel>_predicted`, not `<channel>`, with the measurement.\n";
+
 fn report(s: &PredictSummary) -> String {
     let mut r = format!("# Prediction on new data\n\nModel: {}.\n\n", s.model_kind);
     r.push_str(&format!(
@@ -563,6 +572,7 @@ fn report(s: &PredictSummary) -> String {
         r.push_str("The record has no column of a state or model output to compare with.\n");
     } else {
         r.push_str(&table(&s.free_run.channels));
+        r.push_str(SCORED_COLUMNS);
     }
     if let Some(d) = &s.network_domain {
         r.push_str(&format!("\nNetwork: {}.\n", d.sentence()));

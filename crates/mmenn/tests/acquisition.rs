@@ -215,11 +215,106 @@ fn an_identity_filter_gives_the_numbers_of_no_table() {
         (plain - one).abs() <= 1e-9 * plain,
         "RMSE {plain} without the table, {one} with an identity filter"
     );
-    let (a, b) = (column(&plain_csv, "x"), column(&one_csv, "x_acquired"));
+    let (a, b) = (column(&plain_csv, "x"), column(&one_csv, "x_predicted"));
     let scale = a.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     for (k, (p, q)) in a.iter().zip(&b).enumerate() {
         assert!((p - q).abs() <= 1e-9 * scale, "sample {k}: {p} vs {q}");
     }
+}
+
+/// The CSV's header, in order.
+fn header(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let first = text.lines().next().unwrap();
+    first.split(',').map(str::to_string).collect()
+}
+
+/// `<x>_measured − <x>_predicted` is `<x>_error`, sample by sample (the difference the
+/// scores are computed from).
+fn assert_error_is_measured_minus_predicted(csv: &Path) {
+    let (m, p, e) = (
+        column(csv, "x_measured"),
+        column(csv, "x_predicted"),
+        column(csv, "x_error"),
+    );
+    for (k, ((m, p), e)) in m.iter().zip(&p).zip(&e).enumerate() {
+        assert!((m - p - e).abs() <= 1e-12, "sample {k}: {m} - {p} vs {e}");
+    }
+}
+
+/// Without the table, the scored column `x_predicted` of a judged state is the state's
+/// own column `x`, and the error is measured − predicted.
+#[test]
+fn predicted_is_the_state_without_the_table() {
+    let dir = scratch("predicted-plain");
+    let (u, x) = record(800, 13);
+    let csv = dir.join("test.csv");
+    write_record(&csv, &u, &x);
+    let (rmse_written, out) = predict(&dir, "plain", &model_text(None), &csv);
+    let names = header(&out);
+    assert_eq!(
+        names,
+        ["t", "x", "v", "x_predicted", "x_measured", "x_error"],
+        "{names:?}"
+    );
+    let (state, predicted) = (column(&out, "x"), column(&out, "x_predicted"));
+    for (k, (a, b)) in state.iter().zip(&predicted).enumerate() {
+        assert!((a - b).abs() <= 1e-12, "sample {k}: x {a}, x_predicted {b}");
+    }
+    assert_error_is_measured_minus_predicted(&out);
+    // The RMSE reported is that of `x_error`.
+    let e = column(&out, "x_error");
+    let r = (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+    assert!(
+        (r - rmse_written).abs() <= 1e-12 * rmse_written,
+        "{r} vs {rmse_written}"
+    );
+}
+
+/// With the table, `x_predicted` is the state `x` passed through the filter (what is
+/// scored), not the state itself; the error is measured − predicted, and report.md says
+/// which column is scored.
+#[test]
+fn predicted_is_the_filtered_state_with_the_table() {
+    let dir = scratch("predicted-filtered");
+    let (u, x) = record(1500, 17);
+    let csv = dir.join("test.csv");
+    write_record(&csv, &u, &x);
+    let table = known_bands();
+    let (rmse_written, out) = predict(&dir, "with", &model_text(Some(&table)), &csv);
+    let names = header(&out);
+    assert_eq!(
+        names,
+        ["t", "x", "v", "x_predicted", "x_measured", "x_error"],
+        "{names:?}"
+    );
+    let spec =
+        mmenn::model_file::parse_model(Path::new("m.toml"), &model_text(Some(&table))).unwrap();
+    let filter = spec.acquisition.unwrap();
+    let state = column(&out, "x");
+    let predicted = column(&out, "x_predicted");
+    let filtered = filter.apply(&state, DT).unwrap();
+    let scale = state.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    for (k, (p, f)) in predicted.iter().zip(&filtered).enumerate() {
+        assert!((p - f).abs() <= 1e-9 * scale, "sample {k}: {p} vs {f}");
+    }
+    let apart = state
+        .iter()
+        .zip(&predicted)
+        .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(
+        apart > 1e-4 * scale,
+        "x_predicted is the state itself (largest difference {apart:.3e}, scale {scale:.3e})"
+    );
+    assert_error_is_measured_minus_predicted(&out);
+    let e = column(&out, "x_error");
+    let r = (e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt();
+    assert!(
+        (r - rmse_written).abs() <= 1e-12 * rmse_written,
+        "{r} vs {rmse_written}"
+    );
+    let report = std::fs::read_to_string(dir.join("with").join("report.md")).unwrap();
+    assert!(report.contains("`<channel>_predicted`"), "{report}");
 }
 
 /// `predict` with the table is the manual pipeline: the CSV's columns deconvolved with
@@ -250,7 +345,7 @@ fn predict_through_the_table_is_the_manual_pipeline() {
         (through - manual_rmse).abs() <= 1e-9 * manual_rmse,
         "RMSE through the table {through}, manual pipeline {manual_rmse}"
     );
-    let written = column(&through_csv, "x_acquired");
+    let written = column(&through_csv, "x_predicted");
     let scale = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
     for (k, (p, q)) in written.iter().zip(&manual).enumerate() {
         assert!((p - q).abs() <= 1e-9 * scale, "sample {k}: {p} vs {q}");
@@ -299,7 +394,7 @@ fn a_known_filter_explains_a_duffing_record_measured_through_it() {
     let (with_all, with_csv) = predict(&dir, "with", &model_text(Some(&known_bands())), &csv);
     let inner = 200..n - 200;
     let without = rmse(&column(&without_csv, "x")[inner.clone()], &x[inner.clone()]);
-    let with = rmse(&column(&with_csv, "x_acquired")[inner.clone()], &x[inner]);
+    let with = rmse(&column(&with_csv, "x_predicted")[inner.clone()], &x[inner]);
     assert!(
         with <= 0.25 * without,
         "RMSE away from the ends with the known filter {with:.3e}, without {without:.3e} \

@@ -256,12 +256,10 @@ fn hybrid_output_domain(
         score_from: None,
     };
     let outcome = mmenn::predict::compute_predict(&model, &record, &opts)?;
-    // A model read through an acquisition filter scores an output that is also a state in
-    // `<output>_acquired` (the column `<output>` holds the state itself).
-    let acquired = format!("{output}_acquired");
+    // The scored value of the output (through the model's acquisition filter, if it has
+    // one; the column `<output>` of an output that is also a state holds the state).
     let y = outcome
-        .column(&acquired)
-        .or_else(|| outcome.column(output))
+        .column(&format!("{output}_predicted"))
         .map(<[f64]>::to_vec)
         .with_context(|| format!("the prediction has no channel {output}"))?;
     Ok((y, outcome.summary.network_domain))
