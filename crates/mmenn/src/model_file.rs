@@ -78,8 +78,8 @@ impl ModelSpec {
     }
 
     /// `Err` naming the step `what` and the file `path` when the model has an
-    /// `[acquisition]` table that the step would ignore (`estimate`, `greyest`, `monitor`:
-    /// their numbers would not be read through the filter as `predict`'s are).
+    /// `[acquisition]` table that the step would ignore (`estimate`, `greyest`, `monitor`,
+    /// `discover`: their numbers would not be read through the filter as `predict`'s are).
     pub fn refuse_acquisition(&self, what: &'static str, path: &Path) -> Result<()> {
         match self.acquisition {
             Some(_) => Err(MmennError::Model {

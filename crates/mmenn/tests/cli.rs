@@ -279,3 +279,62 @@ fn list_commands_refuse_force() {
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `discover` does not read a model's `[acquisition]` table: a model with one (a linear
+/// model with named-term discovery ahead of it, and the two-link arm's `[mechanics]`
+/// model, whose discovery runs in force space) is refused with the typed error that
+/// `estimate`, `greyest` and `monitor` give, naming `discover` and the file, exit status
+/// 1, before any folder is written.
+#[test]
+fn discover_refuses_a_model_with_an_acquisition_table() {
+    let dir = scratch("discover-acquisition");
+    let table = "\n[acquisition]\npass_below_hz = 1.0\nbands = [[2.0, 0.9, -0.1]]\n";
+    std::fs::write(
+        dir.join("linear.toml"),
+        format!(
+            "states = [\"x\", \"v\"]\ninputs = [\"u\"]\nA = [[0.0, 1.0], [-4.0, -0.2]]\nB = [[0.0], [1.0]]\nmeasured = [\"x\"]\ncorrected = [\"v\"]\nnoise_variance = [1e-4]\n{table}"
+        ),
+    )
+    .unwrap();
+    let mut csv = String::from("t,u,x\n");
+    for k in 0..200 {
+        let t = 0.05 * f64::from(k);
+        csv.push_str(&format!("{t},{},{}\n", t.sin(), 0.1 * t.cos()));
+    }
+    std::fs::write(dir.join("d.csv"), csv).unwrap();
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link");
+    let arm = std::fs::read_to_string(fixture.join("rigid_body.toml")).unwrap();
+    assert!(arm.contains("[mechanics]"));
+    std::fs::write(dir.join("arm.toml"), format!("{arm}{table}")).unwrap();
+    let est = fixture.join("est.csv");
+    for (model, data, out) in [
+        ("linear.toml", dir.join("d.csv"), "out-linear"),
+        ("arm.toml", est, "out-arm"),
+    ] {
+        let run = mmenn(
+            &dir,
+            &[
+                "discover",
+                "--data",
+                data.to_str().unwrap(),
+                "--model",
+                model,
+                "--out",
+                out,
+            ],
+        );
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{model}: {err}");
+        assert!(
+            err.contains(
+                "discover does not read the [acquisition] table yet (fit, predict, compare and \
+                 show do)"
+            ),
+            "{model}: {err}"
+        );
+        assert!(err.contains(model), "{model}: the file is not named: {err}");
+        assert!(run.stdout.is_empty(), "{model}");
+        assert!(!dir.join(out).exists(), "{model}: {out} was written");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -135,6 +135,7 @@ pub(super) fn run_force_discover(
     out: &Path,
     progress: &dyn ProgressSink,
 ) -> Result<DiscoverSummary> {
+    original.refuse_acquisition("discover", Path::new("<model>"))?;
     let step = |done: usize, stage: &str| {
         progress.report(&Progress::new(DISCOVER_TASK, done, Some(STEPS)).with_stage(stage));
     };
