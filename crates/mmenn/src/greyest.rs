@@ -71,8 +71,28 @@ pub struct ParameterSummary {
     pub sigma: Option<f64>,
     /// Bounds, if any.
     pub bounds: Option<(f64, f64)>,
-    /// `"lower"` or `"upper"` when the estimate sits on that bound.
+    /// `"lower"` or `"upper"` when the estimate sits on that bound;
+    /// [`FIXED_BY_EQUAL_BOUNDS`] when its bounds are equal (a free parameter held at that
+    /// value, not estimated).
     pub active_bound: Option<&'static str>,
+}
+
+/// `active_bound` of a free parameter whose bounds are equal (`bounds = [v, v]`): held at
+/// `v`, neither estimated nor on one side of an interval.
+pub const FIXED_BY_EQUAL_BOUNDS: &str = "fixed_by_equal_bounds";
+
+impl ParameterSummary {
+    /// Where it is held, in words, when it sits on a bound: "on its lower bound", "on its
+    /// upper bound", or "fixed by equal bounds" (`report.md` and the terminal).
+    pub fn held(&self) -> Option<String> {
+        self.active_bound.map(|b| {
+            if b == FIXED_BY_EQUAL_BOUNDS {
+                "fixed by equal bounds".to_string()
+            } else {
+                format!("on its {b} bound")
+            }
+        })
+    }
 }
 
 /// One record in `greyest.json`.
@@ -317,10 +337,16 @@ pub fn compute_greyest(
             value: p.value,
             sigma: p.sigma,
             bounds: (p.lower.is_finite() || p.upper.is_finite()).then_some((p.lower, p.upper)),
-            active_bound: p.active_bound.map(|b| match b {
-                ActiveBound::Lower => "lower",
-                ActiveBound::Upper => "upper",
-            }),
+            // Equal bounds hold the parameter at its value (sysid-core's grey box keeps it
+            // out of the solver and marks it on its lower bound): say so instead.
+            active_bound: if p.upper <= p.lower {
+                Some(FIXED_BY_EQUAL_BOUNDS)
+            } else {
+                p.active_bound.map(|b| match b {
+                    ActiveBound::Lower => "lower",
+                    ActiveBound::Upper => "upper",
+                })
+            },
         })
         .collect();
     let finite = |v: f64| v.is_finite().then_some(v);
@@ -448,9 +474,9 @@ pub fn report(outcome: &GreyestOutcome) -> String {
         "| parameter | start | estimate | ±σ | unit | bounds |\n|---|---|---|---|---|---|\n",
     );
     for p in &s.parameters {
-        let sigma = match (p.sigma, p.active_bound) {
+        let sigma = match (p.sigma, p.held()) {
             (Some(v), _) => format!("±{}", number(v)),
-            (None, Some(b)) => format!("— (on its {b} bound)"),
+            (None, Some(held)) => format!("— ({held})"),
             (None, None) => "— (not identifiable)".into(),
         };
         let bounds = p.bounds.map_or("—".into(), |(lo, hi)| {

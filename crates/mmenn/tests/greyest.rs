@@ -176,11 +176,12 @@ fn unidentifiable_rigid_body_parameters_are_reported_as_such() {
 }
 
 /// The masses stated by equal bounds (`bounds = [v, v]`, free) instead of `fixed = true`:
-/// they are held at their values and reported on their bound without σ, outside the rank
-/// (the rest as with the masses fixed: rank 12 of 12), instead of being moved past their
-/// bounds by the solver (an error).
+/// they are held at their values and reported as fixed by their equal bounds (not "on
+/// their lower bound": neither side of an interval) without σ, outside the rank (the rest
+/// as with the masses fixed: rank 12 of 12), instead of being moved past their bounds by
+/// the solver (an error).
 #[test]
-fn parameters_held_by_equal_bounds_are_reported_on_them() {
+fn parameters_held_by_equal_bounds_are_reported_fixed_by_them() {
     let dir = scratch("pinned");
     let text = perturbed(true)
         .replace(
@@ -205,7 +206,12 @@ fn parameters_held_by_equal_bounds_are_reported_on_them() {
     for (name, mass) in [("m1", 0.45), ("m2", 0.25)] {
         let p = outcome.parameter(name).unwrap_or_else(|| panic!("{name}"));
         assert_eq!(p.value.to_bits(), f64::to_bits(mass), "{p:?}");
-        assert_eq!((p.sigma, p.active_bound), (None, Some("lower")), "{p:?}");
+        assert_eq!(
+            (p.sigma, p.active_bound),
+            (None, Some(mmenn::greyest::FIXED_BY_EQUAL_BOUNDS)),
+            "{p:?}"
+        );
+        assert_eq!(p.held().as_deref(), Some("fixed by equal bounds"), "{p:?}");
     }
     for (name, truth) in &TRUTH {
         let p = outcome.parameter(name).unwrap_or_else(|| panic!("{name}"));
@@ -213,8 +219,20 @@ fn parameters_held_by_equal_bounds_are_reported_on_them() {
         assert!((p.value - truth).abs() < 0.05 * truth, "{p:?}");
     }
     let report = std::fs::read_to_string(dir.join("out/report.md")).unwrap_or_default();
-    assert!(report.contains("— (on its lower bound)"), "{report}");
+    assert!(report.contains("— (fixed by equal bounds)"), "{report}");
+    assert!(!report.contains("bound)"), "{report}");
     assert!(!report.contains("Not identifiable"), "{report}");
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("out/greyest.json")).unwrap_or_default(),
+    )
+    .unwrap_or_else(|e| panic!("greyest.json: {e}"));
+    for p in json["parameters"].as_array().unwrap() {
+        let expected = match p["name"].as_str() {
+            Some("m1" | "m2") => serde_json::json!("fixed_by_equal_bounds"),
+            _ => serde_json::Value::Null,
+        };
+        assert_eq!(p["active_bound"], expected, "{p}");
+    }
 }
 
 #[allow(clippy::result_large_err)] // the facade's own error type, as its workflows return it

@@ -341,9 +341,9 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
     let s = &outcome.summary;
     outln!("grey-box estimate ({}):", s.weighting);
     for p in &s.parameters {
-        let sigma = match (p.sigma, p.active_bound) {
+        let sigma = match (p.sigma, p.held()) {
             (Some(v), _) => format!("± {v:.3e}"),
-            (None, Some(b)) => format!("(on its {b} bound)"),
+            (None, Some(held)) => format!("({held})"),
             (None, None) => "(not identifiable)".into(),
         };
         outln!(
