@@ -728,6 +728,11 @@ pub struct TanksOptions {
     /// Held time constant (s) of a first-order lag between the pump's voltage and its flow
     /// (`w' = (u − w)/τ`, every pump term driven by `w`), or `None`.
     pub pump_lag: Option<f64>,
+    /// Whether the pump's flow falls with the water held in the tanks (the reservoir it
+    /// lifts from empties as they fill, so its head grows): calibrated terms
+    /// `−kr1·max(h1, 0)` and `−kr2·max(h2, 0)` in the upper tank's equation
+    /// (docs/decisions/tanks-reservoir-head-rule.md).
+    pub reservoir_head: bool,
 }
 
 /// The structure [`tanks_spec`] builds: `k2` free, both overflows at a held rate of 1/s,
@@ -751,6 +756,7 @@ impl Default for TanksOptions {
             area1: false,
             pump_quadratic: false,
             pump_lag: None,
+            reservoir_head: false,
         }
     }
 }
@@ -890,6 +896,12 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     if o.pump_quadratic {
         free.push(terms.len());
         terms.push(("h1", "pump_quadratic", format!("{drive}^2"), 0.0));
+    }
+    if o.reservoir_head {
+        free.push(terms.len());
+        terms.push(("h1", "reservoir_head_upper", positive("h1"), 0.0));
+        free.push(terms.len());
+        terms.push(("h1", "reservoir_head_lower", positive("h2"), 0.0));
     }
     free.sort_unstable();
     let linear = LinearModel::with_names(

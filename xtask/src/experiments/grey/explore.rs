@@ -1,7 +1,7 @@
 //! Exploration harness (ignored; reads /work/shared/data; prints training and test
 //! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
 //! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 area1 area2 trainx0
-//! pumpq lag
+//! pumpq lag res
 //! holdout (calibrate on the first 80 %, score the last 20 %) sub hz;
 //! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
@@ -274,6 +274,7 @@ fn explore_tanks() {
                 "trainx0" => trainx0 = v != 0.0,
                 "pumpq" => o.pump_quadratic = v != 0.0,
                 "lag" => o.pump_lag = Some(v),
+                "res" => o.reservoir_head = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
