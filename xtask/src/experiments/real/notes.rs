@@ -127,78 +127,20 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
         }
         Benchmark::Silverbox => {
             "the rows read through the acquisition filter (Rule 6 of \
-             docs/decisions/silverbox-schroeder-rule.md) meet both targets; what follows is \
-             why the grey box without it misses test_arrow_full, measured before that rule. \
-             The filter's cause: above 200 Hz, where the input has no content, the recorded \
-             output is the cubic spring's distortion of the components near the 70-Hz \
-             resonance, and on the training record it lags what the calibrated grey box \
-             generates there by 27–44° at 200–225 Hz with 10–20 % less amplitude, while below \
-             195 Hz the two agree to 0.3°; both channels are recorded by identical HP1430A \
-             cards, and a filter they share cancels from their linear relation but not from \
-             that distortion, so the model is read as `Ã·N(Ã⁻¹·u)` with Ã estimated from the \
-             training record per 5-Hz band. Of the grey box's 0.2791-mV error on \
-             test_arrow_full, 0.1245 mV RMS lay above 200 Hz (0.2498 mV below it), growing \
-             with the amplitude (36 % of the error power at the arrow's top lay at 200–250 Hz; \
-             measured on the grey box's free runs of 59ff347). \
-             Before it: test_multisine and test_arrow_no_extrapolation are within 0.01 mV of the training \
-             free-run error (0.2311 mV); on test_arrow_full the grey box's error is 0.227 mV up \
-             to sample 29 049, where the output first exceeds the largest training amplitude \
-             (0.216 V), and 0.398 mV after it: the last 28 % of the record carries 55 % of the \
-             squared error (samples with |y| in 0.1–0.2 V: 0.49 mV, 0.2–0.25 V: 1.07 mV, \
-             above 0.25 V: 1.72 mV; below 0.1 V: 0.26 mV; explore_silverbox with the 0.1-ms \
-             input stage on dde3da8). The polynomial spring and damping fitted on the training \
-             amplitudes do not hold at the arrow's largest ones, and the network, trained on \
-             the same amplitudes, changes that little (0.286 → 0.283 mV; with the input gain \
-             below, 0.285 → 0.279 mV). Since db1acd2 the grey box has an input gain that \
-             varies with the displacement (u·y, u·y²), chosen by a rule written before its \
-             runs on the Schroeder record's second half (0.3165 against 0.3261 mV, training \
-             0.2305 against 0.2311 mV; Rule 3 of docs/decisions/silverbox-schroeder-rule.md): \
-             it moved test_arrow_full only from 0.2856 to 0.285 mV, and the two other \
-             proposals of that rule extrapolated worse there (a measurement filter on the \
-             output, 0.3339 mV at its best time constant; PNLSS's full state polynomial in \
-             (y, y'), 0.3360 mV, though it fitted the training record best, 0.2250 mV); the \
-             error split above was measured without it. A damping quartic in the \
-             displacement (y⁴·y'), alone or with a quintic spring, proposed from the inverse \
-             dynamics of the Schroeder record's first half, also fitted the training record \
-             better (0.2300 and 0.2289 mV) and extrapolated worse (0.3744 and 0.4103 mV on \
-             the second half; Rule 4). The anchor's protocol does not explain the gap: \
-             calibrated as PNLSS was, on the whole multisine part (training and test \
-             multisines as one 86 750-sample record), the same structure scores 0.2852 mV \
-             on test_arrow_full (explore_silverbox on 3937bcb); and scored over the older \
-             literature's window (the record's first 40 000 samples, which leaves out about \
-             490 samples of the arrow's top that the loader's record keeps) the grey box and \
-             the hybrid gain about 1.5 % (the rows \"test_arrow_full to sample 40 000\"; \
-             docs/decisions/silverbox-arrow-older-window.md). More amplitude in the training \
-             data does not close the gap either: the same structure calibrated on the \
-             training record plus schroeder80mV (outputs to 0.265 V; outside the loader's \
-             split, a diagnosis, never a reported row) scores 0.2789 mV on test_arrow_full \
-             against 0.2846 mV, 0.2224 against 0.2270 mV before sample 29 049 and 0.3868 \
-             against 0.3946 mV after it (explore_silverbox_amplitude_coverage on 1e0abe4), \
-             so what the grey box misses at the arrow's largest amplitudes is not in this \
-             polynomial class or not excited by the multisines. Quadratic drag \
-             (v·|v|) moved the arrow most: without it (training 0.2565 mV, 0.2-ms stage) \
-             test_arrow_full was 0.378 mV, with it 0.293 mV; the input stage's time constant \
-             then went from 0.2 to 0.1 ms by its training RMSE (0.2392 → 0.2311 mV; \
-             grey::SILVERBOX_STAGE_TAU), giving 0.286 mV. With the 0.2-ms stage, a further \
-             quintic spring, cubic damping (v³) or an odd quadratic spring (y·|y|) lowered the \
-             training RMSE by at most 0.0016 mV and moved test_arrow_full to 0.288–0.322 mV \
-             (explore_silverbox on 7a8efb5), so the training record does not pick the \
-             extrapolation among them; without the quadratic spring the arrow is worse \
-             (0.369 mV, training 0.2959 mV). The input between samples is not the cause \
-             either. The excitation reaches 200 Hz, a third of the sampling rate, where the \
-             linear interpolation the physics-first models used until 8765874 passes 69 % of a \
-             component's amplitude (sinc² of f/fs) and half of it at mid-interval. Since then \
-             they read it band-limited (`intersample = \"bl\"`, chosen by Rule 5 of \
-             docs/decisions/silverbox-schroeder-rule.md on the Schroeder record's second half): \
-             the grey box's training RMSE went from 0.2305 to 0.2235 mV, test_arrow_full from \
-             0.2846 to 0.2791 mV and test_multisine from 0.2390 to 0.2328 mV, so about 2 % of \
-             the arrow's error was the interpolation, not the 7 % the target asks for. The \
-             hybrid on it, whose MME now reads the same input, gained more inside the \
-             training amplitude (test_multisine 0.2337 → 0.2172 mV; its guard's held-out \
-             score 0.2087 against the physics' 0.2227 mV) and lost on the arrow (0.2788 → \
-             0.2927 mV): held at its training box, its correction at the box's edge is not \
-             what the arrow's largest amplitudes need, and no training-range record shows \
-             that"
+             docs/decisions/silverbox-schroeder-rule.md) meet every Silverbox target; the \
+             grey box without it misses test_arrow_full and the older window by 6–7 %, for \
+             two measured reasons. First, above 200 Hz, where the input has no content, the \
+             recorded output is the cubic spring's distortion, recorded through a filter both \
+             channels share (lag 27–44° at 200–225 Hz on the training record), which the \
+             plain model does not read: of its 0.2791-mV error on test_arrow_full, 0.1245 mV \
+             RMS lay above 200 Hz (free runs of 59ff347). Second, the polynomial spring and \
+             damping fitted on the training amplitudes do not hold at the arrow's largest \
+             ones: 0.227 mV up to sample 29 049, where the output first exceeds the largest \
+             training amplitude (0.216 V), and 0.398 mV after it (explore_silverbox on \
+             dde3da8). The structures, protocols, training amplitudes, input interpolation and \
+             the recalibration through the filter (Rule 7) tried against that gap, each with \
+             what it changed, are in docs/decisions/silverbox-gap-history.md and \
+             silverbox-schroeder-rule.md"
         }
         Benchmark::Emps => {
             "the published 2.64 mm was not measured on the test record: dynoNet's script scores \
