@@ -118,11 +118,17 @@ fn push_terms(
             .get(&(t.state.clone(), t.term.clone()))
             .map(|s| format!("(±{}) ", number(*s)))
             .unwrap_or_default();
+        // A constant term (expression `1`) reads as its coefficient alone.
+        let expr = if t.term.trim() == "1" {
+            String::new()
+        } else {
+            expression(&t.term)
+        };
         push_term(
             line,
             first,
             sign * t.coefficient,
-            &format!("{sigma}{}", expression(&t.term)),
+            format!("{sigma}{expr}").trim_end(),
         );
     }
 }
@@ -399,5 +405,38 @@ coefficient = -0.803
             "{lines:?}"
         );
         assert!(lines.iter().any(|l| l.contains("x [m]")), "{lines:?}");
+    }
+
+    /// A constant term reads as its coefficient (with its ±σ), not as `c 1`.
+    #[test]
+    fn constant_term_is_its_coefficient() {
+        let text = r#"
+states = ["x", "v"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-4.0, -0.2]]
+B = [[0.0], [1.0]]
+measured = ["x"]
+corrected = ["v"]
+noise_variance = [1e-4]
+
+[[terms]]
+state = "v"
+effect = "offset"
+term = "1"
+coefficient = -1010.0
+"#;
+        let model = LoadedModel::parse(Path::new("m.toml"), text).unwrap();
+        let plain = equations(&model, &TermSigmas::new());
+        assert!(
+            plain.contains(&"v' = -4 x - 0.2 v + 1 u - 1010".to_string()),
+            "{plain:?}"
+        );
+        let mut sig = TermSigmas::new();
+        sig.insert(("v".into(), "1".into()), 3.0);
+        let with = equations(&model, &sig);
+        assert!(
+            with.contains(&"v' = -4 x - 0.2 v + 1 u - 1010 (±3)".to_string()),
+            "{with:?}"
+        );
     }
 }
