@@ -287,6 +287,8 @@ pub(super) fn grey_rows(
     let acquisition = match (data.benchmark, extra.first()) {
         (Benchmark::Silverbox, schroeder) => acquisition_rows(
             table,
+            sims,
+            offset,
             &label,
             &chosen_spec,
             &fit,
@@ -335,6 +337,8 @@ pub const ACQUISITION: &str = "read through the acquisition filter both channels
 #[allow(clippy::too_many_arguments)]
 fn acquisition_rows(
     table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    offset: f64,
     label: &str,
     spec: &grey::GreySpec,
     fit: &grey::GreyFit,
@@ -427,16 +431,26 @@ fn acquisition_rows(
         None => filtered.tests.clone(),
     };
     let row_label = format!("{label}, {ACQUISITION}");
+    // The figure draws the grey box the target note reports: the one read through Ã.
+    let mut figure = sims.clone();
+    figure.retain(|(l, _)| l != "grey box");
+    let before = figure.len();
     push_grey(
         table,
-        &mut Vec::new(),
+        &mut figure,
         &row_label,
         &scored_tests,
         tests,
         window,
         scale,
-        None,
+        Some(offset),
     );
+    if figure.len() > before
+        && let Some(last) = figure.last_mut()
+    {
+        last.0 = "grey box, read through Ã".into();
+        *sims = figure;
+    }
     let seconds = seconds
         + if recalibrated.is_some() {
             g_seconds
