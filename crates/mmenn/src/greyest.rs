@@ -337,16 +337,13 @@ pub fn compute_greyest(
             value: p.value,
             sigma: p.sigma,
             bounds: (p.lower.is_finite() || p.upper.is_finite()).then_some((p.lower, p.upper)),
-            // Equal bounds hold the parameter at its value (sysid-core's grey box keeps it
-            // out of the solver and marks it on its lower bound): say so instead.
-            active_bound: if p.upper <= p.lower {
-                Some(FIXED_BY_EQUAL_BOUNDS)
-            } else {
-                p.active_bound.map(|b| match b {
-                    ActiveBound::Lower => "lower",
-                    ActiveBound::Upper => "upper",
-                })
-            },
+            // Equal bounds hold the parameter at its value (sysid-core keeps it out of the
+            // solver and marks it `Fixed`).
+            active_bound: p.active_bound.map(|b| match b {
+                ActiveBound::Lower => "lower",
+                ActiveBound::Upper => "upper",
+                ActiveBound::Fixed => FIXED_BY_EQUAL_BOUNDS,
+            }),
         })
         .collect();
     let finite = |v: f64| v.is_finite().then_some(v);

@@ -24,7 +24,7 @@
 //! **Bounds** by a change of variable (`greybox/transform.rs`): a parameter whose optimum lies on
 //! its bound is reported there ([`ActiveBound`]) and held fixed in the covariance (no σ,
 //! no column in the rank). A free parameter with equal bounds is held at that value out
-//! of the solver and reported on its (lower) bound the same way.
+//! of the solver and reported [`ActiveBound::Fixed`] the same way.
 //!
 //! **Uncertainty.** With `J` the Jacobian of the weighted residuals along the physical
 //! parameters (those on a bound left out) and the start states at the optimum, `N`
@@ -137,6 +137,8 @@ pub enum ActiveBound {
     Lower,
     /// Its upper bound.
     Upper,
+    /// Both: equal bounds hold it at that value (never estimated).
+    Fixed,
 }
 
 /// One free parameter's estimate.
@@ -427,7 +429,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
                 sigma: None,
                 lower: p.lower,
                 upper: p.upper,
-                active_bound: Some(ActiveBound::Lower),
+                active_bound: Some(ActiveBound::Fixed),
             },
         });
     }

@@ -274,7 +274,7 @@ fn a_parameter_with_equal_bounds_is_held_on_them() {
     };
     assert_eq!((a.name.as_str(), b.name.as_str()), ("a", "b"));
     assert_eq!(a.value.to_bits(), 0.5f64.to_bits(), "{a:?}");
-    assert_eq!(a.active_bound, Some(ActiveBound::Lower), "{a:?}");
+    assert_eq!(a.active_bound, Some(ActiveBound::Fixed), "{a:?}");
     assert!(a.sigma.is_none(), "{a:?}");
     // b and the start state: the two estimated quantities, both determined.
     assert_eq!(fit.rank, (2, 2));
