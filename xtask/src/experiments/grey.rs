@@ -17,6 +17,7 @@ use mmenn::sysid_core::{
 use nalgebra::DMatrix;
 
 /// One grey box: its model, which term coefficients are calibrated, how it is integrated.
+#[derive(Clone)]
 pub struct GreySpec {
     /// The physics model with starting coefficients.
     pub model: TermModel,

@@ -1,7 +1,7 @@
 //! Exploration harness (ignored; reads /work/shared/data; prints training and test
 //! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
 //! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 area1 area2 trainx0
-//! pumpq lag res
+//! pumpq lag res ontest (calibrate on the test record: a diagnosis, never a choice)
 //! holdout (calibrate on the first 80 %, score the last 20 %) sub hz;
 //! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
@@ -137,6 +137,7 @@ fn explore_emps() {
         let mut substeps = 1;
         let mut full = false;
         let mut holdout = false;
+        let mut ontest = false;
         let mut reference = false;
         for (k, v) in kv(item) {
             match k.as_str() {
@@ -152,6 +153,7 @@ fn explore_emps() {
                 "pos" => o.position_force = v != 0.0,
                 "load" => o.load_friction = v != 0.0,
                 "holdout" => holdout = v != 0.0,
+                "ontest" => ontest = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
@@ -164,7 +166,9 @@ fn explore_emps() {
             // The published IDIM-LS coefficients as they are: only the state is fitted.
             spec.free.clear();
         }
-        if holdout {
+        if ontest {
+            on_test(Benchmark::Emps, item.trim(), &spec);
+        } else if holdout {
             held_out(Benchmark::Emps, item.trim(), &spec);
         } else {
             report(Benchmark::Emps, item.trim(), &spec);
@@ -251,6 +255,7 @@ fn explore_tanks() {
         };
         let mut trainx0 = false;
         let mut holdout = false;
+        let mut ontest = false;
         let mut substeps = 8;
         let mut hz = 2;
         for (k, v) in kv(item) {
@@ -275,6 +280,7 @@ fn explore_tanks() {
                 "pumpq" => o.pump_quadratic = v != 0.0,
                 "lag" => o.pump_lag = Some(v),
                 "res" => o.reservoir_head = v != 0.0,
+                "ontest" => ontest = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
@@ -284,11 +290,46 @@ fn explore_tanks() {
         if hz == 4 {
             spec.horizons = vec![0.1, 0.25, 0.5, 1.0];
         }
-        if holdout {
+        if ontest {
+            on_test(Benchmark::CascadedTanks, item.trim(), &spec);
+        } else if holdout {
             held_out(Benchmark::CascadedTanks, item.trim(), &spec);
         } else {
             report(Benchmark::CascadedTanks, item.trim(), &spec);
         }
+    }
+}
+
+/// Diagnosis only, never a model choice: the structure calibrated on the official *test*
+/// record itself and scored there (state fitted to its first window samples, RMSE after
+/// them) — how far the structure can follow that record with coefficients of its own,
+/// against what the training record's coefficients give.
+fn on_test(bench: Benchmark, label: &str, spec: &GreySpec) {
+    let d = data(bench);
+    let w = bench.init_window();
+    let (scale, unit) = bench.reporting_unit();
+    let test = d.tests[0].data.experiments()[0].clone();
+    // Started from the coefficients the training record calibrates (its basin), not from
+    // the structure's generic start.
+    let mut spec = spec.clone();
+    if let Ok(t) = fit_grey(&spec, &d.estimation.experiments()[0], &[], w) {
+        spec.model = t.model;
+    }
+    let spec = &spec;
+    match fit_grey(spec, &test, &[("test".into(), test.clone())], w) {
+        Ok(f) => {
+            let y: Vec<f64> = test.outputs().row(0).iter().copied().collect();
+            let r = match &f.tests[0].sim {
+                Ok(s) => scale * rmse_after(&y, s, w),
+                Err(_) => f64::NAN,
+            };
+            println!(
+                "{label}: calibrated on the test record: {:.4} {unit} from its calibrated state, {r:.4} {unit} from the state fitted to its first {w} samples; {}",
+                scale * f.train_rmse,
+                terms(&f)
+            );
+        }
+        Err(e) => println!("{label}: failed {e:#}"),
     }
 }
 
