@@ -361,7 +361,7 @@ fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
                 Err(_) => f64::NAN,
             };
             println!(
-                "{label}: first 80 % {:.4} {unit} | held-out last 20 % {r:.4} {unit}",
+                "{label}: first 80 % {:.6} {unit} | held-out last 20 % {r:.6} {unit}",
                 scale * f.train_rmse
             );
         }
