@@ -315,22 +315,33 @@ fn on_test(bench: Benchmark, label: &str, spec: &GreySpec) {
     if let Ok(t) = fit_grey(&spec, &d.estimation.experiments()[0], &[], w) {
         spec.model = t.model;
     }
-    let spec = &spec;
-    match fit_grey(spec, &test, &[("test".into(), test.clone())], w) {
-        Ok(f) => {
-            let y: Vec<f64> = test.outputs().row(0).iter().copied().collect();
-            let r = match &f.tests[0].sim {
-                Ok(s) => scale * rmse_after(&y, s, w),
-                Err(_) => f64::NAN,
-            };
-            println!(
-                "{label}: calibrated on the test record: {:.4} {unit} from its calibrated state, {r:.4} {unit} from the state fitted to its first {w} samples; {}",
-                scale * f.train_rmse,
-                terms(&f)
-            );
-        }
+    match fit_and_score(&spec, &test, &test, w) {
+        Ok((f, r)) => println!(
+            "{label}: calibrated on the test record: {:.4} {unit} from its calibrated state, {:.4} {unit} from the state fitted to its first {w} samples; {}",
+            scale * f.train_rmse,
+            scale * r,
+            terms(&f)
+        ),
         Err(e) => println!("{label}: failed {e:#}"),
     }
+}
+
+/// `spec` calibrated on `fit_on` and run free over `score_on` from the state fitted to its
+/// first `w` samples: the fit and that run's RMSE after the window (recorded units; NaN
+/// when the run failed).
+fn fit_and_score(
+    spec: &GreySpec,
+    fit_on: &Experiment,
+    score_on: &Experiment,
+    w: usize,
+) -> Result<(GreyFit, f64)> {
+    let f = fit_grey(spec, fit_on, &[("scored".into(), score_on.clone())], w)?;
+    let y: Vec<f64> = score_on.outputs().row(0).iter().copied().collect();
+    let r = f.tests[0]
+        .sim
+        .as_ref()
+        .map_or(f64::NAN, |s| rmse_after(&y, s, w));
+    Ok((f, r))
 }
 
 /// Calibrate on the first 80 % of a benchmark's training record and score the free run on
@@ -353,18 +364,12 @@ fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
         .with_intersample(est.intersample())
     };
     let (fit_part, held) = (part(0, cut), part(cut, n));
-    match fit_grey(spec, &fit_part, &[("held".into(), held.clone())], w) {
-        Ok(f) => {
-            let y: Vec<f64> = held.outputs().row(0).iter().copied().collect();
-            let r = match &f.tests[0].sim {
-                Ok(s) => scale * rmse_after(&y, s, w),
-                Err(_) => f64::NAN,
-            };
-            println!(
-                "{label}: first 80 % {:.6} {unit} | held-out last 20 % {r:.6} {unit}",
-                scale * f.train_rmse
-            );
-        }
+    match fit_and_score(spec, &fit_part, &held, w) {
+        Ok((f, r)) => println!(
+            "{label}: first 80 % {:.6} {unit} | held-out last 20 % {:.6} {unit}",
+            scale * f.train_rmse,
+            scale * r
+        ),
         Err(e) => println!("{label}: failed {e:#}"),
     }
 }

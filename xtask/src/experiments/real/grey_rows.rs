@@ -474,11 +474,8 @@ fn acquisition_rows(
             .ok()
             .and_then(|x0| grey::free_run(spec, &fit.model, &half, &x0).ok())
             .and_then(|s| rmse_after(&y, &s, window, scale));
-        let dec = grey::deconvolved(&filtered.filter, e)?.window(start, e.len())?;
-        let through = grey::filtered_run_from(spec, &fit.model, &filtered.filter, &dec, window)
-            .ok()
-            .and_then(|s| rmse_after(&y, &s, window, scale));
-        Ok((plain, through))
+        // Through the filter: Rule 7's judgement of F above, the same run.
+        Ok((plain, f_half.map(|v| scale * v)))
     });
     let judged = match judged {
         Some(Ok((Some(a), Some(b)))) => format!(
