@@ -128,6 +128,10 @@ pub enum StartTrajectory {
     /// determine from the model's open-loop run from the initial state whose free run fits
     /// the first 200 samples. Where the data-based start works, nothing changes; when the
     /// fitted start fails too, the error ([`crate::MmeError::StartFailed`]) names both.
+    /// When the iteration from the data-based start sticks instead (a line search that
+    /// cannot lower the cost although the linearisation predicts it can: the first full
+    /// step landed where the model's laws are flat, such as a level below empty), the
+    /// experiment restarts once from the fitted start and the lower-cost end is kept.
     #[default]
     FromData,
     /// Given initial states, one per experiment (`n` each); the start is the open-loop

@@ -312,6 +312,9 @@ struct NonlinearRun<'a, F> {
     /// Per experiment: why the data-based start failed, once the fitted start has
     /// replaced it (`None`: not replaced).
     data_start_failure: Vec<Option<MmeError>>,
+    /// Per experiment: whether a stuck iteration may still restart once from the fitted
+    /// start (only from [`StartTrajectory::FromData`]; see [`Self::solve`]).
+    restart_left: Vec<bool>,
 }
 
 impl<'a, F: Dynamics> NonlinearRun<'a, F> {
@@ -336,6 +339,10 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             binding,
             budget: config.budget.clone(),
             data_start_failure: vec![None; data.experiments().len()],
+            restart_left: vec![
+                matches!(config.start, StartTrajectory::FromData);
+                data.experiments().len()
+            ],
         };
         if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
@@ -730,10 +737,15 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
             .collect();
         self.history.clear();
         self.termination = Termination::MaxIterations;
+        // Per experiment: the trajectory a stuck iteration left and its cost, kept while
+        // the restart from the fitted start runs (the lower-cost end is kept).
+        let mut stuck: Vec<Option<(Traj, f64)>> = vec![None; experiments];
+        let mut stuck_e = vec![false; experiments];
         for iteration in 1..=self.opts.max_iterations {
             let before: f64 = costs.iter().sum();
             let (mut step_norm, mut step_length) = (0.0, 1.0_f64);
             let mut failed = false;
+            stuck_e.fill(false);
             let mut small_prediction = true;
             for (e, cost_e) in costs.iter_mut().enumerate() {
                 self.budget
@@ -784,6 +796,7 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                     }
                     None => {
                         failed = true;
+                        stuck_e[e] = true;
                         step_length = 0.0;
                     }
                 }
@@ -796,6 +809,27 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                 step_length,
             });
             if failed && !small_prediction {
+                // A data-based start can lead the first full step into a region where the
+                // linearisation no longer predicts the model (a level driven below empty,
+                // where the outflow laws are flat), and the iteration sticks there far from
+                // any fit. Each such experiment restarts once from the fitted start
+                // (`start.rs`); the lower-cost end of the two is kept.
+                let mut restarted = false;
+                for e in 0..experiments {
+                    if !(stuck_e[e] && self.restart_left[e]) {
+                        continue;
+                    }
+                    self.restart_left[e] = false;
+                    if let Ok(fresh) = self.fitted_trajectory(e) {
+                        stuck[e] = Some((self.trajs[e].clone(), costs[e]));
+                        self.trajs[e] = fresh;
+                        costs[e] = f64::INFINITY;
+                        restarted = true;
+                    }
+                }
+                if restarted {
+                    continue;
+                }
                 self.termination = Termination::LineSearchFailed;
                 break;
             }
@@ -805,6 +839,14 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
             if small_prediction || (before - after).abs() <= tol * after.abs() {
                 self.termination = Termination::Converged;
                 break;
+            }
+        }
+        for (e, kept) in stuck.into_iter().enumerate() {
+            if let Some((tr, cost)) = kept
+                && (costs[e].is_nan() || costs[e] >= cost)
+            {
+                self.trajs[e] = tr;
+                self.termination = Termination::LineSearchFailed;
             }
         }
         // Summary of the final trajectories.

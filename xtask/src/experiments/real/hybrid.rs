@@ -157,16 +157,47 @@ fn model_spec(spec: &grey::GreySpec, fit: &grey::GreyFit, noise: f64) -> ModelSp
     }
 }
 
-/// `sqrt((h + abs(h))/2)` (or `sqrt(abs(h))`) gets `+ 0.0001` under the root: MME starts
-/// its iterated linearisation from the data (an unmeasured level at 0, where the square
-/// root's slope is infinite); the shift changes an outflow at a 5 V level by 2e-5 of itself.
+/// Every `sqrt((h + abs(h))/2)` (or `sqrt(abs(h))`) in a term, alone or inside a product
+/// such as the lower section's `(h2 - 5)*sqrt((h1 + abs(h1))/2)`, gets `+ 0.0001` under the
+/// root: MME starts its iterated linearisation from the data (an unmeasured level at 0,
+/// where the square root's slope is infinite, and an infinite slope times a zero factor is
+/// NaN); the shift changes an outflow at a 5 V level by 2e-5 of itself.
 fn regularised(term: &str) -> String {
-    match term.strip_prefix("sqrt(").and_then(|r| r.strip_suffix(')')) {
-        Some(inner) if inner.starts_with("abs(") || inner.contains(" + abs(") => {
-            format!("sqrt({inner} + 0.0001)")
+    let mut out = String::with_capacity(term.len() + 16);
+    let mut rest = term;
+    while let Some(at) = rest.find("sqrt(") {
+        let open = at + "sqrt(".len();
+        out.push_str(&rest[..open]);
+        // The argument runs to the parenthesis that closes `sqrt(`.
+        let mut depth = 1usize;
+        let mut close = None;
+        for (i, ch) in rest[open..].char_indices() {
+            match ch {
+                '(' => depth += 1,
+                ')' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        close = Some(open + i);
+                        break;
+                    }
+                }
+                _ => {}
+            }
         }
-        _ => term.to_string(),
+        let Some(close) = close else {
+            out.push_str(&rest[open..]);
+            return out;
+        };
+        let inner = &rest[open..close];
+        let inner = regularised(inner);
+        out.push_str(&inner);
+        if inner.starts_with("abs(") || inner.contains(" + abs(") {
+            out.push_str(" + 0.0001");
+        }
+        rest = &rest[close..];
     }
+    out.push_str(rest);
+    out
 }
 
 fn write_record(path: &Path, e: &Experiment, output: &str) -> Result<()> {
@@ -576,5 +607,31 @@ fn explore_tanks_hybrid_base() {
                 );
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod regularised_tests {
+    use super::regularised;
+
+    #[test]
+    fn every_root_of_a_positive_part_is_shifted_and_nothing_else() {
+        assert_eq!(
+            regularised("sqrt((h1 + abs(h1))/2)"),
+            "sqrt((h1 + abs(h1))/2 + 0.0001)"
+        );
+        assert_eq!(regularised("sqrt(abs(h))"), "sqrt(abs(h) + 0.0001)");
+        assert_eq!(
+            regularised("(h2 - 5)*sqrt((h1 + abs(h1))/2)"),
+            "(h2 - 5)*sqrt((h1 + abs(h1))/2 + 0.0001)"
+        );
+        assert_eq!(
+            regularised("sqrt((h1 + abs(h1))/2) - sqrt((h2 + abs(h2))/2)"),
+            "sqrt((h1 + abs(h1))/2 + 0.0001) - sqrt((h2 + abs(h2))/2 + 0.0001)"
+        );
+        // A root of something that can be negative, and terms without a root, stay as given.
+        assert_eq!(regularised("sqrt(h1)"), "sqrt(h1)");
+        assert_eq!(regularised("(h2 - 5)*u"), "(h2 - 5)*u");
+        assert_eq!(regularised("sqrt((h1"), "sqrt((h1");
     }
 }
