@@ -459,7 +459,7 @@ fn hybrid_rows_inner(
         .join(", ");
     table.note(format!(
         "{LABEL} ({OFFICIAL}): assumed model = the calibrated grey box ({chosen}, training \
-         free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W by the covariance constraint: {}) on all {} training samples at full rate, correction on the {} \
+         free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W by the covariance constraint: {}; its iteration at that W {}) on all {} training samples at full rate, correction on the {} \
          equation; network of {} hidden units picked by {} from a 1–{} × {} sweep on d̂; {refine}; {guard}; training free-run RMSE {train_rmse:.4} {unit} (from MME's x̂(t0)). \
          Test: x0 fitted to the first {window} samples, free run over the whole record ({}).{} \
          Time to accuracy: grey box {grey_seconds:.1} s, MME + network + refinement \
@@ -467,6 +467,7 @@ fn hybrid_rows_inner(
         scale * gfit.train_rmse,
         eff.noise,
         w_text,
+        mmenn::words::termination(summary.mme_termination),
         est.len(),
         spec.linear.correction_names().join(", "),
         summary.hidden,
