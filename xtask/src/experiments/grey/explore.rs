@@ -1,7 +1,9 @@
 //! Exploration harness (ignored; reads /work/shared/data; prints training and test
 //! RMSE — choose by the training numbers). Semicolon-separated variants of `key=value`:
 //! `GREY_TANKS` keys rate k2 smooth sensor lin lin1 pump0 bias c h1 h2 area1 area2 trainx0
-//! pumpq lag res ontest (calibrate on the test record: a diagnosis, never a choice)
+//! pumpq lag res ontest (calibrate on the test record: a diagnosis, never a choice) win
+//! (calibrate with the training state fitted to the window, `TrainState::Window`) selfwin
+//! (print only the training record's free run from the window-fitted state)
 //! holdout (calibrate on the first 80 %, score the last 20 %) sub hz;
 //! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
@@ -256,6 +258,8 @@ fn explore_tanks() {
         let mut trainx0 = false;
         let mut holdout = false;
         let mut ontest = false;
+        let mut selfwin = false;
+        let mut win = false;
         let mut substeps = 8;
         let mut hz = 2;
         for (k, v) in kv(item) {
@@ -281,10 +285,15 @@ fn explore_tanks() {
                 "lag" => o.pump_lag = Some(v),
                 "res" => o.reservoir_head = v != 0.0,
                 "ontest" => ontest = v != 0.0,
+                "win" => win = v != 0.0,
+                "selfwin" => selfwin = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
         let mut spec = tanks_model(&o).unwrap();
+        if win {
+            spec.train_state = TrainState::Window;
+        }
         spec.test_from_training_x0 = trainx0;
         spec.integrator = Integrator::Rk4 { substeps };
         if hz == 4 {
@@ -292,6 +301,8 @@ fn explore_tanks() {
         }
         if ontest {
             on_test(Benchmark::CascadedTanks, item.trim(), &spec);
+        } else if selfwin {
+            training_from_window(Benchmark::CascadedTanks, item.trim(), &spec);
         } else if holdout {
             held_out(Benchmark::CascadedTanks, item.trim(), &spec);
         } else {
@@ -342,6 +353,25 @@ fn fit_and_score(
         .as_ref()
         .map_or(f64::NAN, |s| rmse_after(&y, s, w));
     Ok((f, r))
+}
+
+/// The training record's free run from the state fitted to its first window samples (the
+/// test protocol's start), the coefficients calibrated on the whole record; no test record
+/// is run.
+fn training_from_window(bench: Benchmark, label: &str, spec: &GreySpec) {
+    let d = data(bench);
+    let w = bench.init_window();
+    let (scale, unit) = bench.reporting_unit();
+    let est = &d.estimation.experiments()[0];
+    match fit_and_score(spec, est, est, w) {
+        Ok((f, r)) => println!(
+            "{label}: training {:.6} {unit} from the calibration's own state, {:.6} {unit} from the state fitted to the first {w} samples; {}",
+            scale * f.train_rmse,
+            scale * r,
+            terms(&f)
+        ),
+        Err(e) => println!("{label}: failed {e:#}"),
+    }
 }
 
 /// Calibrate on the first 80 % of a benchmark's training record and score the free run on
