@@ -16,7 +16,9 @@
 //! Termination: `Converged` when an iteration lowers `J` by less than
 //! `cost_tolerance·J` (or the predicted decrease is that small), `LineSearchFailed` when
 //! no step length lowers `J` although the linearisation predicts a decrease,
-//! `MaxIterations` otherwise.
+//! `MaxIterations` otherwise. An experiment started from the data
+//! ([`StartTrajectory::FromData`]) whose line search fails restarts once from the fitted
+//! start (`start.rs`) before the estimate gives up, and keeps the lower-cost end.
 
 use nalgebra::DMatrix;
 use sysid_core::{
