@@ -1,7 +1,9 @@
 //! Integration tests of `sysid-core`: property tests of expressions (printing round trip,
 //! symbolic derivatives against finite differences) and of the term model's right-hand
-//! side and Jacobians, and of the RK4 step's tangents.
+//! side and Jacobians, and of the RK4 step's tangents; and the acquisition-filter estimate
+//! against an independent (scipy) record.
 
+mod acquisition_independent;
 mod band_limited;
 mod expr_props;
 mod tangent;

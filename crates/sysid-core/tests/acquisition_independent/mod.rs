@@ -1,0 +1,293 @@
+//! The acquisition-filter estimate against an independent record, `fixtures/acquisition`:
+//! a Duffing oscillator integrated by scipy's DOP853 on a closed-form multisine and recorded
+//! through a known filter `H = e^{−i2πfD/fs}·G(f)` by exact circular FFT filtering (no code
+//! of this crate made it). `Ã` should be `G`; the scoring rule is the fixture README's,
+//! written before this test first ran.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use nalgebra::Complex;
+use sysid_core::acquisition::{AcquisitionFilter, AcquisitionOptions, FIR_HALF};
+
+fn fixture(name: &str) -> String {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/acquisition")
+        .join(name);
+    std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "cannot read fixture {} ({e}); it is committed, regenerate it with \
+             `python3 fixtures/acquisition/generate.py`",
+            path.display()
+        )
+    })
+}
+
+/// The record's columns `t,u,y_true_model,y`.
+struct Record {
+    t: Vec<f64>,
+    simulated: Vec<f64>,
+    measured: Vec<f64>,
+}
+
+fn record() -> Record {
+    let text = fixture("record.csv");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().map(str::trim),
+        Some("t,u,y_true_model,y"),
+        "record.csv header"
+    );
+    let (mut t, mut simulated, mut measured) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let v: Vec<f64> = line
+            .split(',')
+            .map(|s| {
+                s.trim()
+                    .parse()
+                    .unwrap_or_else(|e| panic!("record.csv row {}: {s:?}: {e}", i + 2))
+            })
+            .collect();
+        assert_eq!(v.len(), 4, "record.csv row {}: {} columns", i + 2, v.len());
+        t.push(v[0]);
+        simulated.push(v[2]);
+        measured.push(v[3]);
+    }
+    Record {
+        t,
+        simulated,
+        measured,
+    }
+}
+
+/// Just enough JSON for `truth.json`: objects, arrays, numbers, strings, literals.
+#[derive(Debug, Clone)]
+enum Json {
+    Num(f64),
+    Str(String),
+    Arr(Vec<Json>),
+    Obj(BTreeMap<String, Json>),
+    Lit,
+}
+
+impl Json {
+    fn get(&self, key: &str) -> &Json {
+        match self {
+            Json::Obj(m) => m
+                .get(key)
+                .unwrap_or_else(|| panic!("truth.json: no key {key:?}")),
+            _ => panic!("truth.json: {key:?} asked of a non-object"),
+        }
+    }
+    fn num(&self) -> f64 {
+        match self {
+            Json::Num(v) => *v,
+            other => panic!("truth.json: expected a number, found {other:?}"),
+        }
+    }
+    fn arr(&self) -> &[Json] {
+        match self {
+            Json::Arr(v) => v,
+            other => panic!("truth.json: expected an array, found {other:?}"),
+        }
+    }
+    fn complex(&self) -> Complex<f64> {
+        let v = self.arr();
+        Complex::new(v[0].num(), v[1].num())
+    }
+}
+
+fn parse_json(text: &str) -> Json {
+    fn skip(b: &[u8], i: &mut usize) {
+        while *i < b.len() && b[*i].is_ascii_whitespace() {
+            *i += 1;
+        }
+    }
+    fn value(b: &[u8], i: &mut usize) -> Json {
+        skip(b, i);
+        match b.get(*i) {
+            Some(b'{') => {
+                *i += 1;
+                let mut m = BTreeMap::new();
+                loop {
+                    skip(b, i);
+                    if b[*i] == b'}' {
+                        *i += 1;
+                        return Json::Obj(m);
+                    }
+                    let Json::Str(key) = value(b, i) else {
+                        panic!("truth.json: object key at byte {i}")
+                    };
+                    skip(b, i);
+                    assert_eq!(b[*i], b':', "truth.json: ':' at byte {i}");
+                    *i += 1;
+                    m.insert(key, value(b, i));
+                    skip(b, i);
+                    if b[*i] == b',' {
+                        *i += 1;
+                    }
+                }
+            }
+            Some(b'[') => {
+                *i += 1;
+                let mut v = Vec::new();
+                loop {
+                    skip(b, i);
+                    if b[*i] == b']' {
+                        *i += 1;
+                        return Json::Arr(v);
+                    }
+                    v.push(value(b, i));
+                    skip(b, i);
+                    if b[*i] == b',' {
+                        *i += 1;
+                    }
+                }
+            }
+            Some(b'"') => {
+                // No escapes in truth.json's strings.
+                let start = *i + 1;
+                let end = start
+                    + b[start..]
+                        .iter()
+                        .position(|&c| c == b'"')
+                        .expect("truth.json: unterminated string");
+                *i = end + 1;
+                Json::Str(String::from_utf8_lossy(&b[start..end]).into_owned())
+            }
+            Some(c) if c.is_ascii_alphabetic() => {
+                while *i < b.len() && b[*i].is_ascii_alphabetic() {
+                    *i += 1;
+                }
+                Json::Lit
+            }
+            Some(_) => {
+                let start = *i;
+                while *i < b.len()
+                    && matches!(b[*i], b'0'..=b'9' | b'-' | b'+' | b'.' | b'e' | b'E')
+                {
+                    *i += 1;
+                }
+                let s = std::str::from_utf8(&b[start..*i]).unwrap();
+                Json::Num(
+                    s.parse()
+                        .unwrap_or_else(|e| panic!("truth.json: number {s:?}: {e}")),
+                )
+            }
+            None => panic!("truth.json: unexpected end"),
+        }
+    }
+    let mut i = 0;
+    value(text.as_bytes(), &mut i)
+}
+
+fn rms(x: impl Iterator<Item = f64>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for v in x {
+        sum += v * v;
+        n += 1;
+    }
+    (sum / n as f64).sqrt()
+}
+
+#[test]
+#[allow(clippy::print_stderr)]
+fn the_estimate_recovers_a_known_acquisition_filter_from_a_scipy_duffing_record() {
+    let truth = parse_json(&fixture("truth.json"));
+    let rec = record();
+    let fs = truth.get("fs_hz").num();
+    let n = truth.get("samples").num() as usize;
+    assert_eq!(rec.t.len(), n, "record.csv rows");
+    let dt = 1.0 / fs;
+    assert!((rec.t[1] - rec.t[0] - dt).abs() < 1e-12, "sample interval");
+
+    let o = truth.get("options");
+    let options = AcquisitionOptions {
+        pass_below_hz: o.get("pass_below_hz").num(),
+        first_band_hz: o.get("first_band_hz").num(),
+        band_hz: o.get("band_hz").num(),
+    };
+    let tol = truth.get("tolerance_abs").num();
+    let filter = AcquisitionFilter::estimate(&rec.measured, &rec.simulated, dt, &options)
+        .expect("estimate on the independent record");
+
+    // Rule 1: every band centred below 180 Hz is estimated; every estimated band is one of
+    // the fixture's.
+    let expected: Vec<(f64, Complex<f64>)> = truth
+        .get("bands")
+        .arr()
+        .iter()
+        .map(|b| (b.get("centre_hz").num(), b.get("mean_g").complex()))
+        .collect();
+    let mean_at = |c: f64| {
+        expected
+            .iter()
+            .find(|(e, _)| (e - c).abs() < 1e-9)
+            .map(|&(_, g)| g)
+    };
+    for &(c, _) in expected.iter().filter(|(c, _)| *c < 180.0) {
+        assert!(
+            filter.bands().iter().any(|(e, _)| (e - c).abs() < 1e-9),
+            "band centred at {c} Hz left out"
+        );
+    }
+
+    // Rule 2: every estimated band within `tol` of G's mean over the band's bins.
+    let mut worst = (0.0f64, 0.0f64);
+    let mut failures = Vec::new();
+    for &(c, g) in filter.bands() {
+        let mean = mean_at(c).unwrap_or_else(|| panic!("estimated band at {c} Hz not in truth"));
+        let err = (g - mean).norm();
+        if err > worst.0 {
+            worst = (err, c);
+        }
+        if err > tol {
+            failures.push(format!("{c} Hz: {g:.5} vs {mean:.5} (|err| {err:.4})"));
+        }
+    }
+    let below_180 = filter
+        .bands()
+        .iter()
+        .filter(|(c, _)| *c < 180.0)
+        .map(|&(c, g)| (g - mean_at(c).unwrap()).norm())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "acquisition: {} bands estimated (last centre {} Hz); largest |Ã − mean G| {:.3e} at \
+         {} Hz; below 180 Hz {:.3e}",
+        filter.bands().len(),
+        filter.bands().last().unwrap().0,
+        worst.0,
+        worst.1,
+        below_180
+    );
+    assert!(
+        failures.is_empty(),
+        "bands off by more than {tol}:\n{}",
+        failures.join("\n")
+    );
+
+    // Rule 3: end to end, away from the ends the FIR holds.
+    let ratio_max = truth.get("inverse_residual_ratio_max").num();
+    let inner = FIR_HALF..n - FIR_HALF;
+    let before = rms(inner.clone().map(|i| rec.measured[i] - rec.simulated[i]));
+    let inv = filter.apply_inverse(&rec.measured, dt).unwrap();
+    let fwd = filter.apply(&rec.simulated, dt).unwrap();
+    let after_inv = rms(inner.clone().map(|i| inv[i] - rec.simulated[i]));
+    let after_fwd = rms(inner.map(|i| fwd[i] - rec.measured[i]));
+    eprintln!(
+        "acquisition: rms(y − S) {before:.4e}; rms(Ã⁻¹y − S) {after_inv:.4e} (ratio {:.4}); \
+         rms(ÃS − y) {after_fwd:.4e} (ratio {:.4})",
+        after_inv / before,
+        after_fwd / before
+    );
+    assert!(
+        after_inv <= ratio_max * before,
+        "inverse: ratio {}",
+        after_inv / before
+    );
+    assert!(
+        after_fwd <= ratio_max * before,
+        "forward: ratio {}",
+        after_fwd / before
+    );
+}
