@@ -50,7 +50,10 @@ impl AcquisitionFilter {
     /// Estimate the filter from a record's measured output and a calibrated model's free
     /// run of it (same samples, interval `dt`): per band, `Σ Y·S̄ / Σ |S|²` over the
     /// record's DFT bins in it. A band with no simulated content (power below 10⁻¹² of the
-    /// strongest band's) is left out; the filter interpolates across it.
+    /// strongest band's, or of the whole simulated output's) is left out; the filter
+    /// interpolates across it. A record whose simulated output has no content above the
+    /// pass band at all (a linear model: only integration error lies there) is an error
+    /// rather than a filter estimated from rounding.
     pub fn estimate(
         measured: &[f64],
         simulated: &[f64],
@@ -112,11 +115,14 @@ impl AcquisitionFilter {
             bands.push((0.5 * (lo + hi), cross, power));
             lo += band_hz;
         }
-        // Bands whose simulated power is rounding error beside the strongest band's.
+        // Bands whose simulated power is rounding error beside the strongest band's or
+        // beside the whole simulated output's (Parseval: Σ_k |S_k|² = n·Σ s², half of it
+        // at positive frequencies).
         let strongest = bands.iter().map(|b| b.2).fold(0.0, f64::max);
+        let whole = 0.5 * n as f64 * simulated.iter().map(|v| v * v).sum::<f64>();
         let bands: Vec<(f64, Complex<f64>)> = bands
             .into_iter()
-            .filter(|&(_, _, p)| p > 1e-12 * strongest && p > 0.0)
+            .filter(|&(_, _, p)| p > 1e-12 * strongest && p > 1e-12 * whole && p > 0.0)
             .map(|(c, cross, p)| (c, cross / p))
             .collect();
         if bands.is_empty() {
@@ -431,5 +437,39 @@ mod tests {
         assert!(AcquisitionFilter::estimate(&x, &x, 0.002, &wide).is_err());
         // All-zero simulated output: no band has content.
         assert!(AcquisitionFilter::estimate(&x, &x, 0.002, &options).is_err());
+    }
+
+    /// A linear model's output: tones below the pass band only, plus content above it at
+    /// the level of integration error (1e-8 of the tones' amplitude, power 1e-16 of
+    /// theirs). Relative to the strongest band that content is all there is, so only the
+    /// whole output's power can tell it is none; with distortion at 1e-3 it is estimated.
+    #[test]
+    fn a_record_without_content_above_the_pass_band_is_an_error() {
+        let (n, dt) = (4000, 1.0 / 500.0);
+        let options = AcquisitionOptions {
+            pass_below_hz: 100.0,
+            first_band_hz: 105.0,
+            band_hz: 5.0,
+        };
+        let record = |high: f64| -> Vec<f64> {
+            (0..n)
+                .map(|i| {
+                    let t = i as f64 * dt;
+                    let tau = std::f64::consts::TAU;
+                    (tau * 20.0 * t).cos()
+                        + 0.5 * (tau * 55.5 * t + 1.0).cos()
+                        + high * (tau * 150.25 * t + 0.3).cos()
+                        + high * (tau * 201.0 * t + 2.0).cos()
+                })
+                .collect()
+        };
+        let rounding = record(1e-8);
+        assert!(AcquisitionFilter::estimate(&rounding, &rounding, dt, &options).is_err());
+        let distorted = record(1e-3);
+        let filter = AcquisitionFilter::estimate(&distorted, &distorted, dt, &options).unwrap();
+        assert!(!filter.bands().is_empty());
+        for &(c, g) in filter.bands() {
+            assert!((g - Complex::new(1.0, 0.0)).norm() < 1e-9, "band at {c} Hz: {g}");
+        }
     }
 }
