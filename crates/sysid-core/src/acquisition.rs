@@ -469,7 +469,10 @@ mod tests {
         let filter = AcquisitionFilter::estimate(&distorted, &distorted, dt, &options).unwrap();
         assert!(!filter.bands().is_empty());
         for &(c, g) in filter.bands() {
-            assert!((g - Complex::new(1.0, 0.0)).norm() < 1e-9, "band at {c} Hz: {g}");
+            assert!(
+                (g - Complex::new(1.0, 0.0)).norm() < 1e-9,
+                "band at {c} Hz: {g}"
+            );
         }
     }
 }
