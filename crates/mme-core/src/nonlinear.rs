@@ -778,6 +778,8 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                     cur = self.fitted_trajectory(e).map_err(both)?;
                     self.trajs[e] = cur.clone();
                     self.data_start_failure[e] = Some(data_start.clone());
+                    // Already on the fitted start: a later restart would repeat it.
+                    self.restart_left[e] = false;
                     (accepted, small) = self.attempt(e, &cur, *cost_e, w, inv_r).map_err(both)?;
                 }
                 small_prediction &= small;
