@@ -4,7 +4,6 @@
 //! of this crate made it). `Ã` should be `G`; the scoring rule is the fixture README's,
 //! written before this test first ran.
 
-use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use nalgebra::Complex;
@@ -60,125 +59,32 @@ fn record() -> Record {
     }
 }
 
-/// Just enough JSON for `truth.json`: objects, arrays, numbers, strings, literals.
-#[derive(Debug, Clone)]
-enum Json {
-    Num(f64),
-    Str(String),
-    Arr(Vec<Json>),
-    Obj(BTreeMap<String, Json>),
-    Lit,
+/// `truth.json`'s values, read with serde_json; a missing key or a wrong type names it.
+trait Truth {
+    fn key(&self, key: &str) -> &serde_json::Value;
+    fn num(&self) -> f64;
+    fn arr(&self) -> &[serde_json::Value];
+    fn complex(&self) -> Complex<f64>;
 }
 
-impl Json {
-    fn get(&self, key: &str) -> &Json {
-        match self {
-            Json::Obj(m) => m
-                .get(key)
-                .unwrap_or_else(|| panic!("truth.json: no key {key:?}")),
-            _ => panic!("truth.json: {key:?} asked of a non-object"),
-        }
+impl Truth for serde_json::Value {
+    fn key(&self, key: &str) -> &serde_json::Value {
+        self.as_object()
+            .and_then(|m| m.get(key))
+            .unwrap_or_else(|| panic!("truth.json: no key {key:?}"))
     }
     fn num(&self) -> f64 {
-        match self {
-            Json::Num(v) => *v,
-            other => panic!("truth.json: expected a number, found {other:?}"),
-        }
+        self.as_f64()
+            .unwrap_or_else(|| panic!("truth.json: expected a number, found {self}"))
     }
-    fn arr(&self) -> &[Json] {
-        match self {
-            Json::Arr(v) => v,
-            other => panic!("truth.json: expected an array, found {other:?}"),
-        }
+    fn arr(&self) -> &[serde_json::Value] {
+        self.as_array()
+            .unwrap_or_else(|| panic!("truth.json: expected an array, found {self}"))
     }
     fn complex(&self) -> Complex<f64> {
         let v = self.arr();
         Complex::new(v[0].num(), v[1].num())
     }
-}
-
-fn parse_json(text: &str) -> Json {
-    fn skip(b: &[u8], i: &mut usize) {
-        while *i < b.len() && b[*i].is_ascii_whitespace() {
-            *i += 1;
-        }
-    }
-    fn value(b: &[u8], i: &mut usize) -> Json {
-        skip(b, i);
-        match b.get(*i) {
-            Some(b'{') => {
-                *i += 1;
-                let mut m = BTreeMap::new();
-                loop {
-                    skip(b, i);
-                    if b[*i] == b'}' {
-                        *i += 1;
-                        return Json::Obj(m);
-                    }
-                    let Json::Str(key) = value(b, i) else {
-                        panic!("truth.json: object key at byte {i}")
-                    };
-                    skip(b, i);
-                    assert_eq!(b[*i], b':', "truth.json: ':' at byte {i}");
-                    *i += 1;
-                    m.insert(key, value(b, i));
-                    skip(b, i);
-                    if b[*i] == b',' {
-                        *i += 1;
-                    }
-                }
-            }
-            Some(b'[') => {
-                *i += 1;
-                let mut v = Vec::new();
-                loop {
-                    skip(b, i);
-                    if b[*i] == b']' {
-                        *i += 1;
-                        return Json::Arr(v);
-                    }
-                    v.push(value(b, i));
-                    skip(b, i);
-                    if b[*i] == b',' {
-                        *i += 1;
-                    }
-                }
-            }
-            Some(b'"') => {
-                // No escapes in truth.json's strings.
-                let start = *i + 1;
-                let end = start
-                    + b[start..]
-                        .iter()
-                        .position(|&c| c == b'"')
-                        .expect("truth.json: unterminated string");
-                *i = end + 1;
-                Json::Str(String::from_utf8_lossy(&b[start..end]).into_owned())
-            }
-            Some(c) if c.is_ascii_alphabetic() => {
-                while *i < b.len() && b[*i].is_ascii_alphabetic() {
-                    *i += 1;
-                }
-                Json::Lit
-            }
-            Some(_) => {
-                let start = *i;
-                while *i < b.len()
-                    && matches!(b[*i], b'0'..=b'9' | b'-' | b'+' | b'.' | b'e' | b'E')
-                {
-                    *i += 1;
-                }
-                let s = std::str::from_utf8(&b[start..*i]).unwrap();
-                Json::Num(
-                    s.parse()
-                        .unwrap_or_else(|e| panic!("truth.json: number {s:?}: {e}")),
-                )
-            }
-            None => panic!("truth.json: unexpected end"),
-        }
-    }
-    let mut i = 0;
-    value(text.as_bytes(), &mut i)
 }
 
 fn rms(x: impl Iterator<Item = f64>) -> f64 {
@@ -193,31 +99,32 @@ fn rms(x: impl Iterator<Item = f64>) -> f64 {
 #[test]
 #[allow(clippy::print_stderr)]
 fn the_estimate_recovers_a_known_acquisition_filter_from_a_scipy_duffing_record() {
-    let truth = parse_json(&fixture("truth.json"));
+    let truth: serde_json::Value =
+        serde_json::from_str(&fixture("truth.json")).expect("truth.json is JSON");
     let rec = record();
-    let fs = truth.get("fs_hz").num();
-    let n = truth.get("samples").num() as usize;
+    let fs = truth.key("fs_hz").num();
+    let n = truth.key("samples").num() as usize;
     assert_eq!(rec.t.len(), n, "record.csv rows");
     let dt = 1.0 / fs;
     assert!((rec.t[1] - rec.t[0] - dt).abs() < 1e-12, "sample interval");
 
-    let o = truth.get("options");
+    let o = truth.key("options");
     let options = AcquisitionOptions {
-        pass_below_hz: o.get("pass_below_hz").num(),
-        first_band_hz: o.get("first_band_hz").num(),
-        band_hz: o.get("band_hz").num(),
+        pass_below_hz: o.key("pass_below_hz").num(),
+        first_band_hz: o.key("first_band_hz").num(),
+        band_hz: o.key("band_hz").num(),
     };
-    let tol = truth.get("tolerance_abs").num();
+    let tol = truth.key("tolerance_abs").num();
     let filter = AcquisitionFilter::estimate(&rec.measured, &rec.simulated, dt, &options)
         .expect("estimate on the independent record");
 
     // Rule 1: every band centred below 180 Hz is estimated; every estimated band is one of
     // the fixture's.
     let expected: Vec<(f64, Complex<f64>)> = truth
-        .get("bands")
+        .key("bands")
         .arr()
         .iter()
-        .map(|b| (b.get("centre_hz").num(), b.get("mean_g").complex()))
+        .map(|b| (b.key("centre_hz").num(), b.key("mean_g").complex()))
         .collect();
     let mean_at = |c: f64| {
         expected
@@ -267,7 +174,7 @@ fn the_estimate_recovers_a_known_acquisition_filter_from_a_scipy_duffing_record(
     );
 
     // Rule 3: end to end, away from the ends the FIR holds.
-    let ratio_max = truth.get("inverse_residual_ratio_max").num();
+    let ratio_max = truth.key("inverse_residual_ratio_max").num();
     let inner = FIR_HALF..n - FIR_HALF;
     let before = rms(inner.clone().map(|i| rec.measured[i] - rec.simulated[i]));
     let inv = filter.apply_inverse(&rec.measured, dt).unwrap();
