@@ -98,6 +98,16 @@ pub struct IterationOptions {
     /// Converged when the relative decrease of `J` in an iteration is below this
     /// (default 1e-10).
     pub cost_tolerance: f64,
+    /// Also converged when `J` falls by less than this in each of
+    /// [`IterationOptions::plateau_iterations`] iterations running (default 1e-3). `J`
+    /// is in units of the noise variance (`Σ r²/R + h·Σ dᵀWd`, minus twice a
+    /// log-likelihood up to a constant), so this is a change no statistic of the estimate
+    /// can see; it ends the slow crawl of damped steps along a kink of the model (a
+    /// `max(·, 0)` law) that the relative test would follow to the iteration limit.
+    pub cost_plateau: f64,
+    /// Iterations running that must each gain less than [`IterationOptions::cost_plateau`]
+    /// (default 3).
+    pub plateau_iterations: usize,
     /// Most halvings of the step in the line search (default 30).
     pub max_halvings: usize,
     /// Magnitude beyond which a state counts as diverged (default 1e12).
@@ -109,6 +119,8 @@ impl Default for IterationOptions {
         Self {
             max_iterations: 50,
             cost_tolerance: 1e-10,
+            cost_plateau: 1e-3,
+            plateau_iterations: 3,
             max_halvings: 30,
             blow_up: 1e12,
         }
@@ -317,6 +329,14 @@ pub(crate) fn check_iterations(it: &IterationOptions) -> Result<()> {
         });
     }
     positive_setting("cost_tolerance", it.cost_tolerance)?;
+    positive_setting("cost_plateau", it.cost_plateau)?;
+    if it.plateau_iterations == 0 {
+        return Err(MmeError::InvalidSetting {
+            name: "plateau_iterations",
+            value: 0.0,
+            reason: "need at least one iteration",
+        });
+    }
     positive_setting("blow_up", it.blow_up)?;
     Ok(())
 }
@@ -324,6 +344,40 @@ pub(crate) fn check_iterations(it: &IterationOptions) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn iteration_option_errors_are_typed() {
+        let ok = IterationOptions::default();
+        assert!(check_iterations(&ok).is_ok());
+        for (bad, name) in [
+            (
+                IterationOptions {
+                    cost_plateau: 0.0,
+                    ..ok
+                },
+                "cost_plateau",
+            ),
+            (
+                IterationOptions {
+                    cost_plateau: f64::NAN,
+                    ..ok
+                },
+                "cost_plateau",
+            ),
+            (
+                IterationOptions {
+                    plateau_iterations: 0,
+                    ..ok
+                },
+                "plateau_iterations",
+            ),
+        ] {
+            match check_iterations(&bad) {
+                Err(MmeError::InvalidSetting { name: n, .. }) => assert_eq!(n, name),
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+    }
 
     #[test]
     fn weight_errors_are_typed() {

@@ -14,7 +14,10 @@
 //! step is the exact optimum of the RK4-discretised problem.
 //!
 //! Termination: `Converged` when an iteration lowers `J` by less than
-//! `cost_tolerance·J` (or the predicted decrease is that small), `LineSearchFailed` when
+//! `cost_tolerance·J` (or the predicted decrease is that small), or when
+//! `plateau_iterations` iterations running each lower it by less than `cost_plateau` (`J`
+//! is in noise-variance units, so that is a change no statistic of the estimate sees),
+//! `LineSearchFailed` when
 //! no step length lowers `J` although the linearisation predicts a decrease,
 //! `MaxIterations` otherwise. An experiment started from the data
 //! ([`StartTrajectory::FromData`]) whose line search fails restarts once from the fitted
@@ -743,6 +746,8 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
         // the restart from the fitted start runs (the lower-cost end is kept).
         let mut stuck: Vec<Option<(Traj, f64)>> = vec![None; experiments];
         let mut stuck_e = vec![false; experiments];
+        // Iterations running whose gain was below `cost_plateau`.
+        let mut plateau = 0usize;
         for iteration in 1..=self.opts.max_iterations {
             let before: f64 = costs.iter().sum();
             let (mut step_norm, mut step_length) = (0.0, 1.0_f64);
@@ -841,6 +846,17 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                 continue;
             }
             if small_prediction || (before - after).abs() <= tol * after.abs() {
+                self.termination = Termination::Converged;
+                break;
+            }
+            // A restart leaves `before` infinite: the count starts again.
+            let gain = before - after;
+            if !failed && gain.is_finite() && gain < self.opts.cost_plateau {
+                plateau += 1;
+            } else {
+                plateau = 0;
+            }
+            if plateau >= self.opts.plateau_iterations {
                 self.termination = Termination::Converged;
                 break;
             }

@@ -303,3 +303,70 @@ fn a_data_start_that_sticks_far_from_the_data_restarts_from_the_fitted_start() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The same grey box at W = 2.5e4 (the reproduce's hybrid chooses W of this order): the
+/// `max(·, 0)` kinks of its overflow laws make Gauss–Newton crawl with damped steps that
+/// each gain 1e-7 of `J` or less, and with the relative test alone the solve ran to the
+/// 50-iteration limit. The plateau test (`J` falls by less than 1e-3 noise-variance units
+/// three iterations running) ends it as converged. Judged against the same solve run on
+/// to 200 iterations with the plateau test off: the bound (0.1 in `J`, a tenth of one
+/// degree of freedom of a chi-square) was fixed before the run.
+#[test]
+fn a_crawl_along_a_kink_ends_on_the_cost_plateau_not_the_iteration_limit() {
+    let Some(folder) = crate::real_data::tanks_folder() else {
+        return;
+    };
+    let table = read_table(&folder.join("estimation.csv")).unwrap();
+    let col = |name: &str| table.columns[table.column_index(name).unwrap()].clone();
+    let (t, u, y) = (col("t"), col("u"), col("y"));
+    let e = Experiment::new(
+        t[0],
+        t[1] - t[0],
+        DMatrix::from_row_slice(1, u.len(), &u),
+        DMatrix::from_row_slice(1, y.len(), &y),
+    )
+    .unwrap();
+    let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("h2")], vec![e]).unwrap();
+    let spec =
+        mmenn::model_file::parse_model(std::path::Path::new("area2.toml"), TANKS_AREA2).unwrap();
+    let opts = EstimateOptions {
+        w: mmenn::estimate::WeightChoice::Value(2.5e4),
+        substeps: Some(8),
+        ..EstimateOptions::default()
+    };
+    let plateau = mmenn::estimate::mme_config(&spec, &opts);
+    let mut long = plateau.clone();
+    long.iterations.max_iterations = 200;
+    long.iterations.cost_plateau = f64::MIN_POSITIVE;
+    let a = mmenn::estimate::estimate_spec(&spec, &data, &plateau).unwrap();
+    let b = mmenn::estimate::estimate_spec(&spec, &data, &long).unwrap();
+    let (ra, rb) = (&a.estimate.report, &b.estimate.report);
+    assert_eq!(
+        ra.termination,
+        Some(Termination::Converged),
+        "{:?}",
+        ra.iterations
+    );
+    let (ja, jb) = (
+        ra.iterations.last().unwrap().cost,
+        rb.iterations.last().unwrap().cost,
+    );
+    assert!(
+        ra.iterations.len() < 50,
+        "{} iterations",
+        ra.iterations.len()
+    );
+    assert!(
+        ja - jb < 0.1,
+        "plateau stop J = {ja} after {} iterations, long run J = {jb} after {} ({:?})",
+        ra.iterations.len(),
+        rb.iterations.len(),
+        rb.termination
+    );
+    eprintln!(
+        "plateau: J = {ja} after {} iterations; long: J = {jb} after {} ({:?})",
+        ra.iterations.len(),
+        rb.iterations.len(),
+        rb.termination
+    );
+}
