@@ -23,9 +23,12 @@
 //! tan asin acos atan exp log sqrt abs sign tanh sinh cosh`, where `log` is the natural
 //! logarithm (`ln` is accepted for it) and `sign(0) = 0` (`sgn` is accepted for it); the
 //! two-argument functions are `atan2(y, x)` (the angle of the point `(x, y)`, in
-//! `(-π, π]`), `min(a, b)` and `max(a, b)` (NaN if either argument is NaN). Powers are
-//! written with `^`. There is no implicit multiplication (`2x` is an error) and no unary
-//! plus.
+//! `(-π, π]`), `min(a, b)` and `max(a, b)` (NaN if either argument is NaN), and
+//! `xmuly(a, b)` and `xdivy(a, b)`, which are `a*b` and `a/b` except that they are 0
+//! where `a` is 0 (even where `b` is infinite or NaN, or 0 for `xdivy`): the chain rule's
+//! products in symbolic derivatives (below), named after SciPy's and TensorFlow's
+//! `xlogy`/`xdivy`. Powers are written with `^`. There is no implicit multiplication
+//! (`2x` is an error) and no unary plus.
 //!
 //! # Values outside a function's domain
 //!
@@ -44,12 +47,26 @@
 //! (the mean of both slopes where `a = b`); `d asin(a) = da/sqrt(1 − a²)` is infinite at
 //! `a = ±1`.
 //!
+//! The chain rule has a strong zero: a term `g'(a)·da` is 0 wherever `da` is 0, even
+//! where the outer slope `g'(a)` is infinite or NaN (the NaN-safe mode of forward-mode
+//! automatic differentiation). So `d sqrt(max(x, 0))/dx` is 0 for `x < 0`, where the
+//! function is constant, not `0/(2·sqrt(0))` = NaN; likewise `log`, `asin`, `acos`,
+//! `a^c` for a constant `c < 1` or fractional, `a^b` (its `db·log(a)` and `b·da/a`) and
+//! `atan2` at the origin (each argument's partial). Such a term is `xdivy(da, g)` or
+//! `xmuly(da, g')` when `da` varies, and the plain `da/g` or `g'*da` when `da` is a
+//! constant, which is never 0 there: `d sqrt(x)/dx = 1/(2*sqrt(x))` is still `+inf` at
+//! `x = 0`. Wherever the plain rule gives a number (not NaN) both forms give the same
+//! bits, except for `atan2` with a varying inner derivative: its two partials, written
+//! apart, round differently from the plain `(b·da − a·db)/(a² + b²)`.
+//!
 //! # Simplification
 //!
 //! Every tree (parsed or differentiated) is built through the same light rules: constant
 //! folding when the result is finite, `0·a = 0`, `0/a = 0`, `1·a = a`, `a/1 = a`,
 //! `a ± 0 = a`, `0 - a = -a`, `-(-a) = a`, `a - (-b) = a + b`, `a + (-b) = a - b`,
-//! `a^0 = 1`, `a^1 = a`, `1^a = 1`. The rules `0·a = 0` and `0/a = 0` ignore the NaN that
+//! `a^0 = 1`, `a^1 = a`, `1^a = 1`, `xmuly(0, b) = xdivy(0, b) = 0`, and `xmuly`/`xdivy`
+//! become `*`/`/` with a nonzero constant first argument or a second argument of 0
+//! (`xmuly`) or ±1. The rules `0·a = 0` and `0/a = 0` ignore the NaN that
 //! IEEE gives for `a = ±inf` (or `a = 0` in `0/a`), so the simplified function equals the
 //! written one wherever the written one is finite. Constants are always finite.
 //!
@@ -125,7 +142,8 @@ pub enum ExprError {
     /// A call of a function that does not exist.
     #[error(
         "column {column}: unknown function '{name}' (functions: sin cos tan asin acos atan \
-         exp log sqrt abs sign tanh sinh cosh; atan2(y, x) min(a, b) max(a, b))"
+         exp log sqrt abs sign tanh sinh cosh; atan2(y, x) min(a, b) max(a, b) xmuly(a, b) \
+         xdivy(a, b))"
     )]
     UnknownFunction {
         /// Column where the function name starts.

@@ -493,8 +493,28 @@ fn shapes_evaluate_exactly_as_the_stack_program() {
     // infinities and NaN.
     let vars = ["x", "y", "z"];
     let texts = [
-        "2.5", "x", "z", "x^2", "y^3", "x^-2", "x*y", "y*x", "x*x", "(x*y)*z", "x^2*y", "2*x",
-        "x*2", "-x", "x + y", "x/y", "abs(x)*y", "x^0.5", "sqrt(x)", "x^2^2",
+        "2.5",
+        "x",
+        "z",
+        "x^2",
+        "y^3",
+        "x^-2",
+        "x*y",
+        "y*x",
+        "x*x",
+        "(x*y)*z",
+        "x^2*y",
+        "2*x",
+        "x*2",
+        "-x",
+        "x + y",
+        "x/y",
+        "abs(x)*y",
+        "x^0.5",
+        "sqrt(x)",
+        "x^2^2",
+        "xmuly(x, y)",
+        "xdivy(x, y)",
     ];
     let values = [0.0, -0.0, 1.5, -2.25, 1e300, -7.0, f64::INFINITY, f64::NAN];
     for text in texts {
@@ -517,4 +537,199 @@ fn shapes_evaluate_exactly_as_the_stack_program() {
     assert!(matches!(parse("x^2", &vars).shape, Shape::Square(0)));
     assert!(matches!(parse("4", &vars).shape, Shape::Const(_)));
     assert!(matches!(parse("(x*y)*z", &vars).shape, Shape::Small));
+}
+
+/// Central difference `∂e/∂v_var` with step `ε^(1/3)·max(1, |v_var|)`.
+fn central(e: &Expr, v: &[f64], var: usize) -> f64 {
+    let h = f64::EPSILON.cbrt() * v[var].abs().max(1.0);
+    let (mut p, mut m) = (v.to_vec(), v.to_vec());
+    p[var] += h;
+    m[var] -= h;
+    (e.eval(&p) - e.eval(&m)) / (2.0 * h)
+}
+
+/// The chain rule's strong zero: where a term's argument is held (its inner derivative is
+/// exactly 0) the slope is exactly 0, although the outer slope there is infinite or NaN
+/// (the plain rule gave 0/0 or 0·inf = NaN for every case but `log(max(x, 1))`, whose
+/// argument is held at 1). Where the argument moves, the slope matches a central
+/// difference, and every derivative prints to text that parses back to it.
+#[test]
+fn strong_zero_where_the_inner_derivative_vanishes() {
+    let vars = ["x", "y"];
+    // (text, variable, a point of the held region with x replaced, x values where the
+    // argument moves): the held region is x < 0 unless the text says otherwise.
+    let held = [-3.0, -0.5, -1e-3];
+    let moving = [0.3, 1.7, 4.0];
+    let cases: [(&str, usize, &[f64], &[f64]); 13] = [
+        ("sqrt(max(x, 0))", 0, &held, &moving),
+        ("sqrt((x + abs(x))/2)", 0, &held, &moving),
+        ("(y - 5)*sqrt(max(x, 0))", 0, &held, &moving),
+        ("(y - 5)*sqrt(max(x, 0))", 1, &held, &moving),
+        ("log(max(x, 1))", 0, &[-3.0, 0.5, 0.999], &[1.3, 2.0, 4.0]),
+        ("max(x, 0)^0.5", 0, &held, &moving),
+        ("max(x, 0)^0.25*y", 0, &held, &moving),
+        ("max(x, 0)^y", 0, &held, &moving),
+        ("asin(min(x, 1))", 0, &[1.001, 2.0, 5.0], &[-0.9, 0.2, 0.7]),
+        (
+            "acos(max(x, -1))",
+            0,
+            &[-1.001, -2.0, -5.0],
+            &[-0.9, 0.2, 0.7],
+        ),
+        ("exp(log(max(x, 0)))", 0, &held, &moving),
+        ("atan2(max(x, 0), max(y - 3, 0))", 0, &held, &moving),
+        ("atan2(max(x, 0), max(y - 3, 0))", 1, &held, &moving),
+    ];
+    for (text, var, zero_at, slope_at) in cases {
+        let e = parse(text, &vars);
+        let d = e.derivative(var).unwrap_or_else(|e| panic!("{e}"));
+        let printed = d.to_string();
+        assert_eq!(parse(&printed, &vars), d, "d({text}) = {printed}");
+        for &x in zero_at {
+            let got = d.eval(&[x, 2.0]);
+            assert!(
+                got == 0.0,
+                "d({text})/d{} = {printed} at x = {x}: {got}",
+                vars[var]
+            );
+        }
+        for &x in slope_at {
+            let v = [x, 2.0];
+            let (got, want) = (d.eval(&v), central(&e, &v, var));
+            assert!(
+                (got - want).abs() <= 1e-6 * (1.0 + got.abs()),
+                "d({text})/d{} = {printed} at x = {x}: {got} vs {want}",
+                vars[var]
+            );
+        }
+    }
+    // A second derivative keeps the strong zero too.
+    let d2 = parse("sqrt(max(x, 0))", &vars)
+        .derivative(0)
+        .and_then(|d| d.derivative(0))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(parse(&d2.to_string(), &vars), d2);
+    assert!(d2.eval(&[-1.0, 0.0]) == 0.0, "{d2}");
+    let want = -0.25 * 2.0_f64.powf(-1.5);
+    assert!((d2.eval(&[2.0, 0.0]) - want).abs() <= 1e-15, "{d2}");
+}
+
+/// Only a zero inner derivative gives the strong zero: where the argument moves into the
+/// singular point, the slope is still the infinite one of the plain rule, and a constant
+/// inner derivative keeps the plain printed form.
+#[test]
+fn strong_zero_needs_a_zero_inner_derivative() {
+    let vars = ["x", "y"];
+    for (text, point, want) in [
+        ("sqrt(max(x, 0))", [0.0, 0.0], f64::INFINITY),
+        ("sqrt(x)", [0.0, 0.0], f64::INFINITY),
+        ("sqrt(2*x)", [0.0, 0.0], f64::INFINITY),
+        ("max(x, 0)^0.5", [0.0, 0.0], f64::INFINITY),
+        ("log(abs(x) + x)", [0.0, 0.0], f64::INFINITY),
+        ("asin(x)", [1.0, 0.0], f64::INFINITY),
+    ] {
+        let d = parse(text, &vars)
+            .derivative(0)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(d.eval(&point), want, "d({text}) = {d} at {point:?}");
+    }
+    // atan2 has no slope at the origin: NaN unless both arguments are held there.
+    let d = parse("atan2(x, max(y, 0))", &vars)
+        .derivative(0)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(d.eval(&[0.0, -1.0]).is_nan(), "{d}");
+    // Printed forms: plain where the inner derivative is a constant, the strong products
+    // where it varies.
+    for (text, want) in [
+        ("sqrt(2*x)", "2/(2*sqrt(2*x))"),
+        ("(2*x)^0.5", "0.5*(2*x)^(-0.5)*2"),
+        (
+            "sqrt(max(x, 0))",
+            "xdivy(0.5*(1 + sign(x)), 2*sqrt(max(x, 0)))",
+        ),
+        ("log(y*x)", "xdivy(y, y*x)"),
+        ("log(x^2)", "xdivy(2*x, x^2)"),
+        (
+            "max(x, 0)^0.5",
+            "xmuly(0.5*(1 + sign(x)), 0.5*max(x, 0)^(-0.5))",
+        ),
+        ("sin(x^2)", "cos(x^2)*(2*x)"),
+        ("(x^2)^3", "3*(x^2)^2*(2*x)"),
+        ("asin(x^2)", "xdivy(2*x, sqrt(1 - (x^2)^2))"),
+        ("x^y", "x^y*xdivy(y, x)"),
+        ("y^x", "y^x*log(y)"),
+        ("atan2(x^2, y)", "xmuly(2*x, y/((x^2)^2 + y^2))"),
+    ] {
+        let d = parse(text, &vars)
+            .derivative(0)
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(d.to_string(), want, "d({text})/dx");
+        assert_eq!(parse(want, &vars), d, "{want}");
+    }
+}
+
+/// `xmuly` and `xdivy`: the plain product and quotient bit for bit wherever those are
+/// not NaN, 0 where the first argument is 0 and they are; their simplifications.
+#[test]
+fn strong_zero_products_evaluate_and_simplify() {
+    let vars = ["x", "y"];
+    let mul = parse("xmuly(x, y)", &vars);
+    let div = parse("xdivy(x, y)", &vars);
+    let values = [
+        0.0,
+        -0.0,
+        1.5,
+        -2.25,
+        1e-320,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NAN,
+    ];
+    for &a in &values {
+        for &b in &values {
+            for (e, plain) in [(&mul, a * b), (&div, a / b)] {
+                let got = e.eval(&[a, b]);
+                if !plain.is_nan() {
+                    assert_eq!(got.to_bits(), plain.to_bits(), "{e} at ({a}, {b})");
+                } else if a == 0.0 {
+                    assert_eq!(got.to_bits(), 0.0_f64.to_bits(), "{e} at ({a}, {b})");
+                } else {
+                    assert!(got.is_nan(), "{e} at ({a}, {b}): {got}");
+                }
+            }
+        }
+    }
+    for (text, want) in [
+        ("xmuly(x, y)", "xmuly(x, y)"),
+        ("xdivy(x + 1, y)*2", "xdivy(x + 1, y)*2"),
+        ("xmuly(0, y)", "0"),
+        ("xdivy(0, y)", "0"),
+        ("xmuly(2, y)", "2*y"),
+        ("xdivy(-2, y)", "-2/y"),
+        ("xmuly(x, 1) + xdivy(y, -1)", "x - y"),
+        ("xmuly(x, 0)", "0"),
+        ("xmuly(3, 2) + xdivy(1, 4)", "6.25"),
+        ("-xdivy(x, y)^2", "-xdivy(x, y)^2"),
+    ] {
+        let e = parse(text, &vars);
+        assert_eq!(e.to_string(), want, "{text}");
+        assert_eq!(parse(want, &vars), e, "{want}");
+    }
+    // Their own derivatives keep the strong zero of the first argument.
+    let e = parse("xdivy(max(x, 0), y) + xmuly(max(x, 0), log(y))", &vars);
+    for var in 0..2 {
+        let d = e.derivative(var).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(parse(&d.to_string(), &vars), d);
+        assert!(d.eval(&[-1.0, 0.0]) == 0.0, "{d}");
+        let v = [0.7, 1.3];
+        let (got, want) = (d.eval(&v), central(&e, &v, var));
+        assert!(
+            (got - want).abs() <= 1e-6 * (1.0 + got.abs()),
+            "{d}: {got} vs {want}"
+        );
+    }
+    assert!(matches!(
+        err("xmuly(x)", &vars),
+        ExprError::UnexpectedToken { .. }
+    ));
 }

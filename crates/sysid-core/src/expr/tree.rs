@@ -18,6 +18,11 @@ pub(super) enum BinOp {
     Min,
     /// `max(a, b)` (NaN if either is NaN).
     Max,
+    /// `xmuly(a, b)`: `a·b`, except 0 where `a` is 0 and `a·b` is NaN (`b` infinite or
+    /// NaN) — the chain rule's strong zero for a product (see the module doc of `expr`).
+    XMulY,
+    /// `xdivy(a, b)`: `a/b`, except 0 where `a` is 0 and `a/b` is NaN (`b` zero or NaN).
+    XDivY,
 }
 
 impl BinOp {
@@ -35,6 +40,10 @@ impl BinOp {
             BinOp::Min | BinOp::Max if a.is_nan() || b.is_nan() => f64::NAN,
             BinOp::Min => a.min(b),
             BinOp::Max => a.max(b),
+            // Exactly the plain operation wherever that is not NaN (signed zeros included),
+            // so a derivative keeps its bits wherever the plain chain rule was defined.
+            BinOp::XMulY => strong_zero(a, a * b),
+            BinOp::XDivY => strong_zero(a, a / b),
         }
     }
 
@@ -44,15 +53,23 @@ impl BinOp {
             BinOp::Atan2 => Some("atan2"),
             BinOp::Min => Some("min"),
             BinOp::Max => Some("max"),
+            BinOp::XMulY => Some("xmuly"),
+            BinOp::XDivY => Some("xdivy"),
             _ => None,
         }
     }
 
     /// The two-argument function with this name, if any.
     pub(super) fn from_function_name(name: &str) -> Option<BinOp> {
-        [BinOp::Atan2, BinOp::Min, BinOp::Max]
-            .into_iter()
-            .find(|op| op.function_name() == Some(name))
+        [
+            BinOp::Atan2,
+            BinOp::Min,
+            BinOp::Max,
+            BinOp::XMulY,
+            BinOp::XDivY,
+        ]
+        .into_iter()
+        .find(|op| op.function_name() == Some(name))
     }
 
     fn symbol(self) -> &'static str {
@@ -62,8 +79,19 @@ impl BinOp {
             BinOp::Mul => "*",
             BinOp::Div => "/",
             BinOp::Pow => "^",
-            BinOp::Atan2 | BinOp::Min | BinOp::Max => ", ",
+            BinOp::Atan2 | BinOp::Min | BinOp::Max | BinOp::XMulY | BinOp::XDivY => ", ",
         }
+    }
+}
+
+/// `value` (the plain product or quotient of `a` by something), or 0 where `a` is 0 and
+/// `value` is NaN.
+#[inline(always)]
+fn strong_zero(a: f64, value: f64) -> f64 {
+    if a == 0.0 && value.is_nan() {
+        0.0
+    } else {
+        value
     }
 }
 
@@ -191,6 +219,26 @@ pub(super) fn bin(op: BinOp, a: Tree, b: Tree) -> Tree {
                 raw(op, a, b)
             }
         }
+        // 0 in the first place is 0 whatever the second (the strong zero); a nonzero
+        // constant there makes the plain operation, which then equals it everywhere.
+        BinOp::XMulY | BinOp::XDivY => {
+            let plain = if op == BinOp::XMulY {
+                BinOp::Mul
+            } else {
+                BinOp::Div
+            };
+            if is(&a, 0.0) {
+                Tree::Const(0.0)
+            } else if matches!(a, Tree::Const(_))
+                || is(&b, 1.0)
+                || is(&b, -1.0)
+                || (plain == BinOp::Mul && is(&b, 0.0))
+            {
+                bin(plain, a, b)
+            } else {
+                raw(op, a, b)
+            }
+        }
         BinOp::Atan2 | BinOp::Min | BinOp::Max => raw(op, a, b),
     }
 }
@@ -214,6 +262,24 @@ pub(super) fn pow(a: Tree, b: Tree) -> Tree {
 // ---------------------------------------------------------------------------------------
 // Derivative, variable walks, compilation.
 
+/// The chain rule's `outer·da` where `outer` may be infinite or NaN while the function is
+/// finite: `xmuly(da, outer)`, 0 wherever `da` is (the strong zero). A constant `da`
+/// (nonzero: a zero folds the product away) gives the plain `outer*da`, which then equals
+/// it everywhere and prints as before.
+fn chain_mul(outer: Tree, da: Tree) -> Tree {
+    if matches!(da, Tree::Const(_)) {
+        mul(outer, da)
+    } else {
+        bin(BinOp::XMulY, da, outer)
+    }
+}
+
+/// Symbolic derivative. Where the outer derivative of a chain-rule product can be
+/// infinite or NaN while the function is finite (`sqrt`, `log`, `asin`, `acos`, a
+/// fractional or negative constant power, a power with a varying exponent, `atan2` at the
+/// origin), the product is `xmuly`/`xdivy`: 0 wherever the inner derivative is 0. A
+/// constant inner derivative, which is never 0 there, gives the plain form (the
+/// simplifying constructors see to it).
 pub(super) fn diff(t: &Tree, v: usize) -> Tree {
     match t {
         Tree::Const(_) => Tree::Const(0.0),
@@ -232,23 +298,46 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                     pow(b, Tree::Const(2.0)),
                 ),
                 BinOp::Pow => match (&a, &b) {
-                    // c·a^(c-1)·da; c - 1 is finite because c is.
+                    // c·a^(c-1)·da; c - 1 is finite because c is. a^(c-1) is infinite at
+                    // a = 0 (c < 1) or NaN below it (fractional c) where a^c may be finite:
+                    // a strong zero there.
                     (_, Tree::Const(c)) => {
                         let c = *c;
-                        mul(mul(Tree::Const(c), pow(a, Tree::Const(c - 1.0))), da)
+                        let outer = mul(Tree::Const(c), pow(a, Tree::Const(c - 1.0)));
+                        if c < 1.0 || c.fract() != 0.0 {
+                            chain_mul(outer, da)
+                        } else {
+                            mul(outer, da)
+                        }
                     }
                     // a^b·log(a)·db for a constant base.
                     (Tree::Const(_), _) => mul(mul(t.clone(), call(Func::Log, a)), db),
+                    // a^b·(db·log(a) + b·da/a): log(a) and 1/a are singular at a = 0.
                     _ => {
-                        let inner = add(mul(db, call(Func::Log, a.clone())), div(mul(b, da), a));
+                        let inner = add(
+                            bin(BinOp::XMulY, db, call(Func::Log, a.clone())),
+                            bin(BinOp::XDivY, mul(b, da), a),
+                        );
                         mul(t.clone(), inner)
                     }
                 },
-                // (b·da − a·db)/(a² + b²)
-                BinOp::Atan2 => div(
-                    sub(mul(b.clone(), da), mul(a.clone(), db)),
-                    add(pow(a, Tree::Const(2.0)), pow(b, Tree::Const(2.0))),
-                ),
+                // (b·da − a·db)/(a² + b²), which is 0/0 at the origin even where a and b
+                // are held there (da = db = 0); with a varying inner derivative, each
+                // partial is a strong zero: xmuly(da, b/(a² + b²)) − xmuly(db, a/(a² + b²)).
+                BinOp::Atan2 => {
+                    let norm = add(
+                        pow(a.clone(), Tree::Const(2.0)),
+                        pow(b.clone(), Tree::Const(2.0)),
+                    );
+                    if matches!(da, Tree::Const(_)) && matches!(db, Tree::Const(_)) {
+                        div(sub(mul(b, da), mul(a, db)), norm)
+                    } else {
+                        sub(
+                            bin(BinOp::XMulY, da, div(b, norm.clone())),
+                            bin(BinOp::XMulY, db, div(a, norm)),
+                        )
+                    }
+                }
                 // min(a, b) = (a + b − |a − b|)/2, max(a, b) = (a + b + |a − b|)/2, so
                 // the derivative is (da + db ∓ sign(a − b)·(da − db))/2.
                 BinOp::Min | BinOp::Max => {
@@ -261,6 +350,12 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                     };
                     mul(Tree::Const(0.5), inner)
                 }
+                // Each product rule term keeps the strong zero of its first factor.
+                BinOp::XMulY => add(bin(BinOp::XMulY, da, b.clone()), bin(BinOp::XMulY, a, db)),
+                BinOp::XDivY => sub(
+                    bin(BinOp::XDivY, da, b.clone()),
+                    bin(BinOp::XDivY, mul(a, db), pow(b, Tree::Const(2.0))),
+                ),
             }
         }
         Tree::Call(f, a) => {
@@ -274,8 +369,9 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                 Func::Cos => neg(mul(call(Func::Sin, a), da)),
                 Func::Tan => div(da, pow(call(Func::Cos, a), Tree::Const(2.0))),
                 Func::Exp => mul(t.clone(), da),
-                Func::Log => div(da, a),
-                Func::Sqrt => div(da, mul(Tree::Const(2.0), t.clone())),
+                // 1/a and 1/(2·sqrt(a)) are infinite at a = 0: strong zeros.
+                Func::Log => bin(BinOp::XDivY, da, a),
+                Func::Sqrt => bin(BinOp::XDivY, da, mul(Tree::Const(2.0), t.clone())),
                 Func::Abs => mul(call(Func::Sign, a), da),
                 Func::Sign => Tree::Const(0.0),
                 Func::Tanh => mul(sub(Tree::Const(1.0), pow(t.clone(), Tree::Const(2.0))), da),
@@ -283,7 +379,8 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                 Func::Asin | Func::Acos => {
                     let root = call(Func::Sqrt, sub(Tree::Const(1.0), pow(a, Tree::Const(2.0))));
                     let da = if *f == Func::Asin { da } else { neg(da) };
-                    div(da, root)
+                    // Infinite at a = ±1: a strong zero.
+                    bin(BinOp::XDivY, da, root)
                 }
                 Func::Sinh => mul(call(Func::Cosh, a), da),
                 Func::Cosh => mul(call(Func::Sinh, a), da),
@@ -398,7 +495,7 @@ fn precedence(t: &Tree) -> u8 {
         Tree::Bin(BinOp::Add | BinOp::Sub, ..) => SUM,
         Tree::Bin(BinOp::Mul | BinOp::Div, ..) => PRODUCT,
         Tree::Bin(BinOp::Pow, ..) => POWER,
-        Tree::Bin(BinOp::Atan2 | BinOp::Min | BinOp::Max, ..) => ATOM,
+        Tree::Bin(BinOp::Atan2 | BinOp::Min | BinOp::Max | BinOp::XMulY | BinOp::XDivY, ..) => ATOM,
     }
 }
 
@@ -450,7 +547,7 @@ pub(super) fn write_tree(t: &Tree, names: &[String], f: &mut fmt::Formatter<'_>)
                 BinOp::Add | BinOp::Sub => (SUM, PRODUCT),
                 BinOp::Mul | BinOp::Div => (PRODUCT, POWER),
                 BinOp::Pow => (ATOM, POWER),
-                BinOp::Atan2 | BinOp::Min | BinOp::Max => (0, 0),
+                BinOp::Atan2 | BinOp::Min | BinOp::Max | BinOp::XMulY | BinOp::XDivY => (0, 0),
             };
             write_operand(a, precedence(a) < left_min, names, f)?;
             f.write_str(op.symbol())?;
