@@ -406,10 +406,23 @@ pub fn compute_greyest(
                          start at a stationary point, e.g. an unmeasured state at a term's \
                          singular point such as sqrt(0); start it elsewhere (--x0 NAME=VALUE)"
                     )
+                } else if s.report.termination == sysid_core::Termination::NoDescent
+                    && !s.report.stationary()
+                {
+                    format!(
+                        "stopped: no damped step lowered the cost although the gradient is not \
+                         small there (largest cosine between a Jacobian column and the \
+                         residual {:.1e}, stationary at most {:.0e}): the Jacobian may not \
+                         describe the residuals (not converged)",
+                        s.report.gradient_cosine.unwrap_or(f64::NAN),
+                        sysid_core::STATIONARY_COSINE
+                    )
                 } else {
                     crate::words::termination(Some(s.report.termination)).to_owned()
                 },
-                converged: s.report.termination == sysid_core::Termination::Converged,
+                // No damped step lowering the cost at a point where the gradient is at
+                // rounding level is a stationary point, not a failure.
+                converged: s.report.stationary(),
                 iterations: s.report.iterations,
                 initial_cost: s.report.initial_cost,
                 final_cost: s.report.final_cost(),

@@ -168,9 +168,32 @@ pub struct LmReport {
     /// Rank of the column-normalised `JᵀJ` and its number of columns, when the test of
     /// [`LmSettings::no_progress`] ran (a solve that did not move); `None` otherwise.
     pub rank: Option<(usize, usize)>,
+    /// MINPACK's gradient measure at the last Jacobian: the largest cosine between a
+    /// column of `J` and the residual, `max_j |J_jᵀr| / (‖J_j‖·‖r‖)` (zero columns left
+    /// out); `None` when no Jacobian was formed. At a stationary point it is at rounding
+    /// level; a solve that ends [`Termination::NoDescent`] with it large had a Jacobian
+    /// that does not describe its residuals ([`LmReport::stationary`]).
+    pub gradient_cosine: Option<f64>,
 }
 
+/// Largest gradient cosine ([`LmReport::gradient_cosine`]) at which a solve that found no
+/// descending step counts as stationary: a Gauss–Newton step from such a point could
+/// lower `‖r‖²` by about `p·1e-8` of itself at most, within a hundred times the default
+/// relative convergence tolerance's reach over `p` parameters.
+pub const STATIONARY_COSINE: f64 = 1e-4;
+
 impl LmReport {
+    /// Whether the solve ended at a stationary point: [`Termination::Converged`], or
+    /// [`Termination::NoDescent`] (no damped step lowered the cost) with a gradient cosine
+    /// at most [`STATIONARY_COSINE`] at the last Jacobian.
+    pub fn stationary(&self) -> bool {
+        match self.termination {
+            Termination::Converged => true,
+            Termination::NoDescent => self.gradient_cosine.is_some_and(|c| c <= STATIONARY_COSINE),
+            _ => false,
+        }
+    }
+
     /// Cost before every accepted step and after the last: index 0 is the start.
     pub fn cost_history(&self) -> Vec<f64> {
         std::iter::once(self.initial_cost)
@@ -234,6 +257,7 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
         trials: 0,
         mu: settings.mu_initial,
         rank: None,
+        gradient_cosine: None,
     };
     let finish = |theta, residuals, report| LmSolution {
         theta,
@@ -287,6 +311,16 @@ pub fn levenberg_marquardt<P: LeastSquaresProblem + ?Sized>(
             d.fill(top);
         }
         let r_norm = cost.sqrt();
+        report.gradient_cosine = Some(
+            g.iter()
+                .enumerate()
+                .filter(|&(j, _)| jtj[(j, j)] > 0.0)
+                .map(|(j, gj)| gj.abs() / (jtj[(j, j)].sqrt() * r_norm.max(f64::MIN_POSITIVE)))
+                .fold(
+                    0.0,
+                    |a: f64, c| if c.is_nan() { f64::INFINITY } else { a.max(c) },
+                ),
+        );
         if g.iter()
             .zip(&d)
             .all(|(gj, dj)| gj.abs() <= settings.gtol * dj * r_norm)
@@ -497,6 +531,79 @@ mod tests {
         let h = sol.report.cost_history();
         assert!(h.windows(2).all(|w| w[1] < w[0]), "{h:?}");
         assert_eq!(sol.report.termination, Termination::Converged);
+    }
+
+    /// `r = (θ − 1, θ + 1)` (minimum θ = 0, `‖r‖² = 2`), with the Jacobian's sign flipped
+    /// when `wrong`, and the residuals rounded to multiples of 1e-6 when `coarse` (a cost
+    /// evaluated to a finite precision, as a simulated one is).
+    struct Pair {
+        wrong: bool,
+        coarse: bool,
+    }
+
+    impl LeastSquaresProblem for Pair {
+        type Error = ();
+        fn residual_count(&self) -> usize {
+            2
+        }
+        fn residuals(&mut self, t: &[f64], r: &mut [f64]) -> Result<bool, ()> {
+            r[0] = t[0] - 1.0;
+            r[1] = t[0] + 1.0;
+            if self.coarse {
+                for v in r.iter_mut() {
+                    *v = (*v * 1e6).round() / 1e6;
+                }
+            }
+            Ok(true)
+        }
+        fn jacobian(&mut self, _: &[f64], _: &[f64], j: &mut DMatrix<f64>) -> Result<(), ()> {
+            let s = if self.wrong { -1.0 } else { 1.0 };
+            j[(0, 0)] = s;
+            // A sensitivity known to 1e-10, as an integrated one is.
+            j[(1, 0)] = s * (1.0 + 1e-10);
+            Ok(())
+        }
+    }
+
+    /// No damped step lowers the cost in both cases; only the one whose gradient is at
+    /// rounding level is a stationary point.
+    #[test]
+    fn no_descent_is_stationary_only_with_a_small_gradient() {
+        // 1e-9 from the minimum: the cost, known to 1e-6, is 2 there and at every point a
+        // step can reach; the gradient, from a Jacobian known to 1e-10, is 1e-10.
+        let at_min = levenberg_marquardt(
+            &mut Pair {
+                wrong: false,
+                coarse: true,
+            },
+            &[1e-9],
+            &LmSettings::default(),
+        )
+        .unwrap();
+        assert_eq!(
+            at_min.report.termination,
+            Termination::NoDescent,
+            "{:?}",
+            at_min.report
+        );
+        let c = at_min.report.gradient_cosine.unwrap();
+        assert!(c < 1e-8 && c > 0.0, "cosine {c}");
+        assert!(at_min.report.stationary());
+        // A Jacobian of the wrong sign: every step goes uphill.
+        let wrong = levenberg_marquardt(
+            &mut Pair {
+                wrong: true,
+                coarse: false,
+            },
+            &[0.5],
+            &LmSettings::default(),
+        )
+        .unwrap();
+        assert_eq!(wrong.report.termination, Termination::NoDescent);
+        let c = wrong.report.gradient_cosine.unwrap();
+        // |Jᵀr| = 2·0.5 = 1 over ‖J‖·‖r‖ = √2·√2.5 (to the Jacobian's 1e-10).
+        assert!((c - 1.0 / 5f64.sqrt()).abs() < 1e-9, "cosine {c}");
+        assert!(!wrong.report.stationary());
     }
 
     /// `r = (θ₁θ₂ − 1, θ₁θ₂ − 2)`: at the origin every column of the Jacobian is zero, so

@@ -41,8 +41,8 @@ pub use judge::{
     judge_free_run, judge_k_step, score, score_rows,
 };
 pub use least_squares::{
-    AcceptedStep, Control, LeastSquaresProblem, LmReport, LmSettings, LmSolution, Scaling,
-    levenberg_marquardt,
+    AcceptedStep, Control, LeastSquaresProblem, LmReport, LmSettings, LmSolution,
+    STATIONARY_COSINE, Scaling, levenberg_marquardt,
 };
 pub use linear::{DiscreteLinear, LinearModel, ModelNames, discretize_zoh, ramp_gain};
 pub use metrics::{ChannelMetrics, channel_metrics};
