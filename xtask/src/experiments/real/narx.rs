@@ -602,7 +602,7 @@ fn frols_inner(
     let terms: Vec<String> = fit.ranking[..fit.n_terms]
         .iter()
         .zip(&fit.coefficients)
-        .map(|(r, c)| format!("{c:+.5e}·{} (ERR {:.2e})", r.name, r.err))
+        .map(|(r, c)| format!("{c:+.5e}·{} ({:.2e})", r.name, r.err))
         .collect();
     table.note(format!(
         "Polynomial NARX, FROLS (sparse) ({OFFICIAL}; docs/decisions/frols-polynomial-narx.md): \
@@ -615,9 +615,10 @@ fn frols_inner(
          candidates) selected on the first {:.0} % of the first {used} of the {} training \
          samples and run free over the rest (held-out free-run RMSE after {window} samples, \
          {unit}: {}); chosen ({d}, {degree}, {nl}) with {}, FROLS run again on all training \
-         samples ({} rows, {} candidates): {} terms, in the order chosen, recorded units: {}; \
-         one-step RMSE {:.4} {unit}. Time to accuracy: selection {select_seconds:.1} s, final \
-         fit {fit_seconds:.1} s wall, 1 thread.",
+         samples ({} rows, {} candidates): {} terms, in the order chosen, in recorded units, \
+         each with its ERR (share of the uncentred yᵀy): {}; one-step RMSE {:.3e} {unit}. \
+         Time to accuracy: selection {select_seconds:.1} s, final fit {fit_seconds:.1} s \
+         wall, 1 thread.",
         100.0 * SELECT_FRACTION,
         est.len(),
         tried.join(", "),
