@@ -143,6 +143,14 @@ pub enum BaselineError {
         /// Value reached.
         value: f64,
     },
+    /// A signal the method needs to vary is constant over the rows it uses.
+    #[error("{what} does not vary over the {rows} rows used")]
+    NoVariation {
+        /// Which signal (e.g. `FROLS target output`).
+        what: &'static str,
+        /// Rows used.
+        rows: usize,
+    },
     /// A table row was evaluated with a different horizon than the table's.
     #[error("table '{table}' holds {expected} results; row '{row}' is a {found} result")]
     MixedHorizon {

@@ -5,6 +5,7 @@ mod discrete;
 pub mod error;
 pub mod evaluate;
 pub mod free_params;
+pub mod frols;
 pub mod lags;
 pub mod linear_ss;
 mod lsq;
@@ -29,6 +30,7 @@ pub use evaluate::{
     ChannelEvaluation, Evaluation, EvaluationTable, TableRow, evaluate, predictions,
 };
 pub use free_params::{FreeParameter, StateMatrix, parse_free_parameters};
+pub use frols::{FrolsConfig, FrolsFit, RankedTerm, TermCount, fit_frols};
 pub use lags::{
     InputOutputXcf, LagCandidate, LagGrid, LagOutcome, LagSearch, LagSearchConfig, LagSuggestion,
     OutputPacf, SuggestionConfig, search_lags, suggest_lags,

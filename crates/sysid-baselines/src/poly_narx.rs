@@ -166,8 +166,9 @@ impl TryFrom<PolyNarxRaw> for PolyNarxModel {
     }
 }
 
-/// The terms of a structure: constant, the linear part, then the monomials.
-fn structure_terms(
+/// The terms of a structure: constant, the linear part, then the monomials (also the
+/// candidate dictionary of [`crate::frols`]).
+pub(crate) fn structure_terms(
     o: &NarxOrders,
     p: usize,
     m: usize,
@@ -209,6 +210,33 @@ fn structure_terms(
 }
 
 impl PolyNarxModel {
+    /// A model from its parts (checked as a model file is), with nothing held.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn from_parts(
+        orders: NarxOrders,
+        centre: Vec<f64>,
+        scale: Vec<f64>,
+        terms: Vec<Vec<usize>>,
+        coefficients: DMatrix<f64>,
+        input_names: Vec<String>,
+        output_names: Vec<String>,
+        limits: Vec<(f64, f64)>,
+    ) -> Result<Self> {
+        let model = PolyNarxModel {
+            orders,
+            centre,
+            scale,
+            terms,
+            coefficients,
+            input_names,
+            output_names,
+            limits,
+            held: None,
+        };
+        model.validate()?;
+        Ok(model)
+    }
+
     fn validate(&self) -> Result<()> {
         self.orders.validate()?;
         let len = self

@@ -13,6 +13,8 @@ mod errors;
 mod evaluation;
 #[path = "cases/foh.rs"]
 mod foh;
+#[path = "cases/frols.rs"]
+mod frols;
 #[path = "cases/narx.rs"]
 mod narx;
 #[path = "cases/oe.rs"]

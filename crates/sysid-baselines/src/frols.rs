@@ -1,0 +1,506 @@
+//! Sparse polynomial NARX by Forward Regression Orthogonal Least Squares (FROLS; Billings,
+//! Chen & Korenberg 1989; Billings 2013, *Nonlinear System Identification: NARMAX Methods*,
+//! ch. 3), the polynomial NARX of the literature.
+//!
+//! The candidate terms are the dense [`crate::poly_narx`] structure's (a constant, every
+//! output lag and input tap, every monomial of degree `2..=degree` in the newest
+//! `nonlinear_lags` lags and taps), built on the same regressor rows. Each variable is
+//! divided by its root mean square over the rows and not centred, so a model that is sparse
+//! in the recorded signals stays sparse among the candidates. Terms are chosen one at a
+//! time: modified Gram–Schmidt keeps every remaining candidate orthogonal to the chosen
+//! ones, and the candidate with the largest Error Reduction Ratio
+//! `ERR = (wᵀr)² / (wᵀw · yᵀy)` (`w` its orthogonal part, `r` the target's, `yᵀy`
+//! uncentred) joins next. The number of terms minimises an information criterion of the
+//! one-step residual (AIC or BIC), or is fixed; the coefficients solve the unit triangular
+//! system of the Gram–Schmidt factors (least squares on the chosen columns). The result is
+//! a [`PolyNarxModel`], so its free run, prediction and divergence report are the dense
+//! model's. Nothing here is random; ties go to the first candidate in dictionary order.
+
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use sysid_core::Dataset;
+
+use crate::error::{BaselineError, Result, check_config};
+use crate::narx::divergence_limits;
+use crate::poly_narx::{PolyNarxModel, structure_terms};
+use crate::regressors::{NarxOrders, training_rows};
+
+/// A candidate whose part orthogonal to the chosen terms is shorter than this fraction of
+/// its own norm depends on them and is not eligible.
+const DEPENDENT_RTOL: f64 = 1e-9;
+/// The selection stops once the residual's squared norm falls below this fraction of
+/// `yᵀy` (nothing left to explain).
+const EXACT_RTOL: f64 = 1e-24;
+
+/// How the number of terms is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TermCount {
+    /// Minimise `AIC(n) = N ln(SSE(n)/N) + 2n` over the terms selected.
+    Aic,
+    /// Minimise `BIC(n) = N ln(SSE(n)/N) + n ln N` over the terms selected.
+    Bic,
+    /// The first `n` terms selected (fewer when the selection stopped earlier).
+    Fixed(usize),
+}
+
+impl TermCount {
+    /// `AIC`, `BIC` or `n terms`.
+    pub fn label(&self) -> String {
+        match self {
+            TermCount::Aic => "AIC".into(),
+            TermCount::Bic => "BIC".into(),
+            TermCount::Fixed(n) => format!("{n} terms"),
+        }
+    }
+}
+
+/// Settings of [`fit_frols`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct FrolsConfig {
+    /// Tapped delays of the linear candidates. Default `na = nb = 2`, `nk = 1`.
+    pub orders: NarxOrders,
+    /// Highest total degree of a candidate monomial (1: sparse ARX). Default 3.
+    pub degree: usize,
+    /// How many of the newest output lags and input taps (each channel) enter the
+    /// candidate monomials of degree ≥ 2. Default 2.
+    pub nonlinear_lags: usize,
+    /// Terms selected at most (the cap of the criterion's search). Default 40.
+    pub max_terms: usize,
+    /// How many of the selected terms the model keeps. Default [`TermCount::Aic`].
+    pub count: TermCount,
+    /// A simulated output more than this many half-ranges of the training data away from
+    /// the data's centre counts as diverged. Default 100.
+    pub divergence_factor: f64,
+}
+
+impl Default for FrolsConfig {
+    fn default() -> Self {
+        Self {
+            orders: NarxOrders::default(),
+            degree: 3,
+            nonlinear_lags: 2,
+            max_terms: 40,
+            count: TermCount::Aic,
+            divergence_factor: 100.0,
+        }
+    }
+}
+
+impl FrolsConfig {
+    /// Check every field.
+    pub fn validate(&self) -> Result<()> {
+        self.orders.validate()?;
+        check_config(
+            "degree",
+            self.degree as f64,
+            "must be between 1 and 5",
+            (1..=5).contains(&self.degree),
+        )?;
+        check_config(
+            "nonlinear_lags",
+            self.nonlinear_lags as f64,
+            "must be ≥ 1 when degree ≥ 2",
+            self.degree == 1 || self.nonlinear_lags >= 1,
+        )?;
+        check_config(
+            "max_terms",
+            self.max_terms as f64,
+            "must be ≥ 1",
+            self.max_terms >= 1,
+        )?;
+        if let TermCount::Fixed(n) = self.count {
+            check_config(
+                "count",
+                n as f64,
+                "a fixed number of terms must be between 1 and max_terms",
+                n >= 1 && n <= self.max_terms,
+            )?;
+        }
+        check_config(
+            "divergence_factor",
+            self.divergence_factor,
+            "must be finite and > 1",
+            self.divergence_factor.is_finite() && self.divergence_factor > 1.0,
+        )
+    }
+}
+
+/// One selected term, in the order FROLS chose it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RankedTerm {
+    /// The term in the recorded signals, e.g. `y(k-1)*u(k-1)` (`1`: the constant).
+    pub name: String,
+    /// Its Error Reduction Ratio (share of `yᵀy` it explains).
+    pub err: f64,
+    /// One-step residual sum of squares with the terms up to and including this one.
+    pub sse: f64,
+    /// AIC with the terms up to and including this one.
+    pub aic: f64,
+    /// BIC with the terms up to and including this one.
+    pub bic: f64,
+}
+
+/// What [`fit_frols`] returns.
+#[derive(Debug, Clone)]
+pub struct FrolsFit {
+    /// The model with the chosen number of terms.
+    pub model: PolyNarxModel,
+    /// Terms the model keeps (a prefix of [`FrolsFit::ranking`]).
+    pub n_terms: usize,
+    /// Every selected term in the order of selection (up to the cap).
+    pub ranking: Vec<RankedTerm>,
+    /// Coefficients of the model's terms in the recorded signals' units (the model itself
+    /// holds them for the scaled variables).
+    pub coefficients: Vec<f64>,
+    /// Candidate terms in the dictionary.
+    pub candidates: usize,
+    /// Rows fitted (rows touching a missing sample are skipped).
+    pub rows: usize,
+    /// Rows skipped for missing samples.
+    pub skipped_rows: usize,
+    /// One-step RMSE of the model on the rows fitted.
+    pub one_step_rmse: f64,
+    factors: Factors,
+}
+
+/// What it takes to build the model of any prefix of the ranking.
+#[derive(Debug, Clone)]
+struct Factors {
+    orders: NarxOrders,
+    scale: Vec<f64>,
+    /// The selected terms, in order.
+    terms: Vec<Vec<usize>>,
+    /// `k × k` unit upper-triangular factor, row-major: `P_sel = Q A`.
+    a: Vec<f64>,
+    /// `y ≈ Q g`.
+    g: Vec<f64>,
+    input_names: Vec<String>,
+    output_names: Vec<String>,
+    limits: Vec<(f64, f64)>,
+}
+
+impl Factors {
+    /// Coefficients (scaled variables) of the first `n` selected terms: `A_n θ = g_n`.
+    fn solve(&self, n: usize) -> Vec<f64> {
+        let k = self.g.len();
+        let mut theta = vec![0.0; n];
+        for t in (0..n).rev() {
+            let row = &self.a[t * k + t + 1..t * k + n];
+            theta[t] = self.g[t] - dot(row, &theta[t + 1..n]);
+        }
+        theta
+    }
+
+    fn model(&self, n: usize) -> Result<PolyNarxModel> {
+        let theta = self.solve(n);
+        PolyNarxModel::from_parts(
+            self.orders,
+            vec![0.0; self.scale.len()],
+            self.scale.clone(),
+            self.terms[..n].to_vec(),
+            DMatrix::from_row_slice(1, n, &theta),
+            self.input_names.clone(),
+            self.output_names.clone(),
+            self.limits.clone(),
+        )
+    }
+}
+
+impl FrolsFit {
+    /// The number of terms `count` keeps.
+    pub fn count(&self, count: TermCount) -> usize {
+        choose_count(&self.ranking, count)
+    }
+
+    /// The model of the first `n` selected terms (`1 ≤ n ≤ ranking.len()`), coefficients
+    /// by least squares on those terms' columns.
+    pub fn model_with(&self, n: usize) -> Result<PolyNarxModel> {
+        check_config(
+            "n",
+            n as f64,
+            "must be between 1 and the number of terms selected",
+            n >= 1 && n <= self.ranking.len(),
+        )?;
+        self.factors.model(n)
+    }
+}
+
+fn choose_count(ranking: &[RankedTerm], count: TermCount) -> usize {
+    let pick = |f: fn(&RankedTerm) -> f64| {
+        let mut best = 0;
+        for (i, r) in ranking.iter().enumerate() {
+            if f(r) < f(&ranking[best]) {
+                best = i;
+            }
+        }
+        best + 1
+    };
+    match count {
+        TermCount::Aic => pick(|r| r.aic),
+        TermCount::Bic => pick(|r| r.bic),
+        TermCount::Fixed(n) => n.min(ranking.len()),
+    }
+}
+
+/// What the orthogonal selection found.
+struct Selection {
+    /// Dictionary indices, in order.
+    chosen: Vec<usize>,
+    err: Vec<f64>,
+    sse: Vec<f64>,
+    /// `k × k` row-major unit upper-triangular factor.
+    a: Vec<f64>,
+    g: Vec<f64>,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// FROLS on the `n × m` column-major dictionary `cols` (overwritten by the candidates'
+/// orthogonal parts) and target `y`, at most `cap` terms.
+fn select(cols: &mut [f64], n: usize, y: &[f64], cap: usize) -> Selection {
+    let m = cols.len() / n;
+    let yy = dot(y, y);
+    let mut r = y.to_vec();
+    let mut q = vec![0.0; n];
+    // Per candidate: original norm, current squared norm, current wᵀr, eligibility.
+    let norm0: Vec<f64> = cols.chunks_exact(n).map(|c| dot(c, c).sqrt()).collect();
+    let mut ww: Vec<f64> = norm0.iter().map(|v| v * v).collect();
+    let mut wr: Vec<f64> = cols.chunks_exact(n).map(|c| dot(c, &r)).collect();
+    let mut eligible = vec![true; m];
+    // c[s·m + j]: the coefficient of chosen term s in candidate j's Gram–Schmidt.
+    let mut c = vec![0.0; cap * m];
+    let (mut chosen, mut err, mut sse, mut g) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for s in 0..cap {
+        let mut best: Option<(usize, f64)> = None;
+        for j in 0..m {
+            if !eligible[j] {
+                continue;
+            }
+            let tol = DEPENDENT_RTOL * norm0[j];
+            if ww[j].is_nan() || ww[j] <= tol * tol {
+                eligible[j] = false;
+                continue;
+            }
+            let e = wr[j] * wr[j] / (ww[j] * yy);
+            if best.is_none_or(|(_, b)| e > b) {
+                best = Some((j, e));
+            }
+        }
+        let Some((j, e)) = best else { break };
+        eligible[j] = false;
+        q.copy_from_slice(&cols[j * n..(j + 1) * n]);
+        let qq = ww[j];
+        let gj = dot(&q, &r) / qq;
+        for (ri, qi) in r.iter_mut().zip(&q) {
+            *ri -= gj * qi;
+        }
+        chosen.push(j);
+        err.push(e);
+        g.push(gj);
+        for k in 0..m {
+            if !eligible[k] {
+                continue;
+            }
+            let w = &mut cols[k * n..(k + 1) * n];
+            let a = dot(&q, w) / qq;
+            c[s * m + k] = a;
+            let (mut nn, mut nr) = (0.0, 0.0);
+            for ((wi, qi), ri) in w.iter_mut().zip(&q).zip(&r) {
+                *wi -= a * qi;
+                nn += *wi * *wi;
+                nr += *wi * ri;
+            }
+            ww[k] = nn;
+            wr[k] = nr;
+        }
+        let rr = dot(&r, &r);
+        sse.push(rr);
+        if rr <= EXACT_RTOL * yy {
+            break;
+        }
+    }
+    let k = chosen.len();
+    let mut a = vec![0.0; k * k];
+    for (t, &j) in chosen.iter().enumerate() {
+        a[t * k + t] = 1.0;
+        for s in 0..t {
+            a[s * k + t] = c[s * m + j];
+        }
+    }
+    Selection {
+        chosen,
+        err,
+        sse,
+        a,
+        g,
+    }
+}
+
+/// Fit a sparse polynomial NARX model by FROLS on every experiment of `data` (one output).
+///
+/// Errors: an invalid configuration, more than one output, records no longer than the lag
+/// window, no row without missing samples, no more rows than the terms that could be
+/// selected, an output that does not vary over the rows.
+pub fn fit_frols(data: &Dataset, config: &FrolsConfig) -> Result<FrolsFit> {
+    config.validate()?;
+    let p = data.output_channels().len();
+    if p != 1 {
+        return Err(BaselineError::Dimension {
+            what: "output channels of a FROLS polynomial NARX",
+            found: p,
+            expected: 1,
+        });
+    }
+    let o = config.orders;
+    let rows = training_rows(data, &o)?;
+    let m_in = data.input_channels().len();
+    let len = o.regressor_len(p, m_in);
+    let n = rows.inputs.ncols();
+    let terms = if config.degree == 1 {
+        structure_terms(&o, p, m_in, 1, 0)
+    } else {
+        structure_terms(&o, p, m_in, config.degree, config.nonlinear_lags)
+    };
+    let m = terms.len();
+    let cap = config.max_terms.min(m);
+    if n <= cap {
+        return Err(BaselineError::TooFewRows {
+            what: "FROLS rows (more than the terms that can be selected)",
+            found: n,
+            needed: cap + 1,
+        });
+    }
+    let y: Vec<f64> = rows.targets.row(0).iter().copied().collect();
+    let mean = y.iter().sum::<f64>() / n as f64;
+    if !y
+        .iter()
+        .any(|v| (v - mean).abs() > 1e-12 * mean.abs().max(f64::MIN_POSITIVE))
+    {
+        return Err(BaselineError::NoVariation {
+            what: "FROLS target output",
+            rows: n,
+        });
+    }
+    // Root-mean-square scale of each variable, not centred (a zero variable keeps 1: its
+    // monomials are zero columns, never eligible).
+    let scale: Vec<f64> = (0..len)
+        .map(|i| {
+            let ms = rows.inputs.row(i).iter().map(|v| v * v).sum::<f64>() / n as f64;
+            if ms > 0.0 { ms.sqrt() } else { 1.0 }
+        })
+        .collect();
+    let mut cols = vec![0.0; n * m];
+    let mut z = vec![0.0; len];
+    for r in 0..n {
+        for (i, zi) in z.iter_mut().enumerate() {
+            *zi = rows.inputs[(i, r)] / scale[i];
+        }
+        for (j, vars) in terms.iter().enumerate() {
+            cols[j * n + r] = vars.iter().map(|&i| z[i]).product();
+        }
+    }
+    let sel = select(&mut cols, n, &y, cap);
+    drop(cols);
+    if sel.chosen.is_empty() {
+        return Err(BaselineError::TooFewRows {
+            what: "FROLS candidate terms with a nonzero column",
+            found: 0,
+            needed: 1,
+        });
+    }
+    let nf = n as f64;
+    let factors = Factors {
+        orders: o,
+        scale,
+        terms: sel.chosen.iter().map(|&j| terms[j].clone()).collect(),
+        a: sel.a,
+        g: sel.g,
+        input_names: data.input_names(),
+        output_names: data.output_names(),
+        limits: divergence_limits(data, config.divergence_factor)?,
+    };
+    let names = factors.model(sel.chosen.len())?.term_names();
+    let ranking: Vec<RankedTerm> = names
+        .into_iter()
+        .enumerate()
+        .map(|(t, name)| {
+            let sse = sel.sse[t];
+            let ln = (sse / nf).ln();
+            let k = (t + 1) as f64;
+            RankedTerm {
+                name,
+                err: sel.err[t],
+                sse,
+                aic: nf * ln + 2.0 * k,
+                bic: nf * ln + k * nf.ln(),
+            }
+        })
+        .collect();
+    let n_terms = choose_count(&ranking, config.count);
+    let model = factors.model(n_terms)?;
+    let coefficients = factors
+        .solve(n_terms)
+        .iter()
+        .zip(&factors.terms)
+        .map(|(th, vars)| th / vars.iter().map(|&i| factors.scale[i]).product::<f64>())
+        .collect();
+    Ok(FrolsFit {
+        model,
+        n_terms,
+        one_step_rmse: (ranking[n_terms - 1].sse / nf).sqrt(),
+        ranking,
+        coefficients,
+        candidates: m,
+        rows: n,
+        skipped_rows: rows.skipped,
+        factors,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The triangular solve against a direct least-squares solve of the same columns.
+    #[test]
+    fn prefix_coefficients_are_least_squares_on_the_chosen_columns() {
+        let n = 50;
+        let cols_of = |j: usize| -> Vec<f64> {
+            (0..n)
+                .map(|i| ((i * (j + 2)) as f64 * 0.37).sin() + 0.1 * j as f64)
+                .collect()
+        };
+        let m = 6;
+        let mut cols: Vec<f64> = (0..m).flat_map(cols_of).collect();
+        let orig = cols.clone();
+        let y: Vec<f64> = (0..n).map(|i| (i as f64 * 0.11).cos() + 0.3).collect();
+        let sel = select(&mut cols, n, &y, 4);
+        assert_eq!(sel.chosen.len(), 4);
+        let k = 4;
+        for used in 1..=k {
+            let f = Factors {
+                orders: NarxOrders::default(),
+                scale: vec![],
+                terms: vec![],
+                a: sel.a.clone(),
+                g: sel.g.clone(),
+                input_names: vec![],
+                output_names: vec![],
+                limits: vec![],
+            };
+            let theta = f.solve(used);
+            let p = DMatrix::from_fn(n, used, |i, t| orig[sel.chosen[t] * n + i]);
+            let yv = nalgebra::DVector::from_vec(y.clone());
+            let ls = p.clone().svd(true, true).solve(&yv, 1e-14).unwrap();
+            for (a, b) in theta.iter().zip(ls.iter()) {
+                assert!((a - b).abs() < 1e-9 * b.abs().max(1.0), "{a} vs {b}");
+            }
+            let resid = (&p * &ls - &yv).norm_squared();
+            assert!((resid - sel.sse[used - 1]).abs() < 1e-9 * resid.max(1.0));
+        }
+    }
+}
