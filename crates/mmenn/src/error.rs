@@ -329,6 +329,18 @@ pub enum MmennError {
         /// The state's name.
         state: String,
     },
+    /// An MME estimate `fit` builds on did not converge, and the fit's policy refuses to
+    /// train a network on its `d̂` ([`crate::fit::UnconvergedMme::Refuse`], the library's
+    /// default): returned as soon as that estimate ends, before any network is trained.
+    #[error(
+        "MME's {report}. No network was trained on its d̂, which is not MME's estimate: {}; \
+         FitOptions::on_unconverged_mme = Warn builds the hybrid anyway, for inspection",
+        report.remedy()
+    )]
+    MmeNotConverged {
+        /// Which estimate, how it ended and its residual/noise variance ratios.
+        report: crate::fit::MmeConvergence,
+    },
     /// A network could not be built or trained.
     #[error("network: {0}")]
     Nn(#[from] nn::NnError),

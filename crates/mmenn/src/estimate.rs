@@ -54,6 +54,10 @@ pub struct EstimateOptions {
     /// The job's budget (default unlimited; the CLI's `--budget SECONDS`): MME stops with
     /// `CoreError::BudgetExhausted`, naming the stage and how far it got, once it is spent.
     pub budget: sysid_core::Budget,
+    /// The nonlinear estimator's iteration settings (a model with named terms; ignored by
+    /// the linear one). Default [`mme_core::IterationOptions::default`] (50 Gauss–Newton
+    /// iterations per solve).
+    pub iterations: mme_core::IterationOptions,
 }
 
 /// The MME configuration a model file and options imply.
@@ -69,6 +73,7 @@ pub fn mme_config(spec: &ModelSpec, opts: &EstimateOptions) -> MmeConfig {
         },
         substeps: opts.substeps,
         budget: opts.budget.clone(),
+        iterations: opts.iterations,
         ..MmeConfig::default()
     }
 }

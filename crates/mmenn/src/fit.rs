@@ -13,6 +13,17 @@
 //! the trajectory training hurt. Under [`DomainPolicy::Checked`] (the command line's
 //! default) each network candidate first meets an amplitude stress check and holds its
 //! edge value outside its training box when it fails ([`DomainCheck`]).
+//!
+//! Nor is a hybrid built on an MME estimate that did not converge, unless asked for: every
+//! estimate [`compute_fit`] runs (on the training records, again after the regression
+//! update, on the validation records) is checked as soon as it ends, and one that ended
+//! anything but `exact` or `converged` ([`MmeConvergence::converged`]) makes it return
+//! [`MmennError::MmeNotConverged`] before any network is trained, naming the estimate
+//! ([`MmeStage`]), its ending and its residual/noise variance ratios. Under
+//! [`UnconvergedMme::Warn`] (what `mmenn fit` and `mmenn compare` use) it goes on, and
+//! [`FitSummary::mme_estimates`] (`mme_estimates` in `summary.json`) and
+//! [`FitSummary::mme_converged`] say so; `mmenn fit` then writes its results for
+//! inspection and exits with status 3.
 
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -39,6 +50,7 @@ pub use choices::{
     DomainPolicy, HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkInputs,
     NetworkSelection, Training,
 };
+pub use convergence::{MmeConvergence, MmeStage, UnconvergedMme};
 pub use guard::{
     CandidateScore, DomainCheck, FoldScores, GuardCandidate, GuardHeldOut, GuardReport,
     STRESS_FACTOR, StressChannel, StressCheck, StressVerdict, stress_input,
@@ -48,6 +60,7 @@ use trajectory::train_network_on_trajectories;
 pub use trajectory::{TrajectoryChoice, TrajectorySummary};
 
 mod choices;
+mod convergence;
 mod d_figures;
 mod folds;
 pub(crate) mod guard;
@@ -105,6 +118,11 @@ pub struct FitOptions {
     /// [`NetworkInputs::StatesAndInputs`] (the thesis; `--network-inputs states` on the
     /// command line for the states alone).
     pub network_inputs: NetworkInputs,
+    /// What happens when an MME estimate the fit builds on does not converge. Default
+    /// [`UnconvergedMme::Refuse`]: [`compute_fit`] returns
+    /// [`MmennError::MmeNotConverged`] before training any network. The command line uses
+    /// [`UnconvergedMme::Warn`] (and exits with status 3 after writing the results).
+    pub on_unconverged_mme: UnconvergedMme,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
@@ -173,6 +191,7 @@ impl Default for FitOptions {
             guard: GuardHeldOut::LastFifth,
             network_domain: DomainPolicy::Extrapolate,
             network_inputs: NetworkInputs::StatesAndInputs,
+            on_unconverged_mme: UnconvergedMme::Refuse,
         }
     }
 }
@@ -313,9 +332,16 @@ pub struct FitSummary {
     /// MME's `W` diagonal on the training data.
     pub w_by_correction: BTreeMap<String, f64>,
     /// How MME's solve on the training data ended (`exact` for a given `W`, otherwise
-    /// the `W` search's ending: `converged`, `not_bracketed`, …). Anything but `exact`
-    /// or `converged` makes `mmenn fit` exit with status 3.
+    /// the `W` search's ending: `converged`, `not_bracketed`, …); the estimate the network
+    /// learns from (after the regression update, when asked for). Every estimate, with
+    /// its stage and residual/noise variance ratios: [`FitSummary::mme_estimates`].
     pub mme_termination: Option<sysid_core::Termination>,
+    /// How every MME estimate the fit ran ended, in order: the training estimate, the
+    /// re-estimate after the regression update (when asked for), the validation estimate
+    /// (when validation data is given). Any that did not converge
+    /// ([`MmeConvergence::converged`]) makes `mmenn fit` exit with status 3, and is only
+    /// here under [`UnconvergedMme::Warn`] (otherwise [`compute_fit`] refuses).
+    pub mme_estimates: Vec<MmeConvergence>,
     /// The automatic `W` search on the training data, when it ran.
     pub w_search: Option<mme_core::WSearch>,
     /// The regression update of the assumed model, when asked for (coefficients ± σ).
@@ -340,6 +366,22 @@ pub struct FitSummary {
     pub network_inputs: NetworkInputs,
     /// Files written.
     pub files: Vec<String>,
+}
+
+impl FitSummary {
+    /// Whether every MME estimate the fit ran converged (ended `exact` or `converged`).
+    pub fn mme_converged(&self) -> bool {
+        self.mme_estimates.iter().all(MmeConvergence::converged)
+    }
+
+    /// The MME estimates that did not converge, in the order they ran (empty when
+    /// [`FitSummary::mme_converged`]).
+    pub fn unconverged_mme(&self) -> Vec<&MmeConvergence> {
+        self.mme_estimates
+            .iter()
+            .filter(|m| !m.converged())
+            .collect()
+    }
 }
 
 /// Run MME on the data, train the network (sweep or fixed size), build the hybrid model,
@@ -414,6 +456,14 @@ pub struct FitOutcome {
     pub x_train: DMatrix<f64>,
 }
 
+impl FitOutcome {
+    /// Whether every MME estimate the hybrid was built on converged
+    /// ([`FitSummary::mme_converged`]; false only under [`UnconvergedMme::Warn`]).
+    pub fn mme_converged(&self) -> bool {
+        self.summary.mme_converged()
+    }
+}
+
 /// The files [`write_fit`] writes, in order.
 fn fit_files(spec: &ModelSpec, validation: bool, inputs: NetworkInputs) -> Vec<String> {
     let mut files = vec!["compare_train.svg".to_string()];
@@ -443,6 +493,11 @@ fn fit_files(spec: &ModelSpec, validation: bool, inputs: NetworkInputs) -> Vec<S
 /// hybrid model, and its free-run judgements on the first training and validation record
 /// (the one judge: initial state fitted to the first `x0_window` samples from the
 /// minimum-norm start and the model's `x̂(t0)`, every sample scored).
+///
+/// Each MME estimate is checked as it ends: one that did not converge returns
+/// [`MmennError::MmeNotConverged`] before any network is trained, unless
+/// [`FitOptions::on_unconverged_mme`] is [`UnconvergedMme::Warn`]
+/// ([`FitSummary::mme_estimates`] records every estimate's ending either way).
 pub fn compute_fit(
     data: &Dataset,
     spec: &ModelSpec,
@@ -474,9 +529,20 @@ pub fn compute_fit(
     };
     let data = &data;
     let config = mme_config(&spec, &opts.estimate);
+    // Every estimate is checked as it ends: a refused one costs no network training.
+    let mut mme_estimates = Vec::new();
+    let mut check = |stage: MmeStage, out: &mme_core::MmeOutput| -> Result<()> {
+        let report = MmeConvergence::of(stage, out);
+        if !report.converged() && opts.on_unconverged_mme == UnconvergedMme::Refuse {
+            return Err(MmennError::MmeNotConverged { report });
+        }
+        mme_estimates.push(report);
+        Ok(())
+    };
     let mut result = crate::progress::stage(progress, "MME estimate", || {
         estimate_spec(&spec, data, &config)
     })?;
+    check(MmeStage::Training, &result)?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
         let up = mme_core::update_model(
@@ -487,6 +553,7 @@ pub fn compute_fit(
         )?;
         spec.linear = up.model.clone();
         result = estimate_spec(&spec, data, &config)?;
+        check(MmeStage::RegressionUpdate, &result)?;
         update_report = Some(up.regressions);
     }
     let lin = spec.linear.clone();
@@ -504,6 +571,7 @@ pub fn compute_fit(
             vconf.w = mme_core::WeightSpec::Matrix(est.w.clone());
             vconf.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
             let vres = estimate_spec(&spec, v, &vconf)?;
+            check(MmeStage::Validation, &vres)?;
             let (xv, dv) = pairs(&vres.estimate, v);
             (
                 (x_train.clone(), d_train.clone()),
@@ -640,6 +708,7 @@ pub fn compute_fit(
         test_source,
         w_by_correction,
         mme_termination: est.report.termination,
+        mme_estimates,
         w_search: result.w_search.clone(),
         model_update: update_report,
         train,

@@ -78,6 +78,9 @@ fn guard_keeps_the_physics_alone_on_data_the_physics_generated() {
                 max_iterations: 3,
                 ..Default::default()
             },
+            // Noise-free data: no W brings the residual variance up to the stated noise
+            // variance (MME's W search ends `not_bracketed`); the guard is what is tested.
+            on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
             ..FitOptions::default()
         },
         &dir.join("fit"),
@@ -199,6 +202,9 @@ fn fit_with_guard(
                 max_iterations: 3,
                 ..Default::default()
             },
+            // Noise-free data: no W brings the residual variance up to the stated noise
+            // variance (MME's W search ends `not_bracketed`); the guard is what is tested.
+            on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
             ..FitOptions::default()
         },
         &dir.join("fit"),

@@ -9,6 +9,7 @@ mod estimate_start;
 mod examples;
 mod fit;
 mod fit_guard;
+mod fit_mme_convergence;
 mod greyest;
 mod hidden_effects;
 mod model;

@@ -582,6 +582,9 @@ fn oe_hybrid_rows(
         // The thesis's method: the network as trained on d̂ (the trajectory refinement
         // of `mmenn fit` is the thesis's future work, §7.1, and costs minutes here).
         train_on_trajectories: mmenn::fit::TrajectoryChoice::None,
+        // As before the policy existed: the row is computed whatever MME's ending (the
+        // summary's `mme_estimates` records it).
+        on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
         ..FitOptions::default()
     };
     let fit_dir = work.join("fit");

@@ -331,6 +331,9 @@ fn run_case(ctx: &Ctx, case: &Case) -> Result<Outcome> {
         // The thesis's method: the network as trained on d̂ (the trajectory refinement
         // of `mmenn fit` is the thesis's future work, §7.1, and costs minutes here).
         train_on_trajectories: mmenn::fit::TrajectoryChoice::None,
+        // As before the policy existed: the hybrid is built whatever MME's ending (the
+        // summary's `mme_estimates` records it).
+        on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
         ..FitOptions::default()
     };
     let spec = LoadedModel::read(&set.train.files.model)?.spec;

@@ -284,6 +284,13 @@ fn metrics_table(rep: &FreeRunReport) -> String {
 
 fn fit_report(s: &FitSummary) -> String {
     let mut r = String::from("# MME/NN hybrid model\n\n");
+    for m in s.unconverged_mme() {
+        r.push_str(&format!(
+            "**Not to be trusted:** MME's {m}. The network learnt a d̂ that is not MME's \
+             estimate ({}).\n\n",
+            m.remedy()
+        ));
+    }
     let training = match s.training {
         Training::Trainlm => "Levenberg–Marquardt with MATLAB trainlm's damping schedule",
         Training::Accelerated => {
@@ -310,6 +317,8 @@ fn fit_report(s: &FitSummary) -> String {
         },
         crate::words::named_values(&s.w_by_correction)
     ));
+    let estimates: Vec<String> = s.mme_estimates.iter().map(|m| m.to_string()).collect();
+    r.push_str(&format!("MME: {}.\n\n", estimates.join("; ")));
     let bounds: Vec<String> = s
         .network_box
         .iter()

@@ -125,6 +125,9 @@ fn fit_options(eff: &Effort, substeps: usize, window: usize) -> FitOptions {
         // docs/decisions/hybrid-network-domain-hold.md: beyond its training data the
         // network keeps its edge value; only the physics extrapolates.
         network_domain: mmenn::fit::DomainPolicy::Hold,
+        // As before the policy existed: the hybrid is built whatever MME's ending, and the
+        // note says how MME's iteration ended (`mme_termination`).
+        on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
         ..FitOptions::default()
     }
 }

@@ -82,6 +82,21 @@ fn check_mme_converged(
     }
 }
 
+/// Exit status 3 ([`NotConverged`]) when an MME estimate `fit` ran did not end `exact` or
+/// `converged` (`FitSummary::mme_estimates`, under `UnconvergedMme::Warn`): the results
+/// are written, but not to be trusted.
+fn check_fit_mme_converged(s: &mmenn::fit::FitSummary, out: &Path) -> Result<()> {
+    match s.unconverged_mme().first() {
+        None => Ok(()),
+        Some(m) => Err(NotConverged(format!(
+            "fit: MME's {m}; the results in {} are written for inspection only (see \
+             report.md)",
+            out.display()
+        ))
+        .into()),
+    }
+}
+
 /// Stage `out` for `command` (see [`StagedDir`]).
 fn stage(out: &Path, command: &str, force: bool, inputs: &[&PathBuf]) -> Result<StagedDir> {
     Ok(StagedDir::begin(
@@ -231,6 +246,7 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
         w: args.w,
         substeps: args.substeps,
         budget: args.budget.start(),
+        ..Default::default()
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "estimate", force, &inputs)?;
@@ -437,6 +453,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
             w: args.w,
             substeps: None,
             budget: args.budget.start(),
+            ..Default::default()
         },
         hidden: args.hidden,
         inits: args.inits,
@@ -454,6 +471,9 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
             window: args.trajectory_window,
             ..Default::default()
         },
+        // The results are written for inspection, and the exit status says they are not to
+        // be trusted (`check_fit_mme_converged`).
+        on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
         ..Default::default()
     };
     let inputs: Vec<&PathBuf> = args
@@ -489,7 +509,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         outln!("{line}");
     }
     outln!("wrote {} files into {}", s.files.len(), args.out.display());
-    check_mme_converged("fit", s.mme_termination, &args.out)
+    check_fit_mme_converged(&s, &args.out)
 }
 
 #[allow(clippy::print_stdout)]
@@ -556,6 +576,8 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             guard: a.guard,
             network_domain: domain(a.network_domain, a.hold_network_domain),
             network_inputs: a.network_inputs,
+            // As before the policy existed: the table is computed whatever MME's ending.
+            on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
             ..Default::default()
         },
         narx_lags: a.narx_lags,
