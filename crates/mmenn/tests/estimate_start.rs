@@ -363,10 +363,4 @@ fn a_crawl_along_a_kink_ends_on_the_cost_plateau_not_the_iteration_limit() {
         rb.iterations.len(),
         rb.termination
     );
-    eprintln!(
-        "plateau: J = {ja} after {} iterations; long: J = {jb} after {} ({:?})",
-        ra.iterations.len(),
-        rb.iterations.len(),
-        rb.termination
-    );
 }
