@@ -93,3 +93,25 @@ pub fn white(len: usize, seed: u64) -> Vec<f64> {
     let normal = Normal::new(0.0, 1.0).unwrap();
     (0..len).map(|_| normal.sample(&mut rng)).collect()
 }
+
+/// The input, output and sample interval of a record of the independent generator
+/// (`fixtures/discovery_suite/cases/<name>/<file>`, scipy, not this workspace's code).
+pub fn read_case(name: &str, file: &str) -> (Vec<f64>, Vec<f64>, f64) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/discovery_suite/cases")
+        .join(name)
+        .join(file);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
+    let (ct, cu, cy) = (col("t"), col("u"), col("y"));
+    let (mut t, mut u, mut y) = (Vec::new(), Vec::new(), Vec::new());
+    for l in lines {
+        let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
+        t.push(f[ct]);
+        u.push(f[cu]);
+        y.push(f[cy]);
+    }
+    (u, y, t[1] - t[0])
+}

@@ -2,8 +2,6 @@
 //! class (the true terms selected first and kept, coefficients exact), the independent
 //! generator's Duffing records (`fixtures/discovery_suite`, scipy RK45), and bad input.
 
-use std::path::Path;
-
 use nalgebra::DMatrix;
 use sysid_baselines::{
     BaselineError, FrolsConfig, NarxOrders, TermCount, fit_frols, frols::FrolsFit,
@@ -156,34 +154,14 @@ fn a_prefix_model_is_least_squares_on_its_terms() {
     assert!(fit.model_with(0).is_err() && fit.model_with(6).is_err());
 }
 
-fn read_case(name: &str, file: &str) -> (Vec<f64>, Vec<f64>, f64) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/discovery_suite/cases")
-        .join(name)
-        .join(file);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
-    let (ct, cu, cy) = (col("t"), col("u"), col("y"));
-    let (mut t, mut u, mut y) = (Vec::new(), Vec::new(), Vec::new());
-    for l in lines {
-        let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
-        t.push(f[ct]);
-        u.push(f[cu]);
-        y.push(f[cy]);
-    }
-    (u, y, t[1] - t[0])
-}
-
 /// Scoring rule fixed before the first run (docs/decisions/frols-polynomial-narx.md, rule
 /// 5b): on the independent generator's hardening Duffing oscillator (measured with noise),
 /// the sparse degree-3 model's validation free-run RMSE is at most half the sparse linear
 /// ARX model's of the same lags.
 #[test]
 fn on_an_independent_duffing_record_the_sparse_cubic_halves_the_free_run_error() {
-    let (u, y, dt) = read_case("duffing_hardening", "est.csv");
-    let (uv, yv, _) = read_case("duffing_hardening", "val.csv");
+    let (u, y, dt) = crate::common::read_case("duffing_hardening", "est.csv");
+    let (uv, yv, _) = crate::common::read_case("duffing_hardening", "val.csv");
     let train = dataset(&u, &y, dt);
     let val = dataset(&uv, &yv, dt);
     let fit = |degree| {

@@ -2,8 +2,6 @@
 //! recovery), and records of a Duffing oscillator that mmenn did not make (the Python /
 //! scipy generator of `fixtures/discovery_suite`, RK45 with tight tolerances).
 
-use std::path::Path;
-
 use nalgebra::DMatrix;
 use sysid_baselines::{NarxOrders, PolyNarxConfig, fit_poly_narx};
 use sysid_core::{Channel, Dataset, Experiment, Model};
@@ -118,34 +116,14 @@ fn a_diverging_free_run_is_an_error_naming_the_sample() {
     assert!(e.contains("diverged at sample"), "{e}");
 }
 
-fn read_case(name: &str, file: &str) -> (Vec<f64>, Vec<f64>, f64) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fixtures/discovery_suite/cases")
-        .join(name)
-        .join(file);
-    let text = std::fs::read_to_string(&path).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |n: &str| header.iter().position(|h| *h == n).unwrap();
-    let (ct, cu, cy) = (col("t"), col("u"), col("y"));
-    let (mut t, mut u, mut y) = (Vec::new(), Vec::new(), Vec::new());
-    for l in lines {
-        let f: Vec<f64> = l.split(',').map(|v| v.parse().unwrap()).collect();
-        t.push(f[ct]);
-        u.push(f[cu]);
-        y.push(f[cy]);
-    }
-    (u, y, t[1] - t[0])
-}
-
 /// Scoring rule fixed before the first run (docs/decisions/polynomial-narx-baseline.md):
 /// on the independent generator's hardening Duffing oscillator (x'' = −40x − 0.6x' −
 /// cubic + u, measured with noise), a degree-3 model's validation free-run RMSE is at most
 /// half the linear ARX model's of the same orders.
 #[test]
 fn on_an_independent_duffing_record_the_cubic_terms_halve_the_free_run_error() {
-    let (u, y, dt) = read_case("duffing_hardening", "est.csv");
-    let (uv, yv, _) = read_case("duffing_hardening", "val.csv");
+    let (u, y, dt) = crate::common::read_case("duffing_hardening", "est.csv");
+    let (uv, yv, _) = crate::common::read_case("duffing_hardening", "val.csv");
     let train = dataset(&u, &y, dt);
     let val = dataset(&uv, &yv, dt);
     let orders = NarxOrders {
@@ -183,8 +161,8 @@ fn on_an_independent_duffing_record_the_cubic_terms_halve_the_free_run_error() {
 /// validation free run, and must lower the free-run error on its own training record.
 #[test]
 fn simulation_focus_refines_the_free_run_on_the_independent_duffing_record() {
-    let (u, y, dt) = read_case("duffing_hardening", "est.csv");
-    let (uv, yv, _) = read_case("duffing_hardening", "val.csv");
+    let (u, y, dt) = crate::common::read_case("duffing_hardening", "est.csv");
+    let (uv, yv, _) = crate::common::read_case("duffing_hardening", "val.csv");
     let train = dataset(&u, &y, dt);
     let val = dataset(&uv, &yv, dt);
     let config = PolyNarxConfig {
