@@ -263,18 +263,7 @@ fn a_data_start_that_sticks_far_from_the_data_restarts_from_the_fitted_start() {
     let dir: PathBuf =
         std::env::temp_dir().join(format!("mmenn-estimate-restart-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    // The record's output under the model's name.
-    let table = read_table(&folder.join("estimation.csv")).unwrap();
-    let col = |name: &str| table.columns[table.column_index(name).unwrap()].clone();
-    let (t, u, y) = (col("t"), col("u"), col("y"));
-    let e = Experiment::new(
-        t[0],
-        t[1] - t[0],
-        DMatrix::from_row_slice(1, u.len(), &u),
-        DMatrix::from_row_slice(1, y.len(), &y),
-    )
-    .unwrap();
-    let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("h2")], vec![e]).unwrap();
+    let data = tanks_record(&folder);
     write_experiment(&dir.join("record.csv"), &data, 0).unwrap();
     std::fs::write(dir.join("model.toml"), TANKS_AREA2).unwrap();
     let s = run_estimate(
@@ -304,6 +293,21 @@ fn a_data_start_that_sticks_far_from_the_data_restarts_from_the_fitted_start() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The real Cascaded Tanks estimation record, its output under the model's name (`h2`).
+fn tanks_record(folder: &std::path::Path) -> Dataset {
+    let table = read_table(&folder.join("estimation.csv")).unwrap();
+    let col = |name: &str| table.columns[table.column_index(name).unwrap()].clone();
+    let (t, u, y) = (col("t"), col("u"), col("y"));
+    let e = Experiment::new(
+        t[0],
+        t[1] - t[0],
+        DMatrix::from_row_slice(1, u.len(), &u),
+        DMatrix::from_row_slice(1, y.len(), &y),
+    )
+    .unwrap();
+    Dataset::new(vec![Channel::new("u")], vec![Channel::new("h2")], vec![e]).unwrap()
+}
+
 /// The same grey box at W = 2.5e4 (the reproduce's hybrid chooses W of this order): the
 /// `max(·, 0)` kinks of its overflow laws make Gauss–Newton crawl with damped steps that
 /// each gain 1e-7 of `J` or less, and with the relative test alone the solve ran to the
@@ -316,17 +320,7 @@ fn a_crawl_along_a_kink_ends_on_the_cost_plateau_not_the_iteration_limit() {
     let Some(folder) = crate::real_data::tanks_folder() else {
         return;
     };
-    let table = read_table(&folder.join("estimation.csv")).unwrap();
-    let col = |name: &str| table.columns[table.column_index(name).unwrap()].clone();
-    let (t, u, y) = (col("t"), col("u"), col("y"));
-    let e = Experiment::new(
-        t[0],
-        t[1] - t[0],
-        DMatrix::from_row_slice(1, u.len(), &u),
-        DMatrix::from_row_slice(1, y.len(), &y),
-    )
-    .unwrap();
-    let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("h2")], vec![e]).unwrap();
+    let data = tanks_record(&folder);
     let spec =
         mmenn::model_file::parse_model(std::path::Path::new("area2.toml"), TANKS_AREA2).unwrap();
     let opts = EstimateOptions {
