@@ -291,10 +291,13 @@ fn trigonometric_term_with_input() {
 }
 
 /// Where sensitivities cannot serve, calibration falls back to finite differences and
-/// still recovers a known coefficient: `ẋ = −0.3x + u + c·sqrt(abs(x))` from `x(0) = 0`,
-/// where `∂φ/∂x = sign(x)/(2√|x|)` is 0/0 (so `S` turns NaN at the first stage; without
-/// the fallback no step is ever taken), and the same model under the adaptive
+/// still recovers a known coefficient: `ẋ = −0.3x + u + c·sqrt(x)` from `x(0) = 0`,
+/// where `∂φ/∂x = 1/(2√x)` is infinite (so `S` turns non-finite at the first stage;
+/// without the fallback no step is ever taken), and the same model under the adaptive
 /// integrator (no sensitivities at all). Noise-free data from `c = −0.4`, start `−0.2`.
+/// The same law written `sqrt(abs(x))` has the strong-zero slope 0 at `x = 0`
+/// (`sign(0) = 0` times an infinite outer slope; sysid-core's derivative rule), so its
+/// sensitivities stay finite there; it must recover the coefficient all the same.
 #[test]
 fn falls_back_to_differences_and_still_recovers() {
     let one = |v: f64| DMatrix::from_element(1, 1, v);
@@ -306,10 +309,14 @@ fn falls_back_to_differences_and_still_recovers() {
         names(&["x"], &["u"], &["x"]),
     )
     .unwrap_or_else(|e| panic!("{e}"));
-    let model = |c: f64| {
-        TermModel::from_specs(linear.clone(), [("x", "orifice", "sqrt(abs(x))", c)])
-            .unwrap_or_else(|e| panic!("{e}"))
+    let law = |term: &'static str| {
+        let linear = linear.clone();
+        move |c: f64| {
+            TermModel::from_specs(linear.clone(), [("x", "orifice", term, c)])
+                .unwrap_or_else(|e| panic!("{e}"))
+        }
     };
+    let model = law("sqrt(x)");
     let u = DMatrix::from_fn(1, 200, |_, k| 0.5 + 0.3 * (0.1 * k as f64).sin());
     let exp = record(&model(-0.4), &[0.0], u, 0.1, &[]);
     let data = Dataset::new(vec![Channel::new("u")], vec![Channel::new("x")], vec![exp])
@@ -331,16 +338,21 @@ fn falls_back_to_differences_and_still_recovers() {
         matches!(jacobian(&pr, &partials, &[-0.2], 4), Ok(Outcome::NonFinite)),
         "the sensitivity at x = 0 must be non-finite for this test to mean anything"
     );
-    for integrator in [
-        Integrator::Rk4 { substeps: 4 },
-        Integrator::DormandPrince(sysid_core::DpOptions::default()),
+    let abs_start = law("sqrt(abs(x))")(-0.2);
+    for (start, integrator) in [
+        (&start, Integrator::Rk4 { substeps: 4 }),
+        (
+            &start,
+            Integrator::DormandPrince(sysid_core::DpOptions::default()),
+        ),
+        (&abs_start, Integrator::Rk4 { substeps: 4 }),
     ] {
         let config = super::super::CalibrationConfig {
             integrator,
             ..Default::default()
         };
         let cal =
-            super::super::calibrate(&start, &data, &x0, &config).unwrap_or_else(|e| panic!("{e}"));
+            super::super::calibrate(start, &data, &x0, &config).unwrap_or_else(|e| panic!("{e}"));
         // Noise-free: the data's own model (RK4; the adaptive integrator differs from it
         // by ~1e-8), so the coefficient comes back to well within 1e-4.
         assert!(
