@@ -115,3 +115,17 @@ pub fn read_case(name: &str, file: &str) -> (Vec<f64>, Vec<f64>, f64) {
     }
     (u, y, t[1] - t[0])
 }
+
+/// One experiment from one input and one output series (channels `u`, `y`; the NARX
+/// term names carry them).
+pub fn series(u: &[f64], y: &[f64], dt: f64) -> Dataset {
+    let n = u.len();
+    let e = Experiment::new(
+        0.0,
+        dt,
+        DMatrix::from_row_slice(1, n, u),
+        DMatrix::from_row_slice(1, n, y),
+    )
+    .unwrap();
+    Dataset::new(vec![Channel::new("u")], vec![Channel::new("y")], vec![e]).unwrap()
+}

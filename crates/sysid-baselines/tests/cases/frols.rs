@@ -8,23 +8,7 @@ use sysid_baselines::{
 };
 use sysid_core::{Channel, Dataset, Experiment, Model};
 
-fn dataset(u: &[f64], y: &[f64], dt: f64) -> Dataset {
-    let n = u.len();
-    Dataset::new(
-        vec![Channel::new("u")],
-        vec![Channel::new("y")],
-        vec![
-            Experiment::new(
-                0.0,
-                dt,
-                DMatrix::from_row_slice(1, n, u),
-                DMatrix::from_row_slice(1, n, y),
-            )
-            .unwrap(),
-        ],
-    )
-    .unwrap()
-}
+use crate::common::series as dataset;
 
 /// A deterministic white-ish input in [−1, 1] (xorshift64*), so every candidate monomial
 /// is excited.

@@ -2,27 +2,10 @@
 //! recovery), and records of a Duffing oscillator that mmenn did not make (the Python /
 //! scipy generator of `fixtures/discovery_suite`, RK45 with tight tolerances).
 
-use nalgebra::DMatrix;
 use sysid_baselines::{NarxOrders, PolyNarxConfig, fit_poly_narx};
-use sysid_core::{Channel, Dataset, Experiment, Model};
+use sysid_core::Model;
 
-fn dataset(u: &[f64], y: &[f64], dt: f64) -> Dataset {
-    let n = u.len();
-    Dataset::new(
-        vec![Channel::new("u")],
-        vec![Channel::new("y")],
-        vec![
-            Experiment::new(
-                0.0,
-                dt,
-                DMatrix::from_row_slice(1, n, u),
-                DMatrix::from_row_slice(1, n, y),
-            )
-            .unwrap(),
-        ],
-    )
-    .unwrap()
-}
+use crate::common::series as dataset;
 
 /// `y(k) = 1.5 y(k−1) − 0.7 y(k−2) + 0.4 u(k−1) − 0.3 y(k−1)³ + 0.2 y(k−1) u(k−1)
 /// + 0.05` driven by a deterministic multisine-like input.
