@@ -22,7 +22,7 @@ use sysid_core::Dataset;
 
 use crate::error::{BaselineError, Result, check_config};
 use crate::narx::divergence_limits;
-use crate::poly_narx::{PolyNarxModel, structure_terms};
+use crate::poly_narx::{PolyNarxModel, check_dictionary, structure_terms};
 use crate::regressors::{NarxOrders, training_rows};
 
 /// A candidate whose part orthogonal to the chosen terms is shorter than this fraction of
@@ -91,19 +91,7 @@ impl Default for FrolsConfig {
 impl FrolsConfig {
     /// Check every field.
     pub fn validate(&self) -> Result<()> {
-        self.orders.validate()?;
-        check_config(
-            "degree",
-            self.degree as f64,
-            "must be between 1 and 5",
-            (1..=5).contains(&self.degree),
-        )?;
-        check_config(
-            "nonlinear_lags",
-            self.nonlinear_lags as f64,
-            "must be ≥ 1 when degree ≥ 2",
-            self.degree == 1 || self.nonlinear_lags >= 1,
-        )?;
+        check_dictionary(&self.orders, self.degree, self.nonlinear_lags)?;
         check_config(
             "max_terms",
             self.max_terms as f64,

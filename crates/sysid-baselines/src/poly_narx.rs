@@ -78,22 +78,32 @@ impl Default for PolyNarxConfig {
     }
 }
 
+/// Check the candidate dictionary's settings (orders, degree, nonlinear lags), shared by
+/// the dense fit and FROLS.
+pub(crate) fn check_dictionary(
+    orders: &NarxOrders,
+    degree: usize,
+    nonlinear_lags: usize,
+) -> Result<()> {
+    orders.validate()?;
+    check_config(
+        "degree",
+        degree as f64,
+        "must be between 1 and 5",
+        (1..=5).contains(&degree),
+    )?;
+    check_config(
+        "nonlinear_lags",
+        nonlinear_lags as f64,
+        "must be ≥ 1 when degree ≥ 2",
+        degree == 1 || nonlinear_lags >= 1,
+    )
+}
+
 impl PolyNarxConfig {
     /// Check every field.
     pub fn validate(&self) -> Result<()> {
-        self.orders.validate()?;
-        check_config(
-            "degree",
-            self.degree as f64,
-            "must be between 1 and 5",
-            (1..=5).contains(&self.degree),
-        )?;
-        check_config(
-            "nonlinear_lags",
-            self.nonlinear_lags as f64,
-            "must be ≥ 1 when degree ≥ 2",
-            self.degree == 1 || self.nonlinear_lags >= 1,
-        )?;
+        check_dictionary(&self.orders, self.degree, self.nonlinear_lags)?;
         check_config(
             "divergence_factor",
             self.divergence_factor,
