@@ -13,4 +13,5 @@ mod nonlinear;
 mod robust;
 mod start;
 mod stiff;
+mod strong_zero_slope;
 mod update;

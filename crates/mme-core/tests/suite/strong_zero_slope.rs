@@ -12,9 +12,9 @@ use nalgebra::DMatrix;
 use rand::SeedableRng;
 use rand::rngs::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sysid_core::{
-    Channel, Dataset, Experiment, Expr, LinearModel, ModelNames, TermModel, Termination,
-};
+use sysid_core::{Dataset, Experiment, Expr, LinearModel, ModelNames, TermModel, Termination};
+
+use super::common::dataset;
 
 /// Upper tank outflow, pump gain, transfer to and outflow of the lower tank (V^½/s,
 /// 1/s), about the values fitted to the Cascaded Tanks benchmark.
@@ -78,9 +78,7 @@ fn data() -> (Dataset, [Vec<f64>; 2]) {
     let normal = Normal::new(0.0, SIGMA).unwrap();
     let y = DMatrix::from_fn(2, LEN, |i, k| [&h1, &h2][i][k] + normal.sample(&mut rng));
     let exp = Experiment::new(0.0, TS, DMatrix::from_row_slice(1, LEN, &u), y).unwrap();
-    let ch = |names: &[&str]| names.iter().map(|n| Channel::new(*n)).collect();
-    let data = Dataset::new(ch(&["u"]), ch(&["y1", "y2"]), vec![exp]).unwrap();
-    (data, [h1, h2])
+    (dataset(&["u"], &["y1", "y2"], vec![exp]), [h1, h2])
 }
 
 /// The assumed model (the truth's structure and coefficients): zero linear part, the
