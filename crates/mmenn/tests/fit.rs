@@ -671,32 +671,11 @@ fn band_limited_model_file_is_read_shown_and_predicted() {
     };
     let f = |t: f64, x: [f64; 2]| [x[1], -4.0 * x[0] - 0.4 * x[1] + u(t)];
     let (len, sub) = (400, 64);
-    let h = DT / sub as f64;
-    let mut x = [0.0, 0.0];
-    let (mut t_col, mut u_col, mut x_col, mut v_col) = (vec![], vec![], vec![], vec![]);
-    for k in 0..len {
-        let t = k as f64 * DT;
-        t_col.push(t);
-        u_col.push(u(t));
-        x_col.push(x[0]);
-        v_col.push(x[1]);
-        for j in 0..sub {
-            let s = t + j as f64 * h;
-            let k1 = f(s, x);
-            let k2 = f(
-                s + h / 2.0,
-                [x[0] + h / 2.0 * k1[0], x[1] + h / 2.0 * k1[1]],
-            );
-            let k3 = f(
-                s + h / 2.0,
-                [x[0] + h / 2.0 * k2[0], x[1] + h / 2.0 * k2[1]],
-            );
-            let k4 = f(s + h, [x[0] + h * k3[0], x[1] + h * k3[1]]);
-            for i in 0..2 {
-                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
-        }
-    }
+    let states = crate::truth::rk4_samples(f, [0.0, 0.0], DT, len, sub);
+    let t_col: Vec<f64> = (0..len).map(|k| k as f64 * DT).collect();
+    let u_col: Vec<f64> = t_col.iter().map(|&t| u(t)).collect();
+    let x_col: Vec<f64> = states.iter().map(|x| x[0]).collect();
+    let v_col: Vec<f64> = states.iter().map(|x| x[1]).collect();
     let dir = scratch("bl");
     std::fs::create_dir_all(&dir).unwrap();
     let data = dir.join("truth.csv");

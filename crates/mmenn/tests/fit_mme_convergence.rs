@@ -50,34 +50,16 @@ fn record() -> Dataset {
             -19.62 * x[0].sin() - 0.2 * x[1] - 2.0 * u(t) - 1.5 * x[1] * x[1].abs(),
         ]
     };
-    let h = DT / SUB as f64;
-    let mut x = [1.0, 0.0];
+    let states = crate::truth::rk4_samples(f, [1.0, 0.0], DT, LEN, SUB);
     let mut lcg = 12345u64;
     let (mut inputs, mut outputs) = (Vec::new(), Vec::new());
-    for k in 0..LEN {
-        let t = k as f64 * DT;
+    for (k, x) in states.iter().enumerate() {
         lcg = lcg
             .wrapping_mul(6364136223846793005)
             .wrapping_add(1442695040888963407);
         let e = ((lcg >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02;
-        inputs.push(u(t));
+        inputs.push(u(k as f64 * DT));
         outputs.push(x[0] + e);
-        for j in 0..SUB {
-            let s = t + j as f64 * h;
-            let k1 = f(s, x);
-            let k2 = f(
-                s + h / 2.0,
-                [x[0] + h / 2.0 * k1[0], x[1] + h / 2.0 * k1[1]],
-            );
-            let k3 = f(
-                s + h / 2.0,
-                [x[0] + h / 2.0 * k2[0], x[1] + h / 2.0 * k2[1]],
-            );
-            let k4 = f(s + h, [x[0] + h * k3[0], x[1] + h * k3[1]]);
-            for i in 0..2 {
-                x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
-        }
     }
     let exp = Experiment::new(
         0.0,

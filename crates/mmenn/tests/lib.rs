@@ -21,3 +21,4 @@ mod real_data;
 mod reliability;
 mod simulate;
 mod stand_in;
+mod truth;
