@@ -312,13 +312,15 @@ pub(super) fn diff(t: &Tree, v: usize) -> Tree {
                     }
                     // a^b·log(a)·db for a constant base.
                     (Tree::Const(_), _) => mul(mul(t.clone(), call(Func::Log, a)), db),
-                    // a^b·(db·log(a) + b·da/a): log(a) and 1/a are singular at a = 0.
+                    // b·a^(b-1)·da + a^b·log(a)·db. At a = 0 both outer factors are
+                    // singular: a^(b-1) is infinite for b < 1, and a^b·log(a) is 0·(-inf)
+                    // for b > 0, whose limit is 0. Each product is a strong zero of its
+                    // first factor: `xmuly(da, ·)` is 0 where the base is held, and
+                    // `xmuly(a^b, log(a))` is the limit 0 where the base is 0.
                     _ => {
-                        let inner = add(
-                            bin(BinOp::XMulY, db, call(Func::Log, a.clone())),
-                            bin(BinOp::XDivY, mul(b, da), a),
-                        );
-                        mul(t.clone(), inner)
+                        let by_base = mul(b.clone(), pow(a.clone(), sub(b, Tree::Const(1.0))));
+                        let by_exponent = bin(BinOp::XMulY, t.clone(), call(Func::Log, a));
+                        add(chain_mul(by_base, da), bin(BinOp::XMulY, db, by_exponent))
                     }
                 },
                 // (b·da − a·db)/(a² + b²), which is 0/0 at the origin even where a and b
