@@ -6,8 +6,11 @@
 //! ```toml
 //! [acquisition]
 //! pass_below_hz = 190.0
-//! bands = [[202.5, 0.90, -0.46], [207.5, 0.72, -0.55]]   # centre Hz, real, imaginary
+//! bands = [[202.5, 0.90, -0.46], [207.5, 0.72, -0.55, 0.02]]   # centre Hz, real, imaginary
 //! ```
+//!
+//! A band's optional fourth number is the standard error of its complex gain, as
+//! [`AcquisitionFilter::estimate`] gives it; `show` prints it, nothing judges with it.
 //!
 //! The response is one up to `pass_below_hz`, linear in real and imaginary parts between
 //! it and the band centres, held past the last centre. Centres must increase from above
@@ -64,7 +67,11 @@ impl AcquisitionToml {
             bands: filter
                 .bands()
                 .iter()
-                .map(|&(c, g)| vec![c, g.re, g.im])
+                .zip(filter.standard_errors())
+                .map(|(&(c, g), se)| match se {
+                    Some(se) => vec![c, g.re, g.im, *se],
+                    None => vec![c, g.re, g.im],
+                })
                 .collect(),
         }
     }
@@ -83,18 +90,32 @@ impl AcquisitionToml {
             ));
         }
         let mut bands = Vec::with_capacity(self.bands.len());
+        let mut errors = Vec::with_capacity(self.bands.len());
         let mut last = (pass, Complex::new(1.0, 0.0));
         for (row, entry) in self.bands.iter().enumerate() {
             let bad = |reason: String| Err(problem("acquisition.bands", Some(row), reason));
-            let &[c, re, im] = entry.as_slice() else {
-                return bad(format!(
-                    "has {} numbers, expected 3 (centre Hz, real part, imaginary part)",
-                    entry.len()
-                ));
+            let (c, re, im, se) = match *entry.as_slice() {
+                [c, re, im] => (c, re, im, None),
+                [c, re, im, se] => (c, re, im, Some(se)),
+                _ => {
+                    return bad(format!(
+                        "has {} numbers, expected 3 (centre Hz, real part, imaginary part) \
+                         or 4 (and the gain's standard error)",
+                        entry.len()
+                    ));
+                }
             };
-            if let Some(v) = [c, re, im].iter().find(|v| !v.is_finite()) {
+            if let Some(v) = [c, re, im]
+                .iter()
+                .chain(se.as_ref())
+                .find(|v| !v.is_finite())
+            {
                 return bad(format!("{v} is not a finite number"));
             }
+            if let Some(se) = se.filter(|v| *v < 0.0) {
+                return bad(format!("standard error {se} must not be negative"));
+            }
+            errors.push(se);
             if c <= last.0 {
                 return bad(if row == 0 {
                     format!("centre {c} Hz must lie above pass_below_hz ({pass} Hz)")
@@ -116,7 +137,9 @@ impl AcquisitionToml {
             bands.push((c, g));
             last = (c, g);
         }
-        AcquisitionFilter::from_bands(pass, bands).map_err(ModelProblem::Model)
+        AcquisitionFilter::from_bands(pass, bands)
+            .and_then(|f| f.with_standard_errors(errors))
+            .map_err(ModelProblem::Model)
     }
 }
 

@@ -282,9 +282,12 @@ pub fn acquisition_lines(f: &sysid_core::acquisition::AcquisitionFilter) -> Vec<
         number(f.pass_below_hz()),
         if n == 1 { "" } else { "s" }
     )];
-    for &(c, g) in f.bands() {
+    for (&(c, g), se) in f.bands().iter().zip(f.standard_errors()) {
+        let se = se.map_or(String::new(), |v| {
+            format!(" (standard error of the complex gain {})", number(v))
+        });
         lines.push(format!(
-            "  {} Hz: gain {}, phase {}°",
+            "  {} Hz: gain {}, phase {}°{se}",
             number(c),
             number(g.norm()),
             number(g.arg().to_degrees())
@@ -370,6 +373,28 @@ pub fn show_model(path: &Path) -> Result<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A band with a standard error prints it after its phase; one without prints none.
+    #[test]
+    fn acquisition_bands_print_their_standard_errors() {
+        use nalgebra::Complex;
+        use sysid_core::acquisition::AcquisitionFilter;
+        let f = AcquisitionFilter::from_bands(
+            190.0,
+            vec![
+                (202.5, Complex::new(0.6, -0.8)),
+                (207.5, Complex::new(0.5, 0.0)),
+            ],
+        )
+        .and_then(|f| f.with_standard_errors(vec![Some(0.0125), None]))
+        .unwrap();
+        let lines = acquisition_lines(&f);
+        assert_eq!(
+            lines[1],
+            "  202.5 Hz: gain 1, phase -53.13° (standard error of the complex gain 0.0125)"
+        );
+        assert_eq!(lines[2], "  207.5 Hz: gain 0.5, phase 0°");
+    }
 
     #[test]
     fn numbers_and_equations() {

@@ -274,9 +274,19 @@ fn acquisition_table_round_trips_and_malformed_ones_name_key_and_row() {
             [f64::to_bits(ec), f64::to_bits(er), f64::to_bits(ei)]
         );
     }
+    assert_eq!(f.standard_errors(), &[None, None]);
     let written = format_model(&spec).unwrap();
     assert!(written.contains("[acquisition]"), "{written}");
     let again = parse_model(Path::new("m.toml"), &written).unwrap();
+    assert_eq!(spec, again);
+    // A band's fourth number is its standard error, read and written back exactly; a band
+    // without one has none.
+    let with_se =
+        with("pass_below_hz = 190.0\nbands = [[202.5, 0.90, -0.46, 0.013], [207.5, 0.72, -0.55]]");
+    let spec = parse_model(Path::new("m.toml"), &with_se).unwrap();
+    let f = spec.acquisition.as_ref().expect("the filter is read");
+    assert_eq!(f.standard_errors(), &[Some(0.013), None]);
+    let again = parse_model(Path::new("m.toml"), &format_model(&spec).unwrap()).unwrap();
     assert_eq!(spec, again);
     // No table: none read, none written.
     let plain = parse_model(Path::new("m.toml"), SPEC_EXAMPLE).unwrap();
@@ -339,10 +349,22 @@ fn acquisition_table_round_trips_and_malformed_ones_name_key_and_row() {
         "expected 3",
     );
     expect(
-        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46, 1.0]]",
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46, 1.0, 2.0]]",
         bands,
         Some(0),
         "expected 3",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46, -0.01]]",
+        bands,
+        Some(0),
+        "negative",
+    );
+    expect(
+        "pass_below_hz = 190.0\nbands = [[202.5, 0.9, -0.46], [207.5, 0.7, -0.5, nan]]",
+        bands,
+        Some(1),
+        "finite",
     );
     // A response through zero (here from one at the pass band to −1) has no inverse.
     expect(

@@ -507,10 +507,18 @@ fn acquisition_rows(
         .filter
         .bands()
         .iter()
-        .map(|(f, g)| format!("{f:.1} Hz {:.3}∠{:+.1}°", g.norm(), g.arg().to_degrees()))
+        .zip(filtered.filter.standard_errors())
+        .map(|((f, g), se)| {
+            let se = se.map_or(String::new(), |v| format!(" (±{v:.3})"));
+            format!(
+                "{f:.1} Hz {:.3}∠{:+.1}°{se}",
+                g.norm(),
+                g.arg().to_degrees()
+            )
+        })
         .collect();
     table.note(format!(
-        "{row_label} ({OFFICIAL}): the grey box above with {coefficients}, its input deconvolved by the acquisition filter Ã and its simulated output filtered by it (`y = Ã·N(Ã⁻¹·u)`; sysid_core::acquisition). Both channels are recorded by identical HP1430A cards; a filter they share cancels from the linear relation between them but not from the distortion the cubic spring generates above the input's band, which is recorded through it. Ã is one below 190 Hz and, above, the least-squares gain of the measured on the simulated training output per 5-Hz band (training record only, from the coefficients as calibrated): {}. Test state fitted to the first {window} recorded outputs, as for the grey box. Training free-run RMSE of the coefficients as calibrated, with the state fitted to the window: {} {unit} without the filter, {:.4} {unit} through it; {judged}. Chosen by Rule 6, written before that second-half run; not blind: the test records' band phases had been looked at. Training wall time: the grey box's calibration plus {seconds:.1} s.",
+        "{row_label} ({OFFICIAL}): the grey box above with {coefficients}, its input deconvolved by the acquisition filter Ã and its simulated output filtered by it (`y = Ã·N(Ã⁻¹·u)`; sysid_core::acquisition). Both channels are recorded by identical HP1430A cards; a filter they share cancels from the linear relation between them but not from the distortion the cubic spring generates above the input's band, which is recorded through it. Ã is one below 190 Hz and, above, the least-squares gain of the measured on the simulated training output per 5-Hz band (training record only, from the coefficients as calibrated; in parentheses each band's standard error of its complex gain, sysid_core::acquisition): {}. Test state fitted to the first {window} recorded outputs, as for the grey box. Training free-run RMSE of the coefficients as calibrated, with the state fitted to the window: {} {unit} without the filter, {:.4} {unit} through it; {judged}. Chosen by Rule 6, written before that second-half run; not blind: the test records' band phases had been looked at. Training wall time: the grey box's calibration plus {seconds:.1} s.",
         bands.join(", "),
         plain_train.map_or("n/a".into(), |v| format!("{v:.4}")),
         scale * filtered.train_rmse,
