@@ -215,6 +215,27 @@ impl FrolsFit {
     }
 }
 
+/// The number of terms chosen by held-out free run (docs/decisions/
+/// frols-term-count-by-free-run.md): `scores` holds, for prefix counts `n`, the held-out
+/// free-run RMSE of the first `n` terms, or `None` where that run failed (diverged or not
+/// finite) — such a count is not eligible. The smallest `n` whose RMSE is within
+/// `tolerance` (relative, e.g. 0.02) of the best eligible one, with that RMSE; `None` when
+/// no count is eligible.
+pub fn count_by_free_run(scores: &[(usize, Option<f64>)], tolerance: f64) -> Option<(usize, f64)> {
+    let eligible = || {
+        scores
+            .iter()
+            .filter_map(|&(n, r)| r.filter(|v| v.is_finite()).map(|v| (n, v)))
+    };
+    let best = eligible().map(|(_, v)| v).fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        return None;
+    }
+    eligible()
+        .filter(|&(_, v)| v <= best * (1.0 + tolerance))
+        .min_by_key(|&(n, _)| n)
+}
+
 fn choose_count(ranking: &[RankedTerm], count: TermCount) -> usize {
     let pick = |f: fn(&RankedTerm) -> f64| {
         let mut best = 0;
@@ -454,6 +475,28 @@ mod tests {
     use super::*;
 
     /// The triangular solve against a direct least-squares solve of the same columns.
+    /// The smallest count within the tolerance of the best eligible one; failed runs are
+    /// never chosen, whatever their position.
+    #[test]
+    fn the_free_run_count_is_the_smallest_within_the_tolerance() {
+        let s = [
+            (1, Some(3.0)),
+            (2, None),
+            (3, Some(1.015)),
+            (4, Some(1.0)),
+            (5, Some(f64::NAN)),
+            (6, Some(0.99)),
+        ];
+        assert_eq!(count_by_free_run(&s, 0.02), Some((4, 1.0)));
+        assert_eq!(count_by_free_run(&s, 0.03), Some((3, 1.015)));
+        assert_eq!(count_by_free_run(&s, 0.0), Some((6, 0.99)));
+        assert_eq!(
+            count_by_free_run(&[(1, None), (2, Some(f64::INFINITY))], 0.02),
+            None
+        );
+        assert_eq!(count_by_free_run(&[], 0.02), None);
+    }
+
     #[test]
     fn prefix_coefficients_are_least_squares_on_the_chosen_columns() {
         let n = 50;

@@ -186,6 +186,71 @@ fn on_an_independent_duffing_record_the_sparse_cubic_halves_the_free_run_error()
     );
 }
 
+/// The number of terms by held-out free run (docs/decisions/
+/// frols-term-count-by-free-run.md), rule fixed before the run: on the sparse system
+/// measured with output noise (σ = 0.01), FROLS on the first 1000 samples (cap 20), every
+/// prefix run free over the last 500, the count chosen keeps every true term and no more
+/// terms than AIC keeps, and a count whose free run diverges is never chosen.
+#[test]
+fn the_free_run_count_keeps_the_true_terms_and_no_more_than_aic() {
+    let u = input(1500, 11);
+    let clean = truth(&u);
+    let noise = input(1500, 23);
+    let y: Vec<f64> = clean
+        .iter()
+        .zip(&noise)
+        .map(|(c, e)| c + 0.01 * 3f64.sqrt() * e)
+        .collect();
+    let fit = fit_frols(
+        &dataset(&u[..1000], &y[..1000], 1.0),
+        &FrolsConfig {
+            orders: NarxOrders {
+                na: 2,
+                nb: 2,
+                nk: 1,
+            },
+            degree: 3,
+            nonlinear_lags: 2,
+            max_terms: 20,
+            count: TermCount::Aic,
+            ..FrolsConfig::default()
+        },
+    )
+    .unwrap();
+    let held = dataset(&u[1000..], &y[1000..], 1.0);
+    let mut scores: Vec<(usize, Option<f64>)> = (1..=fit.ranking.len())
+        .map(|n| {
+            let rmse = fit
+                .model_with(n)
+                .and_then(|m| m.simulate(&held.experiments()[0]))
+                .ok()
+                .and_then(|sim| {
+                    let s = sim.initial_samples;
+                    let r = ((s..500)
+                        .map(|k| (sim.outputs[(0, k)] - y[1000 + k]).powi(2))
+                        .sum::<f64>()
+                        / (500 - s) as f64)
+                        .sqrt();
+                    r.is_finite().then_some(r)
+                });
+            (n, rmse)
+        })
+        .collect();
+    let (n, _) = sysid_baselines::count_by_free_run(&scores, 0.02).expect("an eligible count");
+    let kept: Vec<&str> = fit.ranking[..n].iter().map(|r| r.name.as_str()).collect();
+    for (name, _) in TRUE_TERMS {
+        assert!(
+            kept.contains(&name),
+            "{name} not among the {n} kept: {kept:?}"
+        );
+    }
+    assert!(n <= fit.n_terms, "free run keeps {n}, AIC {}", fit.n_terms);
+    // A count whose free run failed is skipped even if it would be the smallest.
+    scores[n - 1].1 = None;
+    let (m, _) = sysid_baselines::count_by_free_run(&scores, 0.02).unwrap();
+    assert_ne!(m, n);
+}
+
 /// Wrong shapes, short or missing records, a constant output, bad settings: typed errors,
 /// never a panic; a missing output sample only skips the rows it touches; a free run
 /// leaving the limits names its sample.

@@ -11,7 +11,7 @@ use mmenn::benchmarks::{Benchmark, BenchmarkData};
 use mmenn::fit::{STRESS_FACTOR, stress_input};
 use mmenn::sysid_baselines::{
     BaselineError, FrolsConfig, NarxConfig, NarxOrders, NetworkChoice, PolyNarxConfig, TermCount,
-    fit_frols, fit_narx, fit_poly_narx, poly_narx::Focus,
+    count_by_free_run, fit_frols, fit_narx, fit_poly_narx, poly_narx::Focus,
 };
 use mmenn::sysid_core::{Channel, Dataset, Experiment, InterSample, Model, Prediction};
 
@@ -149,8 +149,15 @@ pub fn narx_rows(
         }
         Err(e) => table.note(format!("Polynomial NARX: not built: {e:#}")),
     }
-    if let Err(e) = frols_inner(data, mode, table, sims, offset) {
+    if let Err(e) = frols_inner(data, mode, table, sims, offset, false) {
         table.note(format!("Polynomial NARX, FROLS (sparse): not built: {e:#}"));
+    }
+    // docs/decisions/frols-term-count-by-free-run.md: the number of terms by held-out
+    // free run instead of AIC/BIC.
+    if let Err(e) = frols_inner(data, mode, table, sims, offset, true) {
+        table.note(format!(
+            "Polynomial NARX, FROLS, terms by free run: not built: {e:#}"
+        ));
     }
 }
 
@@ -490,6 +497,10 @@ fn poly_narx_inner(
     Ok((d, degree, nl))
 }
 
+/// How close (relative) to a FROLS run's best held-out free run its chosen term count
+/// must come (docs/decisions/frols-term-count-by-free-run.md).
+const FREE_RUN_COUNT_TOLERANCE: f64 = 0.02;
+
 /// The sparse polynomial NARX candidates (docs/decisions/frols-polynomial-narx.md):
 /// `(na = nb, degree, nonlinear lags)` and the cap on the number of terms.
 fn frols_grid(mode: Mode) -> (Vec<(usize, usize, usize)>, usize) {
@@ -514,13 +525,17 @@ fn frols_grid(mode: Mode) -> (Vec<(usize, usize, usize)>, usize) {
 /// every candidate of [`frols_grid`] on the first 80 % of the samples the other NARX
 /// selections use, the number of terms by AIC and by BIC (two candidates per FROLS run),
 /// each run free over the rest; the winner's FROLS is run again on the whole training
-/// record with the same criterion and scored on the tests as the dense row is.
+/// record with the same criterion and scored on the tests as the dense row is. With
+/// `by_free_run` (docs/decisions/frols-term-count-by-free-run.md) each FROLS run's count
+/// is the smallest prefix within 2 % of its best held-out free run instead, and the winner
+/// keeps that many terms of the whole record's ranking.
 fn frols_inner(
     data: &BenchmarkData,
     mode: Mode,
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
+    by_free_run: bool,
 ) -> Result<()> {
     let b = data.benchmark;
     let window = b.init_window();
@@ -550,7 +565,32 @@ fn frols_inner(
                 continue;
             }
         };
-        for count in [TermCount::Aic, TermCount::Bic] {
+        let counts = if by_free_run {
+            let scores: Vec<(usize, Option<f64>)> = (1..=fit.ranking.len())
+                .map(|n| {
+                    let r = held_out(
+                        fit.model_with(n).and_then(|m| m.simulate(&tail)),
+                        &y_tail,
+                        window,
+                        scale,
+                    );
+                    (n, r.ok())
+                })
+                .collect();
+            match count_by_free_run(&scores, FREE_RUN_COUNT_TOLERANCE) {
+                Some((n, _)) => vec![TermCount::Fixed(n)],
+                None => {
+                    tried.push(format!(
+                        "({d}, {degree}, {nl}): every prefix of its {} terms failed in free run",
+                        fit.ranking.len()
+                    ));
+                    continue;
+                }
+            }
+        } else {
+            vec![TermCount::Aic, TermCount::Bic]
+        };
+        for count in counts {
             let n = fit.count(count);
             let scored = held_out(
                 fit.model_with(n).and_then(|m| m.simulate(&tail)),
@@ -558,11 +598,19 @@ fn frols_inner(
                 window,
                 scale,
             );
-            let what = format!(
-                "({d}, {degree}, {nl}) {}, {n} of {}",
-                count.label(),
-                fit.candidates
-            );
+            let what = if by_free_run {
+                format!(
+                    "({d}, {degree}, {nl}) {n} of {} selected of {}",
+                    fit.ranking.len(),
+                    fit.candidates
+                )
+            } else {
+                format!(
+                    "({d}, {degree}, {nl}) {}, {n} of {}",
+                    count.label(),
+                    fit.candidates
+                )
+            };
             match scored {
                 Ok(r) => {
                     tried.push(format!("{what}: {r:.4}"));
@@ -581,11 +629,18 @@ fn frols_inner(
     let clock = Instant::now();
     let fit = fit_frols(&data.estimation, &config(d, degree, nl, count))?;
     let fit_seconds = clock.elapsed().as_secs_f64();
-    let label = format!(
-        "polynomial NARX, FROLS (sparse) (na = nb = {d}, degree {degree}, {} terms by {}, chosen on held-out data)",
-        fit.n_terms,
-        count.label()
-    );
+    let label = if by_free_run {
+        format!(
+            "polynomial NARX, FROLS (sparse) (na = nb = {d}, degree {degree}, {} terms by held-out free run)",
+            fit.n_terms
+        )
+    } else {
+        format!(
+            "polynomial NARX, FROLS (sparse) (na = nb = {d}, degree {degree}, {} terms by {}, chosen on held-out data)",
+            fit.n_terms,
+            count.label()
+        )
+    };
     let protocol = format!(
         "{OFFICIAL}: all training samples at full rate; delay window = the first {d} of the {window} initialisation samples, RMSE after them"
     );
@@ -594,7 +649,11 @@ fn frols_inner(
         data,
         &label,
         &protocol,
-        "polynomial NARX, FROLS",
+        if by_free_run {
+            "polynomial NARX, FROLS, terms by free run"
+        } else {
+            "polynomial NARX, FROLS"
+        },
         table,
         sims,
         offset,
@@ -604,6 +663,34 @@ fn frols_inner(
         .zip(&fit.coefficients)
         .map(|(r, c)| format!("{c:+.5e}·{} ({:.2e})", r.name, r.err))
         .collect();
+    if by_free_run {
+        table.note(format!(
+            "Polynomial NARX, FROLS, terms by held-out free run ({OFFICIAL}; \
+             docs/decisions/frols-term-count-by-free-run.md): the FROLS row's candidates and \
+             term ranking (at most {cap} terms), but each FROLS run keeps the smallest number \
+             of its first terms whose free run over the held-out rest is within {:.0} % of its \
+             best (a count whose free run fails is not eligible), instead of AIC or BIC; \
+             selected on the first {:.0} % of the first {used} of the {} training samples \
+             (held-out free-run RMSE after {window} samples of each run's count, {unit}: {}); \
+             chosen ({d}, {degree}, {nl}) with {} terms, FROLS run again on all training \
+             samples ({} rows, {} candidates) keeping its first {} terms: {}; one-step RMSE \
+             {:.3e} {unit}. Time to accuracy: selection {select_seconds:.1} s, final fit \
+             {fit_seconds:.1} s wall, 1 thread.",
+            100.0 * FREE_RUN_COUNT_TOLERANCE,
+            100.0 * SELECT_FRACTION,
+            est.len(),
+            tried.join(", "),
+            fit.n_terms,
+            fit.rows,
+            fit.candidates,
+            fit.n_terms,
+            terms.join(" "),
+            fit.one_step_rmse * scale,
+        ));
+        table.set_for_model(&label, "train_s", select_seconds + fit_seconds);
+        table.set_for_model(&label, "threads", 1.0);
+        return Ok(());
+    }
     table.note(format!(
         "Polynomial NARX, FROLS (sparse) ({OFFICIAL}; docs/decisions/frols-polynomial-narx.md): \
          the dense polynomial NARX's terms for (na = nb, nk = 1, degree, nl) as candidates, \
