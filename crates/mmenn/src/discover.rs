@@ -210,10 +210,17 @@ pub struct DiscoverSummary {
     /// Every round.
     pub rounds: Vec<Round>,
     /// How MME's first solve (the assumed model on the estimation records) ended:
-    /// `exact` for a given `W`, otherwise the `W` search's ending. Anything but `exact`
-    /// or `converged` makes `mmenn discover` exit with status 3: `d̂`, and everything
-    /// proposed from it, rest on a `W` the covariance constraint did not fix.
+    /// `exact` for a given `W`, otherwise the `W` search's ending (or the Gauss–Newton
+    /// iteration's, when it failed at the final `W`). [`DiscoverSummary::mme_estimate`]
+    /// says which, and whether it counts as converged.
     pub mme_termination: Option<sysid_core::Termination>,
+    /// MME's first solve, with which part of it ended how, its ratios and the sampling
+    /// band ([`crate::fit::MmeConvergence`]; `None` when it was not recorded). Unless it
+    /// converged ([`crate::fit::MmeConvergence::converged`]), `mmenn discover` exits with
+    /// status 3: `d̂`, and everything proposed from it, rest on an estimate that did not
+    /// converge.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mme_estimate: Option<crate::fit::MmeConvergence>,
     /// Whether the effects were named as generalized forces of a mass-matrix model
     /// (`discovery::force`: intervals and the validation cost decide; no bootstrap judge
     /// and no stand-in).
@@ -229,6 +236,9 @@ struct MmeCore<'a> {
     /// The noise report of the first estimate (MME with the assumed model), kept for
     /// the warnings about an estimated noise variance.
     first_noise: std::sync::Mutex<Option<mme_core::NoiseReport>>,
+    /// How the first estimate that ended ended (the workflow's first estimate: the
+    /// assumed model, from the data start or, when that failed, from the retry).
+    first_convergence: std::sync::Mutex<Option<crate::fit::MmeConvergence>>,
 }
 
 impl MmeCore<'_> {
@@ -265,6 +275,15 @@ impl workflow::Mme for MmeCore<'_> {
             && first.is_none()
         {
             *first = Some(out.noise.clone());
+        }
+        if let Ok(mut first) = self.first_convergence.lock()
+            && first.is_none()
+        {
+            *first = Some(crate::fit::MmeConvergence::of(
+                crate::fit::MmeStage::Training,
+                &out,
+                data,
+            ));
         }
         Ok(out.estimate)
     }
@@ -451,6 +470,7 @@ pub fn run_discover_with_progress(
         spec: &original,
         options: &opts.estimate,
         first_noise: std::sync::Mutex::new(None),
+        first_convergence: std::sync::Mutex::new(None),
     };
     let observer = Reported {
         sink: progress,
@@ -555,6 +575,7 @@ pub fn run_discover_with_progress(
         validation_gap,
         model: "model.discovered.toml".into(),
         mme_termination: outcome.first_estimate.report.termination,
+        mme_estimate: mme.first_convergence.lock().ok().and_then(|m| m.clone()),
         generalized_forces: false,
         rounds: outcome.rounds,
     };

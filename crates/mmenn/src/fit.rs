@@ -16,10 +16,12 @@
 //!
 //! Nor is a hybrid built on an MME estimate that did not converge, unless asked for: every
 //! estimate [`compute_fit`] runs (on the training records, again after the regression
-//! update, on the validation records) is checked as soon as it ends, and one that ended
-//! anything but `exact` or `converged` ([`MmeConvergence::converged`]) makes it return
-//! [`MmennError::MmeNotConverged`] before any network is trained, naming the estimate
-//! ([`MmeStage`]), its ending and its residual/noise variance ratios. Under
+//! update, on the validation records, and the K-fold guard's on each fold) is checked as
+//! soon as it ends, and one that ended anything but `exact` or `converged` — or a `W`
+//! search `not_bracketed` below 1 within the sampling band of a correct model
+//! ([`MmeConvergence::converged`], docs/decisions/mme-ratio-tolerance.md) — makes it return
+//! [`MmennError::MmeNotConverged`] before any network is trained on it, naming the estimate
+//! ([`MmeStage`], and the fold), its ending and its residual/noise variance ratios. Under
 //! [`UnconvergedMme::Warn`] (what `mmenn fit` and `mmenn compare` use) it goes on, and
 //! [`FitSummary::mme_estimates`] (`mme_estimates` in `summary.json`) and
 //! [`FitSummary::mme_converged`] say so; `mmenn fit` then writes its results for
@@ -50,7 +52,9 @@ pub use choices::{
     DomainPolicy, HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkInputs,
     NetworkSelection, Training,
 };
-pub use convergence::{MmeConvergence, MmeStage, UnconvergedMme};
+pub use convergence::{
+    FoldEstimate, MmeConvergence, MmeStage, SAMPLING_BAND_Z, UnconvergedMme, sampling_band,
+};
 pub use guard::{
     CandidateScore, DomainCheck, FoldScores, GuardCandidate, GuardHeldOut, GuardReport,
     STRESS_FACTOR, StressChannel, StressCheck, StressVerdict, stress_input,
@@ -338,7 +342,8 @@ pub struct FitSummary {
     pub mme_termination: Option<sysid_core::Termination>,
     /// How every MME estimate the fit ran ended, in order: the training estimate, the
     /// re-estimate after the regression update (when asked for), the validation estimate
-    /// (when validation data is given). Any that did not converge
+    /// (when validation data is given), then each of the K-fold guard's estimates that did
+    /// not converge (its fold's [`FoldScores::unconverged_mme`]). Any that did not converge
     /// ([`MmeConvergence::converged`]) makes `mmenn fit` exit with status 3, and is only
     /// here under [`UnconvergedMme::Warn`] (otherwise [`compute_fit`] refuses).
     pub mme_estimates: Vec<MmeConvergence>,
@@ -369,7 +374,7 @@ pub struct FitSummary {
 }
 
 impl FitSummary {
-    /// Whether every MME estimate the fit ran converged (ended `exact` or `converged`).
+    /// Whether every MME estimate the fit ran converged ([`MmeConvergence::converged`]).
     pub fn mme_converged(&self) -> bool {
         self.mme_estimates.iter().all(MmeConvergence::converged)
     }
@@ -531,8 +536,8 @@ pub fn compute_fit(
     let config = mme_config(&spec, &opts.estimate);
     // Every estimate is checked as it ends: a refused one costs no network training.
     let mut mme_estimates = Vec::new();
-    let mut check = |stage: MmeStage, out: &mme_core::MmeOutput| -> Result<()> {
-        let report = MmeConvergence::of(stage, out);
+    let mut check = |stage: MmeStage, out: &mme_core::MmeOutput, data: &Dataset| -> Result<()> {
+        let report = MmeConvergence::of(stage, out, data);
         if !report.converged() && opts.on_unconverged_mme == UnconvergedMme::Refuse {
             return Err(MmennError::MmeNotConverged { report });
         }
@@ -542,7 +547,7 @@ pub fn compute_fit(
     let mut result = crate::progress::stage(progress, "MME estimate", || {
         estimate_spec(&spec, data, &config)
     })?;
-    check(MmeStage::Training, &result)?;
+    check(MmeStage::Training, &result, data)?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
         let up = mme_core::update_model(
@@ -553,7 +558,7 @@ pub fn compute_fit(
         )?;
         spec.linear = up.model.clone();
         result = estimate_spec(&spec, data, &config)?;
-        check(MmeStage::RegressionUpdate, &result)?;
+        check(MmeStage::RegressionUpdate, &result, data)?;
         update_report = Some(up.regressions);
     }
     let lin = spec.linear.clone();
@@ -571,7 +576,7 @@ pub fn compute_fit(
             vconf.w = mme_core::WeightSpec::Matrix(est.w.clone());
             vconf.noise_variance = mme_core::NoiseSpec::Given(est.noise_variance.clone());
             let vres = estimate_spec(&spec, v, &vconf)?;
-            check(MmeStage::Validation, &vres)?;
+            check(MmeStage::Validation, &vres, v)?;
             let (xv, dv) = pairs(&vres.estimate, v);
             (
                 (x_train.clone(), d_train.clone()),
@@ -659,6 +664,13 @@ pub fn compute_fit(
             domain_check,
         )?,
     };
+    // The K-fold guard's estimates that did not converge (only under `Warn`).
+    mme_estimates.extend(
+        guard_report
+            .folds
+            .iter()
+            .flat_map(|f| f.unconverged_mme.iter().cloned()),
+    );
     // The model as written: with the acquisition filter, judged on the recorded records.
     spec.acquisition = acquisition;
     let (file, loaded) =

@@ -79,7 +79,9 @@ fn guard_keeps_the_physics_alone_on_data_the_physics_generated() {
                 ..Default::default()
             },
             // Noise-free data: no W brings the residual variance up to the stated noise
-            // variance (MME's W search ends `not_bracketed`); the guard is what is tested.
+            // variance (MME's W search ends `not_bracketed` at ratio ≈ 0, far below the
+            // sampling band of docs/decisions/mme-ratio-tolerance.md, so the default
+            // refuses it); the guard is what is tested.
             on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
             ..FitOptions::default()
         },
@@ -203,7 +205,9 @@ fn fit_with_guard(
                 ..Default::default()
             },
             // Noise-free data: no W brings the residual variance up to the stated noise
-            // variance (MME's W search ends `not_bracketed`); the guard is what is tested.
+            // variance (MME's W search ends `not_bracketed` at ratio ≈ 0, far below the
+            // sampling band of docs/decisions/mme-ratio-tolerance.md, so the default
+            // refuses it); the guard is what is tested.
             on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
             ..FitOptions::default()
         },

@@ -12,6 +12,7 @@ mod fit_guard;
 mod fit_mme_convergence;
 mod greyest;
 mod hidden_effects;
+mod mme_ratio_band;
 mod model;
 mod monitor;
 mod never_panics;

@@ -423,9 +423,6 @@ fn one_fit_percent_in_predict_compare_and_discover() {
                 inits: 1,
                 train_on_trajectories: TrajectoryChoice::None,
                 x0_window: 50,
-                // MME's W search with the discovered model ends `not_bracketed` here
-                // (residual/noise variance 0.96); the fit % the table prints is tested.
-                on_unconverged_mme: mmenn::fit::UnconvergedMme::Warn,
                 ..FitOptions::default()
             },
             narx_lags: Some(2),

@@ -142,7 +142,7 @@ pub(super) fn run_force_discover(
     step(0, "MME with the assumed model");
     let outcome = search(original, data, val, opts, &step);
     progress.finish(DISCOVER_TASK);
-    let (outcome, first) = outcome?;
+    let (outcome, first, first_mme) = outcome?;
 
     let coords = original
         .mechanics
@@ -238,6 +238,7 @@ pub(super) fn run_force_discover(
         model: "model.discovered.toml".into(),
         rounds: Vec::new(),
         mme_termination: first.report.termination,
+        mme_estimate: Some(first_mme),
         generalized_forces: true,
     };
     let val_outputs = match (val, validation_runs) {
@@ -263,9 +264,16 @@ fn search(
     val: Option<&Dataset>,
     opts: &DiscoverOptions,
     step: &dyn Fn(usize, &str),
-) -> Result<(ForceOutcome, sysid_core::MmeEstimate)> {
+) -> Result<(
+    ForceOutcome,
+    sysid_core::MmeEstimate,
+    crate::fit::MmeConvergence,
+)> {
     let model = physical(original)?;
-    let first = estimate_spec(original, data, &mme_config(original, &opts.estimate))?.estimate;
+    let first_out = estimate_spec(original, data, &mme_config(original, &opts.estimate))?;
+    let first_mme =
+        crate::fit::MmeConvergence::of(crate::fit::MmeStage::Training, &first_out, data);
+    let first = first_out.estimate;
     step(1, "generalized forces: proposal and free-run calibration");
     let noise = match &original.noise_variance {
         NoiseVariance::Given(v) => v.clone(),
@@ -292,7 +300,7 @@ fn search(
     };
     let outcome = discovery::force::run_forces(&problem, &config)?;
     step(2, "free runs of the assumed and discovered models");
-    Ok((outcome, first))
+    Ok((outcome, first, first_mme))
 }
 
 /// `report.md` of a force-space run.

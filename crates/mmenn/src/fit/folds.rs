@@ -25,8 +25,8 @@ use super::guard::{
     GuardReport,
 };
 use super::{
-    FitOptions, Trained, TrainingSet, first_state, hybrid_loaded, judge_outputs, split_last_fifth,
-    train_networks, training_pairs_without,
+    FitOptions, FoldEstimate, MmeConvergence, Trained, TrainingSet, UnconvergedMme, first_state,
+    hybrid_loaded, judge_outputs, split_last_fifth, train_networks, training_pairs_without,
 };
 use crate::error::{MmennError, Result};
 use crate::estimate::{estimate_spec, mme_config};
@@ -78,10 +78,13 @@ pub(super) fn choose_by_folds(
     const TASK: &str = "K-fold guard";
     let done = AtomicUsize::new(0);
     progress.report(&Progress::new(TASK, 0, Some(folds)));
+    let count = stretches.len();
     let per_fold: Vec<Result<FoldScores>> = stretches
         .par_iter()
-        .map(|stretch| {
-            let scores = fold(spec, est, data, x0, stretch.clone(), &kinds, opts);
+        .enumerate()
+        .map(|(i, stretch)| {
+            let which = (i + 1, count);
+            let scores = fold(spec, est, data, x0, stretch.clone(), which, &kinds, opts);
             let n = done.fetch_add(1, Ordering::Relaxed) + 1;
             progress.report(&Progress::new(TASK, n, Some(folds)));
             scores
@@ -150,19 +153,27 @@ fn window(stretch: usize, opts: &FitOptions) -> usize {
     opts.x0_window.min(stretch / 2).max(1)
 }
 
-/// One stretch: MME and the networks without it, every kind judged over it.
+/// One stretch (fold `which.0` of `which.1`, from 1): MME and the networks without it,
+/// every kind judged over it.
+#[allow(clippy::too_many_arguments)]
 fn fold(
     spec: &ModelSpec,
     est: &MmeEstimate,
     data: &Dataset,
     x0: &[f64],
     stretch: Range<usize>,
+    which: (usize, usize),
     kinds: &[(GuardCandidate, nn::Domain)],
     opts: &FitOptions,
 ) -> Result<FoldScores> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
-    let (t, start, left_out, start_guess) =
-        train_without(spec, est, data, x0, stretch.clone(), opts)?;
+    let Without {
+        trained: t,
+        start,
+        left_out,
+        start_guess,
+        unconverged_mme,
+    } = train_without(spec, est, data, x0, stretch.clone(), which, opts)?;
     let first = &data.experiments()[0];
     let segment = data
         .window(0, stretch.start, stretch.end)
@@ -188,24 +199,43 @@ fn fold(
         candidates,
         left_out,
         start_guess,
+        unconverged_mme,
     })
 }
 
-/// What [`train_without`] gives: the networks, the stretch's starting state, what was left
-/// out of the training, and how the start was found when MME on its first window failed.
-type Without = (Trained, Vec<f64>, Vec<String>, Option<String>);
+/// What [`train_without`] gives.
+struct Without {
+    /// The networks trained without the stretch.
+    trained: Trained,
+    /// The stretch's starting state.
+    start: Vec<f64>,
+    /// What was left out of the training.
+    left_out: Vec<String>,
+    /// How the start was found when MME on its first window failed.
+    start_guess: Option<String>,
+    /// The estimates without the stretch that did not converge (only under
+    /// [`UnconvergedMme::Warn`]: under `Refuse` the first one is returned as an error).
+    unconverged_mme: Vec<MmeConvergence>,
+}
 
 /// The networks trained without `stretch` (MME on each piece and record on its own; pairs,
 /// shooting windows and the free-run selection on those), the state the stretch's free
 /// run starts from (MME on its first `w` samples alone), and what was left out because MME
 /// could not estimate it on its own (a piece, or its first samples). Nothing else of the
 /// stretch is read.
+///
+/// Each estimate without the stretch is checked as it ends ([`MmeConvergence::converged`]):
+/// under [`UnconvergedMme::Refuse`] one that did not converge is returned as
+/// [`MmennError::MmeNotConverged`] naming the fold (`which`: its index from 1 and the number
+/// of folds), the stretch and the record, before any of the fold's networks is trained;
+/// under [`UnconvergedMme::Warn`] it is kept in [`Without::unconverged_mme`].
 fn train_without(
     spec: &ModelSpec,
     est: &MmeEstimate,
     data: &Dataset,
     x0: &[f64],
     stretch: Range<usize>,
+    which: (usize, usize),
     opts: &FitOptions,
 ) -> Result<Without> {
     let core = |context: &'static str| move |source| MmennError::Core { context, source };
@@ -236,6 +266,7 @@ fn train_without(
     let (mut before_last, mut after_first): (Option<Vec<f64>>, Option<Vec<f64>>) = (None, None);
     let mut rest_est: Option<MmeEstimate> = None;
     let mut left_out = Vec::new();
+    let mut unconverged_mme = Vec::new();
     let mut last_error = None;
     for (index, (name, record)) in records.into_iter().enumerate() {
         // A state that decays within a sample or two (a fast lag) is barely seen by the
@@ -261,6 +292,26 @@ fn train_without(
             .map_err(core("the training records without a K-fold guard stretch"))?;
             match estimate_spec(spec, &one, &config) {
                 Ok(out) => {
+                    let report = MmeConvergence::of_fold(
+                        &out,
+                        &one,
+                        FoldEstimate {
+                            index: which.0,
+                            folds: which.1,
+                            stretch: (stretch.start, stretch.end),
+                            record: if skip > 0 {
+                                format!("{name} from its sample {skip}")
+                            } else {
+                                name.clone()
+                            },
+                        },
+                    );
+                    if !report.converged() {
+                        if opts.on_unconverged_mme == UnconvergedMme::Refuse {
+                            return Err(MmennError::MmeNotConverged { report });
+                        }
+                        unconverged_mme.push(report);
+                    }
                     outcome = Ok((skip, one, out.estimate));
                     break;
                 }
@@ -375,7 +426,13 @@ fn train_without(
             )
         }
     };
-    Ok((t, start, left_out, guess))
+    Ok(Without {
+        trained: t,
+        start,
+        left_out,
+        start_guess: guess,
+        unconverged_mme,
+    })
 }
 
 /// The free run's starting guess when MME cannot estimate a stretch's first window: the
@@ -519,10 +576,16 @@ mod tests {
         let run = |d: &Dataset| {
             let est = estimate_spec(&spec, d, &config).unwrap().estimate;
             let x0 = super::super::first_state(&est);
-            let (t, start, left_out, guess) =
-                train_without(&spec, &est, d, &x0, stretch.clone(), &opts).unwrap();
+            let Without {
+                trained: t,
+                start,
+                left_out,
+                start_guess: guess,
+                unconverged_mme,
+            } = train_without(&spec, &est, d, &x0, stretch.clone(), (2, 5), &opts).unwrap();
             assert!(left_out.is_empty(), "{left_out:?}");
             assert!(guess.is_none(), "{guess:?}");
+            assert!(unconverged_mme.is_empty(), "{unconverged_mme:?}");
             (est, t, start)
         };
         let (est_a, a, start_a) = run(&data);
@@ -544,6 +607,125 @@ mod tests {
         assert!(
             moved > 0.0,
             "the whole-record smoother did not see the change"
+        );
+    }
+
+    /// A fold whose MME (on the records without its stretch) does not converge: refused
+    /// under the default policy, naming the fold, its stretch, the record and the ending;
+    /// recorded in the fold's scores under `Warn`. The whole record's estimate converged
+    /// (its `W`, noise variance and `x̂(t0)` are what the guard is given); the fold's runs
+    /// are limited to one Gauss–Newton iteration. The case's assumed model with a cubic
+    /// spring term (so MME iterates), on its records (the independent generator's).
+    #[test]
+    fn a_fold_whose_mme_did_not_converge_is_refused_or_recorded() {
+        use super::super::{MmeStage, TrajectoryChoice, UnconvergedMme};
+        use sysid_core::Termination;
+        let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../fixtures/discovery_suite/cases/msd_cubic_hard");
+        let spec = crate::model_file::parse_model(
+            Path::new("cubic.toml"),
+            r#"
+states = ["x", "v"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-4.0, -0.4]]
+B = [[0.0], [0.5]]
+measured = ["x"]
+corrected = ["v"]
+noise_variance = [2e-5]
+intersample = "foh"
+
+[[terms]]
+state = "v"
+effect = "cubic spring"
+term = "x^3"
+coefficient = -1.0
+"#,
+        )
+        .unwrap();
+        let (data, _) =
+            crate::data_file::read_with_validation(&[case.join("est.csv")], &[], &spec).unwrap();
+        let estimate = crate::estimate::EstimateOptions {
+            w: crate::estimate::WeightChoice::Value(1e3),
+            ..Default::default()
+        };
+        let whole = estimate_spec(&spec, &data, &mme_config(&spec, &estimate))
+            .unwrap()
+            .estimate;
+        assert_eq!(whole.report.termination, Some(Termination::Converged));
+        let x0 = super::super::first_state(&whole);
+        let opts = |policy| FitOptions {
+            estimate: crate::estimate::EstimateOptions {
+                iterations: mme_core::IterationOptions {
+                    max_iterations: 1,
+                    ..Default::default()
+                },
+                ..estimate.clone()
+            },
+            hidden: super::super::HiddenChoice::Fixed(1),
+            inits: 1,
+            train_on_trajectories: TrajectoryChoice::None,
+            on_unconverged_mme: policy,
+            ..FitOptions::default()
+        };
+        let len = data.experiments()[0].len();
+        let stretch = (len / 5)..(2 * len / 5);
+        let kinds = [(GuardCandidate::PhysicsAlone, nn::Domain::Extrapolate)];
+        let run = |policy| {
+            fold(
+                &spec,
+                &whole,
+                &data,
+                &x0,
+                stretch.clone(),
+                (2, 5),
+                &kinds,
+                &opts(policy),
+            )
+        };
+        let before = format!("samples 0..{}", stretch.start);
+        let after = format!("samples {}..{len}", stretch.end);
+
+        let Err(MmennError::MmeNotConverged { report }) = run(UnconvergedMme::Refuse) else {
+            panic!("a fold whose MME stopped at the iteration limit was not refused");
+        };
+        assert_eq!(report.stage, MmeStage::GuardFold);
+        assert_eq!(report.termination, Some(Termination::MaxIterations));
+        let f = report.fold.as_ref().unwrap();
+        assert_eq!((f.index, f.folds), (2, 5));
+        assert_eq!(f.stretch, (stretch.start, stretch.end));
+        assert_eq!(f.record, before);
+        let message = MmennError::MmeNotConverged {
+            report: report.clone(),
+        }
+        .to_string();
+        for part in [
+            "K-fold guard estimate",
+            &format!(
+                "fold 2 of 5 (stretch samples {}..{} held out), on {before}",
+                stretch.start, stretch.end
+            ),
+            "did not converge",
+            "Gauss–Newton iteration at the given W: stopped at the iteration limit",
+        ] {
+            assert!(message.contains(part), "{part:?} not in {message}");
+        }
+
+        let scores = run(UnconvergedMme::Warn).unwrap();
+        let records: Vec<&str> = scores
+            .unconverged_mme
+            .iter()
+            .map(|m| m.fold.as_ref().unwrap().record.as_str())
+            .collect();
+        assert_eq!(records, [before.as_str(), after.as_str()]);
+        for m in &scores.unconverged_mme {
+            assert_eq!(m.stage, MmeStage::GuardFold);
+            assert_eq!(m.termination, Some(Termination::MaxIterations), "{m}");
+            assert!(!m.converged());
+        }
+        let json = serde_json::to_value(&scores).unwrap();
+        assert_eq!(
+            json["unconverged_mme"][0]["fold"]["index"],
+            serde_json::json!(2)
         );
     }
 

@@ -281,6 +281,11 @@ pub struct FoldScores {
     /// and what the free run started from instead; `None` when it could.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub start_guess: Option<String>,
+    /// The stretch's MME estimates (the records without it) that did not converge
+    /// ([`super::MmeConvergence::converged`]; kept only under
+    /// [`super::UnconvergedMme::Warn`], `fit` refuses otherwise); empty when all did.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub unconverged_mme: Vec<super::MmeConvergence>,
 }
 
 impl GuardReport {

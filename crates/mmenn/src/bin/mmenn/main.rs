@@ -62,21 +62,35 @@ impl std::fmt::Display for NotConverged {
 
 impl std::error::Error for NotConverged {}
 
-/// Exit status 3 ([`NotConverged`]) when an MME solve (its `W` search) did not end
-/// `exact` or `converged`: the results are written, but not to be trusted.
+/// Exit status 3 ([`NotConverged`]) when an MME solve did not converge
+/// (`MmeConvergence::converged`; without its record, when its ending is not `exact` or
+/// `converged`): the results are written, but not to be trusted. The message names which
+/// part failed — the `W` search, or the Gauss–Newton iteration at a `W` — in
+/// `MmeConvergence`'s words.
 fn check_mme_converged(
     command: &str,
+    estimate: Option<&mmenn::fit::MmeConvergence>,
     termination: Option<mmenn::sysid_core::Termination>,
     out: &Path,
 ) -> Result<()> {
-    match termination {
-        Some(mmenn::sysid_core::Termination::Exact | mmenn::sysid_core::Termination::Converged)
-        | None => Ok(()),
-        Some(ended) => Err(NotConverged(format!(
-            "{command}: MME's W search (covariance constraint) did not converge ({}); the \
-             results in {} are written for inspection only (see report.md)",
-            mmenn::words::termination(Some(ended)),
+    let written = || {
+        format!(
+            "the results in {} are written for inspection only (see report.md)",
             out.display()
+        )
+    };
+    match (estimate, termination) {
+        (Some(m), _) if m.converged() => Ok(()),
+        (Some(m), _) => Err(NotConverged(format!("{command}: MME's {m}; {}", written())).into()),
+        (
+            None,
+            Some(mmenn::sysid_core::Termination::Exact | mmenn::sysid_core::Termination::Converged)
+            | None,
+        ) => Ok(()),
+        (None, Some(ended)) => Err(NotConverged(format!(
+            "{command}: MME did not converge ({}); {}",
+            mmenn::words::termination(Some(ended)),
+            written()
         ))
         .into()),
     }
@@ -748,7 +762,7 @@ fn discover(a: DiscoverArgs, force: bool, progress: &Reporter) -> Result<()> {
         show("validation", v);
     }
     outln!("wrote {}", out.join(&s.model).display());
-    check_mme_converged("discover", s.mme_termination, out)
+    check_mme_converged("discover", s.mme_estimate.as_ref(), s.mme_termination, out)
 }
 
 #[allow(clippy::print_stdout)]
@@ -929,5 +943,86 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_mme_converged;
+    use mmenn::fit::{MmeConvergence, MmeStage};
+    use mmenn::sysid_core::Termination;
+    use std::path::Path;
+
+    /// A first estimate that ended `termination`, its `W` search `w_search` at `ratio`.
+    fn ended(
+        termination: Termination,
+        w_search: Option<(Termination, f64)>,
+    ) -> (MmeConvergence, String) {
+        let m = MmeConvergence {
+            stage: MmeStage::Training,
+            termination: Some(termination),
+            w_search: w_search.map(|w| w.0),
+            variance_ratio: [("theta".to_string(), w_search.map_or(0.3, |w| w.1))].into(),
+            w_search_ratio: w_search.map(|w| w.1),
+            sampling_band: w_search.map(|_| mmenn::fit::sampling_band(400, 2)),
+            fold: None,
+        };
+        let message = check_mme_converged("discover", Some(&m), Some(termination), Path::new("o"))
+            .err()
+            .map_or(String::new(), |e| e.to_string());
+        (m, message)
+    }
+
+    /// `discover`'s exit-3 message names the part of MME that failed: the Gauss–Newton
+    /// iteration (at a given `W`, or at the `W` the search found) or the `W` search.
+    #[test]
+    fn the_message_names_the_gauss_newton_iteration_or_the_w_search() {
+        let (_, given) = ended(Termination::MaxIterations, None);
+        assert!(
+            given.contains("Gauss–Newton iteration at the given W: stopped at the iteration limit"),
+            "{given}"
+        );
+        assert!(!given.contains("W search"), "{given}");
+
+        let (_, at_final) = ended(
+            Termination::LineSearchFailed,
+            Some((Termination::Converged, 1.0)),
+        );
+        assert!(
+            at_final.contains("Gauss–Newton iteration at the final W: stopped: the line search"),
+            "{at_final}"
+        );
+        assert!(
+            at_final.contains("W search (covariance constraint): converged"),
+            "{at_final}"
+        );
+
+        let (_, search) = ended(
+            Termination::NotBracketed,
+            Some((Termination::NotBracketed, 1.7)),
+        );
+        assert!(
+            search.contains("W search (covariance constraint): the target was never bracketed"),
+            "{search}"
+        );
+        assert!(!search.contains("Gauss–Newton"), "{search}");
+        for m in [&given, &at_final, &search] {
+            assert!(
+                m.starts_with("discover: MME's training estimate did not converge"),
+                "{m}"
+            );
+        }
+
+        // Not bracketed below 1 within the sampling band: converged, exit 0.
+        let (m, within) = ended(
+            Termination::NotBracketed,
+            Some((Termination::NotBracketed, 0.96)),
+        );
+        assert!(m.converged() && within.is_empty(), "{within}");
+        assert!(
+            m.to_string()
+                .contains("within the sampling band (ratio 0.960 ≥ 0.712)"),
+            "{m}"
+        );
     }
 }
