@@ -264,6 +264,12 @@ pub struct EstimateSummary {
     /// What the user should know about these numbers (see [`noise_warnings`]).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// How the estimate ended, judged as `fit` judges its training estimate (a `W` search
+    /// not bracketed below 1 within the sampling band counts as converged:
+    /// docs/decisions/mme-ratio-tolerance.md); `None` for the robust estimate, whose
+    /// ratio target is not 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub convergence: Option<crate::fit::MmeConvergence>,
 }
 
 /// How much larger than the difference-based scatter an estimated noise variance may be
@@ -498,6 +504,9 @@ fn compute_estimate_owned(
         robust_passes,
         files,
         warnings: noise_warnings(&est.output_names, &result.noise),
+        convergence: robust.is_none().then(|| {
+            crate::fit::MmeConvergence::of(crate::fit::MmeStage::Training, &result, &data)
+        }),
     };
     Ok(EstimateOutcome {
         summary,

@@ -308,3 +308,71 @@ fn compute_fit_accepts_within_the_band_and_refuses_below_it() {
         "{report}"
     );
 }
+
+/// `mmenn estimate` judges its estimate as `fit` does: a correct-model record whose `W`
+/// search ends `not_bracketed` within the band exits 0 and says so; the same record with
+/// the noise variance stated twice the true one exits 3.
+#[test]
+fn mmenn_estimate_exits_0_within_the_band_and_3_below_it() {
+    let truth = &OSCILLATOR_TRUTH;
+    let clean = clean(truth);
+    let good = spec(OSCILLATOR, NOISE_VARIANCE);
+    let seed = (0..40)
+        .find(|&s| {
+            let c = convergence(&good, &record(truth, &clean, s));
+            c.termination == Some(Termination::NotBracketed) && c.converged()
+        })
+        .expect("a correct-model run that ends not bracketed within the band");
+    let dir = std::env::temp_dir().join(format!("mmenn-band-cli-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let data = record(truth, &clean, seed);
+    let e = &data.experiments()[0];
+    let mut csv = String::from("t,u,x\n");
+    for k in 0..LEN {
+        csv += &format!(
+            "{},{},{}\n",
+            k as f64 * truth.dt,
+            e.inputs()[(0, k)],
+            e.outputs()[(0, k)]
+        );
+    }
+    std::fs::write(dir.join("data.csv"), csv).unwrap();
+    let run = |variance: f64, out: &str| {
+        let text = OSCILLATOR.replace(
+            "noise_variance = [1e-4]",
+            &format!("noise_variance = [{variance:e}]"),
+        );
+        std::fs::write(dir.join("model.toml"), text).unwrap();
+        std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
+            .current_dir(&dir)
+            .args([
+                "estimate",
+                "--data",
+                "data.csv",
+                "--model",
+                "model.toml",
+                "--out",
+                out,
+            ])
+            .output()
+            .unwrap()
+    };
+    let within = run(NOISE_VARIANCE, "within");
+    let text = String::from_utf8_lossy(&within.stdout);
+    assert_eq!(
+        within.status.code(),
+        Some(0),
+        "{text}{}",
+        String::from_utf8_lossy(&within.stderr)
+    );
+    assert!(text.contains("within the sampling band"), "{text}");
+    let below = run(2.0 * NOISE_VARIANCE, "below");
+    assert_eq!(
+        below.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&below.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -300,6 +300,9 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
         "  W diagonal: {}",
         mmenn::words::named_values(&s.w_by_correction)
     );
+    if let Some(c) = s.convergence.as_ref().filter(|c| c.within_sampling_band()) {
+        outln!("  {}", c.ending());
+    }
     for w in &s.warnings {
         outln!("  warning: {w}");
     }
@@ -324,7 +327,11 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
         outln!("  final sweep: {:.3e} samples/s", r);
     }
     outln!("wrote {} files into {}", s.files.len(), args.out.display());
+    // As `fit` judges its training estimate: a W search not bracketed below 1 within the
+    // sampling band is converged (docs/decisions/mme-ratio-tolerance.md).
+    let converged = s.convergence.as_ref().map(|c| c.converged());
     if let Some(ended) = s.report.termination
+        && converged != Some(true)
         && !matches!(
             ended,
             mmenn::sysid_core::Termination::Exact | mmenn::sysid_core::Termination::Converged
