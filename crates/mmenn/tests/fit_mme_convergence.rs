@@ -16,8 +16,9 @@ use mmenn::sysid_core::{Channel, Dataset, Experiment, Termination};
 use mmenn::{MmennError, ModelSpec};
 
 /// A pendulum whose gravity is a named term (so MME iterates: Gauss–Newton on the
-/// linearisation); the data carry a quadratic drag the model lacks.
-const PENDULUM: &str = r#"
+/// linearisation); the data carry a quadratic drag the model lacks (`mme_ratio_band` uses it
+/// on data without the drag).
+pub(crate) const PENDULUM: &str = r#"
 states = ["theta", "omega"]
 inputs = ["u"]
 A = [[0.0, 1.0], [0.0, -0.2]]

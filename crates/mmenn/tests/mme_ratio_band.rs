@@ -29,22 +29,8 @@ corrected = ["v"]
 noise_variance = [1e-4]
 "#;
 
-/// The pendulum of `tests/fit_mme_convergence.rs` (gravity a named term: Gauss–Newton).
-const PENDULUM: &str = r#"
-states = ["theta", "omega"]
-inputs = ["u"]
-A = [[0.0, 1.0], [0.0, -0.2]]
-B = [[0.0], [-2.0]]
-measured = ["theta"]
-corrected = ["omega"]
-noise_variance = [1e-4]
-
-[[terms]]
-state = "omega"
-effect = "gravity"
-term = "sin(theta)"
-coefficient = -19.62
-"#;
+// The pendulum of `tests/fit_mme_convergence.rs` (gravity a named term: Gauss–Newton).
+use crate::fit_mme_convergence::PENDULUM;
 
 /// The true noise variance of every record (σ = 0.01).
 const NOISE_VARIANCE: f64 = 1e-4;

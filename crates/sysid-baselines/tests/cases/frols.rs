@@ -47,22 +47,24 @@ const TRUE_TERMS: [(&str, f64); 5] = [
 fn exact_fit(count: TermCount) -> FrolsFit {
     let u = input(800, 7);
     let y = truth(&u);
-    fit_frols(
-        &dataset(&u, &y, 1.0),
-        &FrolsConfig {
-            orders: NarxOrders {
-                na: 2,
-                nb: 2,
-                nk: 1,
-            },
-            degree: 3,
-            nonlinear_lags: 2,
-            max_terms: 20,
-            count,
-            ..FrolsConfig::default()
+    fit_frols(&dataset(&u, &y, 1.0), &cubic_config(count)).unwrap()
+}
+
+/// The dictionary of the sparse system's class: na = nb = 2, degree 3 in the newest two
+/// lags and taps (35 candidates), at most 20 terms.
+fn cubic_config(count: TermCount) -> FrolsConfig {
+    FrolsConfig {
+        orders: NarxOrders {
+            na: 2,
+            nb: 2,
+            nk: 1,
         },
-    )
-    .unwrap()
+        degree: 3,
+        nonlinear_lags: 2,
+        max_terms: 20,
+        count,
+        ..FrolsConfig::default()
+    }
 }
 
 /// From the 35 monomials of degree ≤ 3 in y(k−1), y(k−2), u(k−1), u(k−2), the first five
@@ -203,18 +205,7 @@ fn the_free_run_count_keeps_the_true_terms_and_no_more_than_aic() {
         .collect();
     let fit = fit_frols(
         &dataset(&u[..1000], &y[..1000], 1.0),
-        &FrolsConfig {
-            orders: NarxOrders {
-                na: 2,
-                nb: 2,
-                nk: 1,
-            },
-            degree: 3,
-            nonlinear_lags: 2,
-            max_terms: 20,
-            count: TermCount::Aic,
-            ..FrolsConfig::default()
-        },
+        &cubic_config(TermCount::Aic),
     )
     .unwrap();
     let held = dataset(&u[1000..], &y[1000..], 1.0);
