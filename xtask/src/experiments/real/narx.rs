@@ -663,8 +663,8 @@ fn frols_inner(
         .zip(&fit.coefficients)
         .map(|(r, c)| format!("{c:+.5e}·{} ({:.2e})", r.name, r.err))
         .collect();
-    if by_free_run {
-        table.note(format!(
+    let note = if by_free_run {
+        format!(
             "Polynomial NARX, FROLS, terms by held-out free run ({OFFICIAL}; \
              docs/decisions/frols-term-count-by-free-run.md): the FROLS row's candidates and \
              term ranking (at most {cap} terms), but each FROLS run keeps the smallest number \
@@ -686,13 +686,10 @@ fn frols_inner(
             fit.n_terms,
             terms.join(" "),
             fit.one_step_rmse * scale,
-        ));
-        table.set_for_model(&label, "train_s", select_seconds + fit_seconds);
-        table.set_for_model(&label, "threads", 1.0);
-        return Ok(());
-    }
-    table.note(format!(
-        "Polynomial NARX, FROLS (sparse) ({OFFICIAL}; docs/decisions/frols-polynomial-narx.md): \
+        )
+    } else {
+        format!(
+            "Polynomial NARX, FROLS (sparse) ({OFFICIAL}; docs/decisions/frols-polynomial-narx.md): \
          the dense polynomial NARX's terms for (na = nb, nk = 1, degree, nl) as candidates, \
          variables divided by their RMS (not centred), terms chosen one at a time by Forward \
          Regression Orthogonal Least Squares with the Error Reduction Ratio (Billings 2013, \
@@ -706,16 +703,18 @@ fn frols_inner(
          each with its ERR (share of the uncentred yᵀy): {}; one-step RMSE {:.3e} {unit}. \
          Time to accuracy: selection {select_seconds:.1} s, final fit {fit_seconds:.1} s \
          wall, 1 thread.",
-        100.0 * SELECT_FRACTION,
-        est.len(),
-        tried.join(", "),
-        count.label(),
-        fit.rows,
-        fit.candidates,
-        fit.n_terms,
-        terms.join(" "),
-        fit.one_step_rmse * scale,
-    ));
+            100.0 * SELECT_FRACTION,
+            est.len(),
+            tried.join(", "),
+            count.label(),
+            fit.rows,
+            fit.candidates,
+            fit.n_terms,
+            terms.join(" "),
+            fit.one_step_rmse * scale,
+        )
+    };
+    table.note(note);
     table.set_for_model(&label, "train_s", select_seconds + fit_seconds);
     table.set_for_model(&label, "threads", 1.0);
     Ok(())
