@@ -18,7 +18,7 @@
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use sysid_core::Dataset;
+use sysid_core::{Dataset, Experiment, Model};
 
 use crate::error::{BaselineError, Result, check_config};
 use crate::narx::divergence_limits;
@@ -215,12 +215,100 @@ impl FrolsFit {
     }
 }
 
+/// Why a prefix count has no held-out score (it is then not eligible).
+#[derive(Debug)]
+pub enum PrefixFailure {
+    /// Building or running the prefix model failed; a free run leaving the divergence
+    /// limits is [`BaselineError::Diverged`], with its sample.
+    Run(BaselineError),
+    /// The free run gave a non-finite output after the skipped samples.
+    NonFinite,
+}
+
+impl std::fmt::Display for PrefixFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PrefixFailure::Run(e) => e.fmt(f),
+            PrefixFailure::NonFinite => f.write_str("non-finite output"),
+        }
+    }
+}
+
+/// One prefix count's free run over the held-out records ([`FrolsFit::free_run_scores`]).
+#[derive(Debug)]
+pub struct PrefixScore {
+    /// Terms kept: the first `n` of the ranking.
+    pub n: usize,
+    /// Free-run RMSE over the held-out samples after the skipped ones, in the recorded
+    /// output's units, or why there is none.
+    pub rmse: std::result::Result<f64, PrefixFailure>,
+}
+
+impl PrefixScore {
+    /// The score, `None` when the count is not eligible.
+    pub fn value(&self) -> Option<f64> {
+        self.rmse.as_ref().ok().copied()
+    }
+}
+
+impl FrolsFit {
+    /// Every prefix count `n = 1..=ranking.len()` run free over each of `held` (records
+    /// the selection did not fit), each run started from the record's measured outputs as
+    /// [`PolyNarxModel`]'s free run is. The score is the RMSE over every sample after the
+    /// first `skip` of each record, all records pooled (samples whose measured output is
+    /// not finite left out). A count whose run fails on any record (diverges: the error
+    /// names the sample) or gives a non-finite output there has no score and is not
+    /// eligible (docs/decisions/frols-term-count-by-free-run.md).
+    ///
+    /// Errors: no held-out record, or no measured sample after `skip` in any of them.
+    pub fn free_run_scores(&self, held: &[Experiment], skip: usize) -> Result<Vec<PrefixScore>> {
+        let samples: usize = held
+            .iter()
+            .map(|e| {
+                let y = e.outputs();
+                (skip..e.len())
+                    .filter(|&k| y.nrows() == 1 && y[(0, k)].is_finite())
+                    .count()
+            })
+            .sum();
+        if samples == 0 {
+            return Err(BaselineError::TooFewRows {
+                what: "held-out samples after the skipped ones",
+                found: 0,
+                needed: 1,
+            });
+        }
+        let score = |n: usize| -> std::result::Result<f64, PrefixFailure> {
+            let model = self.factors.model(n).map_err(PrefixFailure::Run)?;
+            let mut sse = 0.0;
+            for e in held {
+                let sim = model.simulate(e).map_err(PrefixFailure::Run)?;
+                let y = e.outputs();
+                for k in skip..e.len() {
+                    let s = sim.outputs[(0, k)];
+                    if !s.is_finite() {
+                        return Err(PrefixFailure::NonFinite);
+                    }
+                    if y[(0, k)].is_finite() {
+                        sse += (y[(0, k)] - s) * (y[(0, k)] - s);
+                    }
+                }
+            }
+            Ok((sse / samples as f64).sqrt())
+        };
+        Ok((1..=self.ranking.len())
+            .map(|n| PrefixScore { n, rmse: score(n) })
+            .collect())
+    }
+}
+
 /// The number of terms chosen by held-out free run (docs/decisions/
 /// frols-term-count-by-free-run.md): `scores` holds, for prefix counts `n`, the held-out
 /// free-run RMSE of the first `n` terms, or `None` where that run failed (diverged or not
 /// finite) — such a count is not eligible. The smallest `n` whose RMSE is within
 /// `tolerance` (relative, e.g. 0.02) of the best eligible one, with that RMSE; `None` when
-/// no count is eligible.
+/// no count is eligible. [`FrolsFit::free_run_scores`] gives the scores
+/// (`(s.n, s.value())`).
 pub fn count_by_free_run(scores: &[(usize, Option<f64>)], tolerance: f64) -> Option<(usize, f64)> {
     let eligible = || {
         scores

@@ -30,7 +30,10 @@ pub use evaluate::{
     ChannelEvaluation, Evaluation, EvaluationTable, TableRow, evaluate, predictions,
 };
 pub use free_params::{FreeParameter, StateMatrix, parse_free_parameters};
-pub use frols::{FrolsConfig, FrolsFit, RankedTerm, TermCount, count_by_free_run, fit_frols};
+pub use frols::{
+    FrolsConfig, FrolsFit, PrefixFailure, PrefixScore, RankedTerm, TermCount, count_by_free_run,
+    fit_frols,
+};
 pub use lags::{
     InputOutputXcf, LagCandidate, LagGrid, LagOutcome, LagSearch, LagSearchConfig, LagSuggestion,
     OutputPacf, SuggestionConfig, search_lags, suggest_lags,

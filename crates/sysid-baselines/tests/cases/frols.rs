@@ -4,7 +4,7 @@
 
 use nalgebra::DMatrix;
 use sysid_baselines::{
-    BaselineError, FrolsConfig, NarxOrders, TermCount, fit_frols, frols::FrolsFit,
+    BaselineError, FrolsConfig, NarxOrders, PrefixFailure, TermCount, fit_frols, frols::FrolsFit,
 };
 use sysid_core::{Channel, Dataset, Experiment, Model};
 
@@ -227,6 +227,12 @@ fn the_free_run_count_keeps_the_true_terms_and_no_more_than_aic() {
             (n, rmse)
         })
         .collect();
+    // The library's scoring is this hand computation.
+    let lib = fit.free_run_scores(held.experiments(), 2).unwrap();
+    assert_eq!(lib.len(), scores.len());
+    for (s, (n, r)) in lib.iter().zip(&scores) {
+        assert_eq!((s.n, s.value()), (*n, *r));
+    }
     let (n, _) = sysid_baselines::count_by_free_run(&scores, 0.02).expect("an eligible count");
     let kept: Vec<&str> = fit.ranking[..n].iter().map(|r| r.name.as_str()).collect();
     for (name, _) in TRUE_TERMS {
@@ -240,6 +246,148 @@ fn the_free_run_count_keeps_the_true_terms_and_no_more_than_aic() {
     scores[n - 1].1 = None;
     let (m, _) = sysid_baselines::count_by_free_run(&scores, 0.02).unwrap();
     assert_ne!(m, n);
+}
+
+/// `y(k) = 0.6 y(k−1) + 0.5 u(k−1) + 0.4 u(k−2)³`: exactly three terms.
+fn three_term_truth(u: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; u.len()];
+    for k in 2..u.len() {
+        y[k] = 0.6 * y[k - 1] + 0.5 * u[k - 1] + 0.4 * u[k - 2].powi(3);
+    }
+    y
+}
+
+const THREE_TERMS: [&str; 3] = ["y(k-1)", "u(k-1)", "u(k-2)^3"];
+
+/// FROLS (degree 3 in two lags, 35 candidates, cap 20) on the first 1500 samples of the
+/// three-term system measured with output noise of σ = `noise`.
+fn three_term_fit(noise: f64) -> (FrolsFit, Vec<f64>, Vec<f64>) {
+    let u = input(2500, 5);
+    let e = input(2500, 29);
+    let y: Vec<f64> = three_term_truth(&u)
+        .iter()
+        .zip(&e)
+        .map(|(c, e)| c + noise * 3f64.sqrt() * e)
+        .collect();
+    let fit = fit_frols(
+        &dataset(&u[..1500], &y[..1500], 1.0),
+        &FrolsConfig {
+            orders: NarxOrders {
+                na: 2,
+                nb: 2,
+                nk: 1,
+            },
+            degree: 3,
+            nonlinear_lags: 2,
+            max_terms: 20,
+            count: TermCount::Aic,
+            ..FrolsConfig::default()
+        },
+    )
+    .unwrap();
+    (fit, u, y)
+}
+
+/// docs/decisions/frols-term-count-by-free-run.md on data where the right count is known:
+/// the three-term system measured with output noise (σ = 0.05), FROLS on the first 1500
+/// samples, every prefix run free over the last 1000 (measured, noisy). The first three
+/// terms ranked are the true ones, every count is eligible there, and the count chosen
+/// is 3, while AIC on the one-step residual keeps more and the cap (20) is not chosen.
+#[test]
+fn held_out_free_run_keeps_the_three_true_terms_where_aic_keeps_more() {
+    let (fit, u, y) = three_term_fit(0.05);
+    assert_eq!(fit.ranking.len(), 20);
+    let mut first: Vec<&str> = fit.ranking[..3].iter().map(|r| r.name.as_str()).collect();
+    first.sort_unstable();
+    let mut truth = THREE_TERMS.to_vec();
+    truth.sort_unstable();
+    assert_eq!(first, truth);
+    let held = dataset(&u[1500..], &y[1500..], 1.0);
+    let scores = fit.free_run_scores(held.experiments(), 10).unwrap();
+    assert_eq!(scores.len(), 20);
+    let pairs: Vec<(usize, Option<f64>)> = scores.iter().map(|s| (s.n, s.value())).collect();
+    assert!(
+        pairs
+            .iter()
+            .enumerate()
+            .all(|(i, p)| p.0 == i + 1 && p.1.is_some()),
+        "{pairs:?}"
+    );
+    let (n, rmse) = sysid_baselines::count_by_free_run(&pairs, 0.02).unwrap();
+    assert_eq!(n, 3, "{pairs:?}");
+    assert_eq!(Some(rmse), pairs[2].1);
+    // About the noise level: the three-term model's free run is the truth's.
+    assert!(rmse < 1.1 * 0.05, "{rmse}");
+    assert!(fit.n_terms > 3, "AIC keeps {}", fit.n_terms);
+    // The largest count explains the fitted rows best but is not chosen.
+    assert!(fit.ranking[19].sse < fit.ranking[2].sse);
+}
+
+/// On a held-out record whose input is 4 times wider than the training input (its output
+/// from the noise-free system), the counts with terms fitted to noise really diverge: each
+/// such count has no score, its failure names the sample, and it is never chosen; the
+/// count chosen is still the true 3.
+#[test]
+fn a_prefix_that_diverges_on_the_held_out_record_is_not_eligible() {
+    let (fit, u, _) = three_term_fit(0.05);
+    let wide: Vec<f64> = u[1500..].iter().map(|v| 4.0 * v).collect();
+    let y = three_term_truth(&wide);
+    let held = dataset(&wide, &y, 1.0);
+    let scores = fit.free_run_scores(held.experiments(), 10).unwrap();
+    let mut diverged = 0;
+    for s in &scores {
+        match &s.rmse {
+            Ok(v) => assert!(v.is_finite() && s.value() == Some(*v)),
+            Err(PrefixFailure::Run(BaselineError::Diverged { sample, .. })) => {
+                assert!(*sample > 2 && *sample < 1000, "{sample}");
+                assert_eq!(s.value(), None);
+                diverged += 1;
+            }
+            Err(other) => panic!("count {}: {other}", s.n),
+        }
+    }
+    // The over-large counts diverge, the small ones do not.
+    assert!(scores[19].value().is_none() && scores[..3].iter().all(|s| s.value().is_some()));
+    assert!(diverged >= 10, "{diverged} of 20 diverged");
+    let pairs: Vec<(usize, Option<f64>)> = scores.iter().map(|s| (s.n, s.value())).collect();
+    let (n, _) = sysid_baselines::count_by_free_run(&pairs, 0.02).unwrap();
+    assert_eq!(n, 3, "{pairs:?}");
+    // Pooled over two records, each count's score is the RMSE over both: the held-out
+    // record twice scores as once, and a count failing on either has no score.
+    let two = [held.experiments()[0].clone(), held.experiments()[0].clone()];
+    let twice = fit.free_run_scores(&two, 10).unwrap();
+    for (a, b) in scores.iter().zip(&twice) {
+        match (a.value(), b.value()) {
+            (Some(x), Some(y)) => assert!((x - y).abs() <= 1e-12 * x, "{x} vs {y}"),
+            (None, None) => {}
+            other => panic!("count {}: {other:?}", a.n),
+        }
+    }
+    // A missing measured sample after the skipped ones is left out of the score, not
+    // counted as zero error.
+    let mut gap = y.clone();
+    gap[500] = f64::NAN;
+    let gapped = dataset(&wide, &gap, 1.0);
+    let with_gap = fit.free_run_scores(gapped.experiments(), 10).unwrap();
+    let sim = fit
+        .model_with(3)
+        .unwrap()
+        .simulate(&held.experiments()[0])
+        .unwrap();
+    let kept: Vec<f64> = (10..1000)
+        .filter(|&k| k != 500)
+        .map(|k| (sim.outputs[(0, k)] - y[k]).powi(2))
+        .collect();
+    let by_hand = (kept.iter().sum::<f64>() / kept.len() as f64).sqrt();
+    let lib = with_gap[2].value().unwrap();
+    assert!(
+        (lib - by_hand).abs() <= 1e-12 * by_hand,
+        "{lib} vs {by_hand}"
+    );
+    // Nothing after the skipped samples, or no record: an error, not a score.
+    assert!(fit.free_run_scores(&[], 10).is_err());
+    let short = dataset(&wide[..10], &y[..10], 1.0);
+    assert!(fit.free_run_scores(short.experiments(), 10).is_err());
 }
 
 /// Wrong shapes, short or missing records, a constant output, bad settings: typed errors,

@@ -149,16 +149,10 @@ pub fn narx_rows(
         }
         Err(e) => table.note(format!("Polynomial NARX: not built: {e:#}")),
     }
-    if let Err(e) = frols_inner(data, mode, table, sims, offset, false) {
-        table.note(format!("Polynomial NARX, FROLS (sparse): not built: {e:#}"));
-    }
-    // docs/decisions/frols-term-count-by-free-run.md: the number of terms by held-out
-    // free run instead of AIC/BIC.
-    if let Err(e) = frols_inner(data, mode, table, sims, offset, true) {
-        table.note(format!(
-            "Polynomial NARX, FROLS, terms by free run: not built: {e:#}"
-        ));
-    }
+    // docs/decisions/frols-polynomial-narx.md and, beside it,
+    // docs/decisions/frols-term-count-by-free-run.md (the number of terms by held-out free
+    // run instead of AIC/BIC), from the same FROLS runs.
+    frols_rows(data, mode, table, sims, offset);
 }
 
 fn narx_inner(
@@ -521,113 +515,210 @@ fn frols_grid(mode: Mode) -> (Vec<(usize, usize, usize)>, usize) {
     (grid, cap)
 }
 
-/// The sparse polynomial NARX row (docs/decisions/frols-polynomial-narx.md): FROLS on
-/// every candidate of [`frols_grid`] on the first 80 % of the samples the other NARX
-/// selections use, the number of terms by AIC and by BIC (two candidates per FROLS run),
-/// each run free over the rest; the winner's FROLS is run again on the whole training
-/// record with the same criterion and scored on the tests as the dense row is. With
-/// `by_free_run` (docs/decisions/frols-term-count-by-free-run.md) each FROLS run's count
-/// is the smallest prefix within 2 % of its best held-out free run instead, and the winner
-/// keeps that many terms of the whole record's ranking.
-fn frols_inner(
-    data: &BenchmarkData,
-    mode: Mode,
-    table: &mut Table,
-    sims: &mut Vec<(String, Vec<f64>)>,
-    offset: f64,
-    by_free_run: bool,
-) -> Result<()> {
-    let b = data.benchmark;
-    let window = b.init_window();
-    let (scale, unit) = b.reporting_unit();
-    let est = &data.estimation.experiments()[0];
-    let clock = Instant::now();
-    let (used, head, tail, y_tail) = selection_split(est, plan(b, mode).select_samples)?;
-    let (grid, cap) = frols_grid(mode);
-    let config = |d: usize, degree, nl, count| FrolsConfig {
+/// The two FROLS rows: the number of terms by AIC or BIC (docs/decisions/
+/// frols-polynomial-narx.md), or by held-out free run (docs/decisions/
+/// frols-term-count-by-free-run.md).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum FrolsRow {
+    Criterion,
+    FreeRun,
+}
+
+/// One FROLS row's selection: every candidate's held-out score (or why it has none), the
+/// best candidate `(d, degree, nl, count)` with its score, and the wall time the row's
+/// selection takes alone (the FROLS runs both rows share plus its own free runs).
+#[derive(Default)]
+struct FrolsChoice {
+    tried: Vec<String>,
+    best: Option<((usize, usize, usize, TermCount), f64)>,
+    seconds: f64,
+}
+
+impl FrolsChoice {
+    /// Keep `candidate` if it beats the best so far (ties: the first in grid order).
+    fn consider(&mut self, candidate: (usize, usize, usize, TermCount), r: f64) {
+        if self.best.is_none_or(|(_, b)| r < b) {
+            self.best = Some((candidate, r));
+        }
+    }
+}
+
+/// Both FROLS rows' selections, from one FROLS run per candidate of [`frols_grid`] on the
+/// first 80 % of the samples the other NARX selections use: the AIC and the BIC count of
+/// each run (docs/decisions/frols-polynomial-narx.md) and the smallest prefix count within
+/// 2 % of the run's best (docs/decisions/frols-term-count-by-free-run.md), each run free
+/// over the rest.
+struct FrolsSelection {
+    used: usize,
+    cap: usize,
+    /// Wall time of the FROLS runs the two rows share.
+    shared_seconds: f64,
+    criterion: FrolsChoice,
+    free_run: FrolsChoice,
+}
+
+fn frols_config(d: usize, degree: usize, nl: usize, cap: usize, count: TermCount) -> FrolsConfig {
+    FrolsConfig {
         orders: NarxOrders::symmetric(d),
         degree,
         nonlinear_lags: nl,
         max_terms: cap,
         count,
         ..FrolsConfig::default()
-    };
-    let mut tried = Vec::new();
-    let mut best: Option<((usize, usize, usize, TermCount), f64)> = None;
+    }
+}
+
+fn frols_selection(data: &BenchmarkData, mode: Mode) -> Result<FrolsSelection> {
+    let b = data.benchmark;
+    let window = b.init_window();
+    let (scale, _) = b.reporting_unit();
+    let est = &data.estimation.experiments()[0];
+    let (used, head, tail, y_tail) = selection_split(est, plan(b, mode).select_samples)?;
+    let (grid, cap) = frols_grid(mode);
+    let (mut criterion, mut free_run) = (FrolsChoice::default(), FrolsChoice::default());
+    let mut shared_seconds = 0.0;
     for (d, degree, nl) in grid {
         if d > window {
             continue;
         }
-        let fit = match fit_frols(&head, &config(d, degree, nl, TermCount::Aic)) {
+        let clock = Instant::now();
+        let fit = fit_frols(&head, &frols_config(d, degree, nl, cap, TermCount::Aic));
+        shared_seconds += clock.elapsed().as_secs_f64();
+        let fit = match fit {
             Ok(f) => f,
             Err(e) => {
-                tried.push(format!("({d}, {degree}, {nl}): {}", failure(&e)));
+                let why = format!("({d}, {degree}, {nl}): {}", failure(&e));
+                criterion.tried.push(why.clone());
+                free_run.tried.push(why);
                 continue;
             }
         };
-        let counts = if by_free_run {
-            let scores: Vec<(usize, Option<f64>)> = (1..=fit.ranking.len())
-                .map(|n| {
-                    let r = held_out(
-                        fit.model_with(n).and_then(|m| m.simulate(&tail)),
-                        &y_tail,
-                        window,
-                        scale,
-                    );
-                    (n, r.ok())
-                })
-                .collect();
-            match count_by_free_run(&scores, FREE_RUN_COUNT_TOLERANCE) {
-                Some((n, _)) => vec![TermCount::Fixed(n)],
-                None => {
-                    tried.push(format!(
-                        "({d}, {degree}, {nl}): every prefix of its {} terms failed in free run",
-                        fit.ranking.len()
-                    ));
-                    continue;
-                }
-            }
-        } else {
-            vec![TermCount::Aic, TermCount::Bic]
-        };
-        for count in counts {
+        let clock = Instant::now();
+        for count in [TermCount::Aic, TermCount::Bic] {
             let n = fit.count(count);
-            let scored = held_out(
+            let what = format!(
+                "({d}, {degree}, {nl}) {}, {n} of {}",
+                count.label(),
+                fit.candidates
+            );
+            match held_out(
                 fit.model_with(n).and_then(|m| m.simulate(&tail)),
                 &y_tail,
                 window,
                 scale,
-            );
-            let what = if by_free_run {
-                format!(
-                    "({d}, {degree}, {nl}) {n} of {} selected of {}",
-                    fit.ranking.len(),
-                    fit.candidates
-                )
-            } else {
-                format!(
-                    "({d}, {degree}, {nl}) {}, {n} of {}",
-                    count.label(),
-                    fit.candidates
-                )
-            };
-            match scored {
+            ) {
                 Ok(r) => {
-                    tried.push(format!("{what}: {r:.4}"));
-                    if best.is_none_or(|(_, b)| r < b) {
-                        best = Some(((d, degree, nl, count), r));
-                    }
+                    criterion.tried.push(format!("{what}: {r:.4}"));
+                    criterion.consider((d, degree, nl, count), r);
                 }
-                Err(why) => tried.push(format!("{what}: {why}")),
+                Err(why) => criterion.tried.push(format!("{what}: {why}")),
             }
         }
+        criterion.seconds += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let selected = fit.ranking.len();
+        match fit.free_run_scores(std::slice::from_ref(&tail), window) {
+            Ok(scores) => {
+                let pairs: Vec<(usize, Option<f64>)> = scores
+                    .iter()
+                    .map(|s| (s.n, s.value().map(|v| scale * v)))
+                    .collect();
+                let by_count: Vec<String> = pairs
+                    .iter()
+                    .map(|(_, r)| r.map_or("×".into(), |v| format!("{v:.3}")))
+                    .collect();
+                match count_by_free_run(&pairs, FREE_RUN_COUNT_TOLERANCE) {
+                    Some((n, r)) => {
+                        free_run.tried.push(format!(
+                            "({d}, {degree}, {nl}) {n} of {selected} selected of {}: {r:.4} \
+                             [counts 1–{selected}: {}]",
+                            fit.candidates,
+                            by_count.join(" ")
+                        ));
+                        free_run.consider((d, degree, nl, TermCount::Fixed(n)), r);
+                    }
+                    None => free_run.tried.push(format!(
+                        "({d}, {degree}, {nl}): every prefix of its {selected} terms failed in \
+                         free run"
+                    )),
+                }
+            }
+            Err(e) => free_run
+                .tried
+                .push(format!("({d}, {degree}, {nl}): {}", failure(&e))),
+        }
+        free_run.seconds += clock.elapsed().as_secs_f64();
     }
-    let select_seconds = clock.elapsed().as_secs_f64();
-    let Some(((d, degree, nl, count), _)) = best else {
-        anyhow::bail!("every candidate failed: {}", tried.join("; "));
+    criterion.seconds += shared_seconds;
+    free_run.seconds += shared_seconds;
+    Ok(FrolsSelection {
+        used,
+        cap,
+        shared_seconds,
+        criterion,
+        free_run,
+    })
+}
+
+/// Both FROLS rows; a failure of either is a note.
+fn frols_rows(
+    data: &BenchmarkData,
+    mode: Mode,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    offset: f64,
+) {
+    let selection = match frols_selection(data, mode) {
+        Ok(s) => s,
+        Err(e) => {
+            table.note(format!("Polynomial NARX, FROLS (sparse): not built: {e:#}"));
+            table.note(format!(
+                "Polynomial NARX, FROLS, terms by free run: not built: {e:#}"
+            ));
+            return;
+        }
+    };
+    for (row, what) in [
+        (FrolsRow::Criterion, "Polynomial NARX, FROLS (sparse)"),
+        (
+            FrolsRow::FreeRun,
+            "Polynomial NARX, FROLS, terms by free run",
+        ),
+    ] {
+        if let Err(e) = frols_row(data, &selection, row, table, sims, offset) {
+            table.note(format!("{what}: not built: {e:#}"));
+        }
+    }
+}
+
+/// One FROLS row from its selection: the winner's FROLS run again on the whole training
+/// record (its count by the same criterion, or its first `n` terms), scored on the tests
+/// as the dense row is.
+fn frols_row(
+    data: &BenchmarkData,
+    selection: &FrolsSelection,
+    row: FrolsRow,
+    table: &mut Table,
+    sims: &mut Vec<(String, Vec<f64>)>,
+    offset: f64,
+) -> Result<()> {
+    let b = data.benchmark;
+    let window = b.init_window();
+    let (scale, unit) = b.reporting_unit();
+    let est = &data.estimation.experiments()[0];
+    let (used, cap) = (selection.used, selection.cap);
+    let by_free_run = row == FrolsRow::FreeRun;
+    let choice = if by_free_run {
+        &selection.free_run
+    } else {
+        &selection.criterion
+    };
+    let select_seconds = choice.seconds;
+    let Some(((d, degree, nl, count), _)) = choice.best else {
+        anyhow::bail!("every candidate failed: {}", choice.tried.join("; "));
     };
     let clock = Instant::now();
-    let fit = fit_frols(&data.estimation, &config(d, degree, nl, count))?;
+    let fit = fit_frols(&data.estimation, &frols_config(d, degree, nl, cap, count))?;
     let fit_seconds = clock.elapsed().as_secs_f64();
     let label = if by_free_run {
         format!(
@@ -663,58 +754,61 @@ fn frols_inner(
         .zip(&fit.coefficients)
         .map(|(r, c)| format!("{c:+.5e}·{} ({:.2e})", r.name, r.err))
         .collect();
-    let note = if by_free_run {
-        format!(
+    let timing = format!(
+        "Time to accuracy: selection {select_seconds:.1} s (of it {:.1} s the FROLS runs both \
+         FROLS rows share, run once), final fit {fit_seconds:.1} s wall, 1 thread.",
+        selection.shared_seconds
+    );
+    if by_free_run {
+        table.note(format!(
             "Polynomial NARX, FROLS, terms by held-out free run ({OFFICIAL}; \
              docs/decisions/frols-term-count-by-free-run.md): the FROLS row's candidates and \
              term ranking (at most {cap} terms), but each FROLS run keeps the smallest number \
              of its first terms whose free run over the held-out rest is within {:.0} % of its \
              best (a count whose free run fails is not eligible), instead of AIC or BIC; \
              selected on the first {:.0} % of the first {used} of the {} training samples \
-             (held-out free-run RMSE after {window} samples of each run's count, {unit}: {}); \
-             chosen ({d}, {degree}, {nl}) with {} terms, FROLS run again on all training \
-             samples ({} rows, {} candidates) keeping its first {} terms: {}; one-step RMSE \
-             {:.3e} {unit}. Time to accuracy: selection {select_seconds:.1} s, final fit \
-             {fit_seconds:.1} s wall, 1 thread.",
+             (held-out free-run RMSE after {window} samples of each run's count, {unit}, then \
+             in brackets every count's, × where its free run failed: {}); chosen ({d}, \
+             {degree}, {nl}) with {} terms, FROLS run again on all training samples ({} rows, \
+             {} candidates) keeping its first {} terms: {}; one-step RMSE {:.3e} {unit}. \
+             {timing}",
             100.0 * FREE_RUN_COUNT_TOLERANCE,
             100.0 * SELECT_FRACTION,
             est.len(),
-            tried.join(", "),
+            choice.tried.join(", "),
             fit.n_terms,
             fit.rows,
             fit.candidates,
             fit.n_terms,
             terms.join(" "),
             fit.one_step_rmse * scale,
-        )
+        ));
     } else {
-        format!(
+        table.note(format!(
             "Polynomial NARX, FROLS (sparse) ({OFFICIAL}; docs/decisions/frols-polynomial-narx.md): \
-         the dense polynomial NARX's terms for (na = nb, nk = 1, degree, nl) as candidates, \
-         variables divided by their RMS (not centred), terms chosen one at a time by Forward \
-         Regression Orthogonal Least Squares with the Error Reduction Ratio (Billings 2013, \
-         ch. 3; modified Gram–Schmidt), their number by AIC or BIC on the one-step residual \
-         (at most {cap}), coefficients by least squares on the chosen terms (not refined by \
-         free-run error); candidates (na = nb, degree, nl, criterion: terms kept of the \
-         candidates) selected on the first {:.0} % of the first {used} of the {} training \
-         samples and run free over the rest (held-out free-run RMSE after {window} samples, \
-         {unit}: {}); chosen ({d}, {degree}, {nl}) with {}, FROLS run again on all training \
-         samples ({} rows, {} candidates): {} terms, in the order chosen, in recorded units, \
-         each with its ERR (share of the uncentred yᵀy): {}; one-step RMSE {:.3e} {unit}. \
-         Time to accuracy: selection {select_seconds:.1} s, final fit {fit_seconds:.1} s \
-         wall, 1 thread.",
+             the dense polynomial NARX's terms for (na = nb, nk = 1, degree, nl) as candidates, \
+             variables divided by their RMS (not centred), terms chosen one at a time by Forward \
+             Regression Orthogonal Least Squares with the Error Reduction Ratio (Billings 2013, \
+             ch. 3; modified Gram–Schmidt), their number by AIC or BIC on the one-step residual \
+             (at most {cap}), coefficients by least squares on the chosen terms (not refined by \
+             free-run error); candidates (na = nb, degree, nl, criterion: terms kept of the \
+             candidates) selected on the first {:.0} % of the first {used} of the {} training \
+             samples and run free over the rest (held-out free-run RMSE after {window} samples, \
+             {unit}: {}); chosen ({d}, {degree}, {nl}) with {}, FROLS run again on all training \
+             samples ({} rows, {} candidates): {} terms, in the order chosen, in recorded units, \
+             each with its ERR (share of the uncentred yᵀy): {}; one-step RMSE {:.3e} {unit}. \
+             {timing}",
             100.0 * SELECT_FRACTION,
             est.len(),
-            tried.join(", "),
+            choice.tried.join(", "),
             count.label(),
             fit.rows,
             fit.candidates,
             fit.n_terms,
             terms.join(" "),
             fit.one_step_rmse * scale,
-        )
-    };
-    table.note(note);
+        ));
+    }
     table.set_for_model(&label, "train_s", select_seconds + fit_seconds);
     table.set_for_model(&label, "threads", 1.0);
     Ok(())
