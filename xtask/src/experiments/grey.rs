@@ -541,6 +541,10 @@ pub struct EmpsOptions {
     /// screw's efficiency; docs/decisions/emps-load-dependent-friction.md; symmetric model
     /// only).
     pub load_friction: bool,
+    /// A limit on the drive command, `u` clamped to `±limit` V before the drive gain
+    /// (an amplifier that saturates below the simulation's `viradm = 10`; a diagnosis of
+    /// the test record, whose command reaches −7.9…+9.0 V against ±4.3 V in training).
+    pub drive_limit: Option<f64>,
 }
 
 /// EMPS (Janot et al. 2019, eqs. 1–3): `M q'' = gτ·u − Fv·q' − Fc·tanh(q'/ε) − offset`
@@ -554,6 +558,7 @@ pub fn emps_spec(eps: f64) -> Result<GreySpec> {
         start: None,
         position_force: false,
         load_friction: false,
+        drive_limit: None,
     })
 }
 
@@ -617,6 +622,9 @@ pub fn emps_model(o: &EmpsOptions) -> Result<GreySpec> {
             ]
         };
     let mut specs = specs;
+    if let Some(s) = o.drive_limit {
+        specs[0].1 = format!("(abs(u + {s:e}) - abs(u - {s:e}))/2");
+    }
     if o.position_force && !o.asymmetric {
         specs.push(("position_force", "q".to_string(), 0.0));
     }
@@ -671,6 +679,7 @@ pub fn emps_asymmetric_from(symmetric: &TermModel, eps: f64) -> Result<GreySpec>
         start: Some([c[0], c[1], c[2], c[3]]),
         position_force: false,
         load_friction: false,
+        drive_limit: None,
     })
 }
 

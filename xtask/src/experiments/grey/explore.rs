@@ -135,6 +135,7 @@ fn explore_emps() {
             start: None,
             position_force: false,
             load_friction: false,
+            drive_limit: None,
         };
         let mut substeps = 1;
         let mut full = false;
@@ -154,6 +155,7 @@ fn explore_emps() {
                 "full" => full = v != 0.0,
                 "pos" => o.position_force = v != 0.0,
                 "load" => o.load_friction = v != 0.0,
+                "lim" => o.drive_limit = Some(v),
                 "holdout" => holdout = v != 0.0,
                 "ontest" => ontest = v != 0.0,
                 _ => panic!("unknown key {k}"),
