@@ -141,6 +141,7 @@ fn explore_emps() {
         let mut full = false;
         let mut holdout = false;
         let mut ontest = false;
+        let mut halves_only = false;
         let mut reference = false;
         for (k, v) in kv(item) {
             match k.as_str() {
@@ -158,6 +159,7 @@ fn explore_emps() {
                 "lim" => o.drive_limit = Some(v),
                 "holdout" => holdout = v != 0.0,
                 "ontest" => ontest = v != 0.0,
+                "halves" => halves_only = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
@@ -172,6 +174,8 @@ fn explore_emps() {
         }
         if ontest {
             on_test(Benchmark::Emps, item.trim(), &spec);
+        } else if halves_only {
+            halves(Benchmark::Emps, item.trim(), &spec);
         } else if holdout {
             held_out(Benchmark::Emps, item.trim(), &spec);
         } else {
@@ -262,6 +266,7 @@ fn explore_tanks() {
         let mut ontest = false;
         let mut selfwin = false;
         let mut win = false;
+        let mut halves_only = false;
         let mut substeps = 8;
         let mut hz = 2;
         for (k, v) in kv(item) {
@@ -289,6 +294,7 @@ fn explore_tanks() {
                 "ontest" => ontest = v != 0.0,
                 "win" => win = v != 0.0,
                 "selfwin" => selfwin = v != 0.0,
+                "halves" => halves_only = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
@@ -303,6 +309,8 @@ fn explore_tanks() {
         }
         if ontest {
             on_test(Benchmark::CascadedTanks, item.trim(), &spec);
+        } else if halves_only {
+            halves(Benchmark::CascadedTanks, item.trim(), &spec);
         } else if selfwin {
             training_from_window(Benchmark::CascadedTanks, item.trim(), &spec);
         } else if holdout {
@@ -403,6 +411,43 @@ fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
             scale * r
         ),
         Err(e) => println!("{label}: failed {e:#}"),
+    }
+}
+
+/// Diagnosis: the structure calibrated on each half of the training record alone, each half's
+/// coefficients printed and run free over the other half (state fitted to its first window
+/// samples). How far the coefficients move between two disjoint stretches of one record, to
+/// set against how far the test record moves them (test-record-floors.md). No test record.
+fn halves(bench: Benchmark, label: &str, spec: &GreySpec) {
+    let d = data(bench);
+    let w = bench.init_window();
+    let (scale, unit) = bench.reporting_unit();
+    let est = &d.estimation.experiments()[0];
+    let n = est.len();
+    let part = |a: usize, b: usize| {
+        Experiment::new(
+            est.t0() + a as f64 * est.dt(),
+            est.dt(),
+            est.inputs().columns(a, b - a).into_owned(),
+            est.outputs().columns(a, b - a).into_owned(),
+        )
+        .unwrap()
+        .with_intersample(est.intersample())
+    };
+    let (first, second) = (part(0, n / 2), part(n / 2, n));
+    for (name, fit_on, other) in [
+        ("first half", &first, &second),
+        ("second half", &second, &first),
+    ] {
+        match fit_and_score(spec, fit_on, other, w) {
+            Ok((f, r)) => println!(
+                "{label}: {name}: own {:.4} {unit}, other half {:.4} {unit}; {}",
+                scale * f.train_rmse,
+                scale * r,
+                terms(&f)
+            ),
+            Err(e) => println!("{label}: {name}: failed {e:#}"),
+        }
     }
 }
 

@@ -86,7 +86,14 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              met 0.18 V; this one can follow the test record to 0.1787 V, so its remaining \
              gap is coefficients the training record calibrates differently (training \
              0.1400 V, test 0.2110 V), and a held-out fifth of the training record does not \
-             tell the two structures apart (0.2347 against 0.2348 V). The grey box has a \
+             tell the two structures apart (0.2347 against 0.2348 V). The training record \
+             does not pin those coefficients either: calibrated on each half of it alone \
+             (explore_tanks `halves` on e83249c, test-record-floors.md), the pump gain \
+             differs 16-fold (7.7e-2 against 4.9e-3) and the √h2 outflow changes sign, each \
+             half fits itself (0.132 and 0.110 V) and predicts the other at 0.209 and \
+             0.276 V, so the test record's 0.211 V is of the size this structure's \
+             estimation variance on 512–1024 samples, one of two levels measured, gives. \
+             The grey box has a \
              4-s lag between the pump's voltage and its flow since \
              4df7330, chosen by a rule written before its runs (docs/decisions/\
              tanks-pump-rule.md: training free-run RMSE at least 2 % lower and a lower score \
@@ -164,6 +171,13 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              friction 9.3 % and the offset 7 % higher than the training record calibrates: \
              the structure can follow the test record, and its coefficients, friction above \
              all, differ between the two days' runs, which 20 test samples cannot reveal. \
+             They differ as much between the two halves of the training record: calibrated \
+             on each half alone (explore_emps `halves` on e83249c) the offset moves 8.6 %, \
+             Coulomb 2.7 %, viscous 3.2 %, the drive gain 0.1 %, and each half's model \
+             predicts the other half at 4.68 and 7.89 mm (from the 20-sample state), the \
+             size of the test error: the open-loop position integrates a velocity set by the \
+             small difference of drive force and friction, so a few per cent of friction or \
+             offset move it by millimetres. \
              The published 2.64 mm was not measured on the test record: dynoNet's script scores \
              the estimation record (first note), and under that protocol the rows marked \
              \"estimation (dynoNet's protocol)\" compare with it. Under that protocol the grey box \
