@@ -16,14 +16,14 @@
 //! a [`PolyNarxModel`], so its free run, prediction and divergence report are the dense
 //! model's. Nothing here is random; ties go to the first candidate in dictionary order.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 use sysid_core::{Dataset, Experiment, Model};
 
 use crate::error::{BaselineError, Result, check_config};
 use crate::narx::divergence_limits;
 use crate::poly_narx::{PolyNarxModel, check_dictionary, structure_terms};
-use crate::regressors::{NarxOrders, training_rows};
+use crate::regressors::{NarxOrders, fill_regressor, training_rows};
 
 /// A candidate whose part orthogonal to the chosen terms is shorter than this fraction of
 /// its own norm depends on them and is not eligible.
@@ -167,6 +167,8 @@ struct Factors {
     input_names: Vec<String>,
     output_names: Vec<String>,
     limits: Vec<(f64, f64)>,
+    /// Samples of each experiment FROLS ranked on (a K-fold record must be that record).
+    record_lens: Vec<usize>,
 }
 
 impl Factors {
@@ -182,13 +184,19 @@ impl Factors {
     }
 
     fn model(&self, n: usize) -> Result<PolyNarxModel> {
-        let theta = self.solve(n);
+        self.model_from(&self.solve(n))
+    }
+
+    /// The model of the first `theta.len()` selected terms with coefficients `theta`
+    /// (scaled variables).
+    fn model_from(&self, theta: &[f64]) -> Result<PolyNarxModel> {
+        let n = theta.len();
         PolyNarxModel::from_parts(
             self.orders,
             vec![0.0; self.scale.len()],
             self.scale.clone(),
             self.terms[..n].to_vec(),
-            DMatrix::from_row_slice(1, n, &theta),
+            DMatrix::from_row_slice(1, n, theta),
             self.input_names.clone(),
             self.output_names.clone(),
             self.limits.clone(),
@@ -234,7 +242,8 @@ impl std::fmt::Display for PrefixFailure {
     }
 }
 
-/// One prefix count's free run over the held-out records ([`FrolsFit::free_run_scores`]).
+/// One prefix count's free run over held-out records ([`FrolsFit::free_run_scores`]) or
+/// over the held folds of a K-fold split ([`FrolsFit::kfold_scores`]).
 #[derive(Debug)]
 pub struct PrefixScore {
     /// Terms kept: the first `n` of the ranking.
@@ -298,6 +307,230 @@ impl FrolsFit {
         };
         Ok((1..=self.ranking.len())
             .map(|n| PrefixScore { n, rmse: score(n) })
+            .collect())
+    }
+}
+
+/// How many contiguous folds the K-fold term count pools (docs/decisions/
+/// frols-count-kfold.md, rule 2).
+pub const KFOLD_FOLDS: usize = 5;
+
+impl FrolsFit {
+    /// Every prefix count `n = 1..=ranking.len()` scored by free run pooled over `folds`
+    /// contiguous folds of `data` (docs/decisions/frols-count-kfold.md), so that a count
+    /// is chosen on the whole record rather than on one held-out stretch's noise.
+    ///
+    /// `data` must be the one-experiment record this fit ranked its terms on: the ranking
+    /// stays fixed and each fold uses its first `n` terms. The record is cut into `folds`
+    /// folds of `len / folds` samples (the last takes the remainder). For fold `k` and every
+    /// `n`, the first `n` terms' coefficients are refitted by least squares on the
+    /// regression rows of the other folds only — a row whose lag window or target reaches
+    /// into fold `k` is dropped, as is a row touching a missing sample — and that model runs
+    /// free over fold `k` from the fold's measured start (its first measured samples start
+    /// the run, as [`PolyNarxModel`]'s free run does; the first `skip` samples are the delay
+    /// window and are not scored). A count's score is the RMSE of the squared errors after
+    /// the first `skip` samples of every fold, pooled (samples whose measured output is not
+    /// finite left out). A count has no score, and is not eligible, when on any fold its free run
+    /// diverges (the error names the sample of `data`), gives a non-finite output, or its
+    /// refit has no unique solution because a term depends on the earlier ones on the other
+    /// folds' rows ([`BaselineError::Unidentifiable`], naming the term).
+    ///
+    /// One Householder QR per fold of the selected terms' columns (variables scaled as in
+    /// the fit) gives every prefix: the columns are in ranking order, so the first `n`
+    /// columns' least-squares coefficients solve the leading `n × n` block of `R` against
+    /// the first `n` entries of `Qᵀy`. The divergence limits are the fit's.
+    ///
+    /// Errors: `folds < 2`; `skip` shorter than the lag window; `data` with other than one
+    /// experiment or one output, other input channels than the fit's, or another length
+    /// than the record ranked on (or a fit ranked on several experiments); a fold no longer
+    /// than `skip`; no more usable rows outside a fold than terms selected; no measured
+    /// sample after `skip` in any fold.
+    pub fn kfold_scores(
+        &self,
+        data: &Dataset,
+        folds: usize,
+        skip: usize,
+    ) -> Result<Vec<PrefixScore>> {
+        let f = &self.factors;
+        let o = f.orders;
+        let lag = o.max_lag();
+        check_config("folds", folds as f64, "must be at least 2", folds >= 2)?;
+        check_config(
+            "skip",
+            skip as f64,
+            "must be at least the lag window (max_lag) of the model",
+            skip >= lag,
+        )?;
+        let experiments = data.experiments();
+        if experiments.len() != 1 {
+            return Err(BaselineError::Dimension {
+                what: "experiments of a K-fold record",
+                found: experiments.len(),
+                expected: 1,
+            });
+        }
+        let e = &experiments[0];
+        let (p, m) = (e.n_outputs(), e.n_inputs());
+        if p != 1 || m != f.input_names.len() {
+            return Err(BaselineError::Dimension {
+                what: "channels of the K-fold record (one output, the fit's inputs)",
+                found: p + m,
+                expected: 1 + f.input_names.len(),
+            });
+        }
+        let len = e.len();
+        match f.record_lens[..] {
+            [ranked] if ranked == len => {}
+            [ranked] => {
+                return Err(BaselineError::Dimension {
+                    what: "samples of the K-fold record vs the record FROLS ranked on",
+                    found: len,
+                    expected: ranked,
+                });
+            }
+            _ => {
+                return Err(BaselineError::Dimension {
+                    what: "experiments FROLS ranked on (a K-fold record is one)",
+                    found: f.record_lens.len(),
+                    expected: 1,
+                });
+            }
+        }
+        let fold_len = len / folds;
+        if fold_len <= skip {
+            return Err(BaselineError::TooFewRows {
+                what: "samples per K-fold fold (more than the skipped ones)",
+                found: fold_len,
+                needed: skip + 1,
+            });
+        }
+        // Every regression row of the record (target sample lag + r): the selected terms'
+        // scaled columns (column-major), the target, and whether it touches a missing sample.
+        let k = self.ranking.len();
+        let all = len - lag;
+        let (y, u) = (e.outputs(), e.inputs());
+        let mut phi = vec![0.0; all * k];
+        let mut target = vec![f64::NAN; all];
+        let mut reg = vec![0.0; f.scale.len()];
+        for (r, tr) in target.iter_mut().enumerate() {
+            let t = lag + r;
+            fill_regressor(|c, j| y[(c, j)], |c, j| u[(c, j)], (p, m), t, &o, &mut reg);
+            if y[(0, t)].is_nan() || reg.iter().any(|v| v.is_nan()) {
+                continue;
+            }
+            *tr = y[(0, t)];
+            for (z, s) in reg.iter_mut().zip(&f.scale) {
+                *z /= s;
+            }
+            for (j, vars) in f.terms.iter().enumerate() {
+                phi[j * all + r] = vars.iter().map(|&i| reg[i]).product();
+            }
+        }
+        let mut sse = vec![0.0; k];
+        let mut failed: Vec<Option<PrefixFailure>> = (0..k).map(|_| None).collect();
+        let mut samples = 0;
+        let mut theta = vec![0.0; k];
+        let mut rows = Vec::with_capacity(all);
+        for fold in 0..folds {
+            let a = fold * fold_len;
+            let b = if fold + 1 == folds { len } else { a + fold_len };
+            // Rows whose window t − lag ..= t misses the fold a..b.
+            rows.clear();
+            rows.extend((0..all).filter(|&r| !target[r].is_nan() && (lag + r < a || r >= b)));
+            if rows.len() <= k {
+                return Err(BaselineError::TooFewRows {
+                    what: "FROLS K-fold regression rows outside a fold (more than the terms selected)",
+                    found: rows.len(),
+                    needed: k + 1,
+                });
+            }
+            let mat = DMatrix::from_fn(rows.len(), k, |i, j| phi[j * all + rows[i]]);
+            let norms: Vec<f64> = mat.column_iter().map(|c| c.norm()).collect();
+            let mut rhs = DVector::from_iterator(rows.len(), rows.iter().map(|&r| target[r]));
+            let qr = mat.qr();
+            qr.q_tr_mul(&mut rhs);
+            let rr = qr.r();
+            // The first term whose column is (numerically) dependent on the earlier ones
+            // on these rows: no prefix containing it has a unique refit.
+            let dependent = (0..k).find(|&j| {
+                let d = rr[(j, j)].abs();
+                d.is_nan() || d <= DEPENDENT_RTOL * norms[j]
+            });
+            let held = e.window(a, b)?;
+            samples += (a + skip..b).filter(|&t| y[(0, t)].is_finite()).count();
+            for n in 1..=k {
+                if failed[n - 1].is_some() {
+                    continue;
+                }
+                if let Some(j) = dependent.filter(|&j| j < n) {
+                    failed[n - 1] = Some(PrefixFailure::Run(BaselineError::Unidentifiable {
+                        name: self.ranking[j].name.clone(),
+                        ratio: rr[(j, j)].abs() / norms[j],
+                    }));
+                    continue;
+                }
+                for t in (0..n).rev() {
+                    let mut s = rhs[t];
+                    for (c, th) in theta.iter().enumerate().take(n).skip(t + 1) {
+                        s -= rr[(t, c)] * th;
+                    }
+                    theta[t] = s / rr[(t, t)];
+                }
+                let run = f
+                    .model_from(&theta[..n])
+                    .and_then(|model| model.simulate(&held));
+                let sim = match run {
+                    Ok(sim) => sim,
+                    Err(BaselineError::Diverged {
+                        sample,
+                        channel,
+                        value,
+                    }) => {
+                        failed[n - 1] = Some(PrefixFailure::Run(BaselineError::Diverged {
+                            sample: a + sample,
+                            channel,
+                            value,
+                        }));
+                        continue;
+                    }
+                    Err(err) => {
+                        failed[n - 1] = Some(PrefixFailure::Run(err));
+                        continue;
+                    }
+                };
+                let mut fold_sse = 0.0;
+                for i in skip..b - a {
+                    let s = sim.outputs[(0, i)];
+                    if !s.is_finite() {
+                        failed[n - 1] = Some(PrefixFailure::NonFinite);
+                        break;
+                    }
+                    let ym = y[(0, a + i)];
+                    if ym.is_finite() {
+                        fold_sse += (ym - s) * (ym - s);
+                    }
+                }
+                sse[n - 1] += fold_sse;
+            }
+        }
+        if samples == 0 {
+            return Err(BaselineError::TooFewRows {
+                what: "measured samples after the skipped ones of the K-fold folds",
+                found: 0,
+                needed: 1,
+            });
+        }
+        Ok(failed
+            .into_iter()
+            .zip(sse)
+            .enumerate()
+            .map(|(i, (fail, s))| PrefixScore {
+                n: i + 1,
+                rmse: match fail {
+                    Some(why) => Err(why),
+                    None => Ok((s / samples as f64).sqrt()),
+                },
+            })
             .collect())
     }
 }
@@ -519,6 +752,7 @@ pub fn fit_frols(data: &Dataset, config: &FrolsConfig) -> Result<FrolsFit> {
         input_names: data.input_names(),
         output_names: data.output_names(),
         limits: divergence_limits(data, config.divergence_factor)?,
+        record_lens: data.experiments().iter().map(|e| e.len()).collect(),
     };
     let names = factors.model(sel.chosen.len())?.term_names();
     let ranking: Vec<RankedTerm> = names
@@ -610,6 +844,7 @@ mod tests {
                 input_names: vec![],
                 output_names: vec![],
                 limits: vec![],
+                record_lens: vec![],
             };
             let theta = f.solve(used);
             let p = DMatrix::from_fn(n, used, |i, t| orig[sel.chosen[t] * n + i]);

@@ -178,9 +178,16 @@ fn duffing_config(degree: usize) -> FrolsConfig {
     }
 }
 
-/// A model's free-run RMSE over the Duffing validation record after its delay window.
+/// A model's free-run RMSE over the hardening Duffing validation record after its delay
+/// window.
 fn duffing_val_rmse(model: &PolyNarxModel) -> f64 {
-    let (uv, yv, dt) = crate::common::read_case("duffing_hardening", "val.csv");
+    case_val_rmse("duffing_hardening", model)
+}
+
+/// A model's free-run RMSE over the validation record of discovery-suite case `case` after
+/// its delay window.
+fn case_val_rmse(case: &str, model: &PolyNarxModel) -> f64 {
+    let (uv, yv, dt) = crate::common::read_case(case, "val.csv");
     let sim = model
         .simulate(&dataset(&uv, &yv, dt).experiments()[0])
         .unwrap();
@@ -538,4 +545,207 @@ fn bad_input_gives_typed_errors() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("diverged at sample"), "{e}");
+}
+
+/// A term of the ranking written out (`1`, `y(k-1)`, `y(k-1)^2*u(k-2)`), evaluated at
+/// sample `t` of the recorded signals `y` and `u`: the hand computation's own reading of
+/// the names, independent of the library's scaled columns.
+fn term_at(name: &str, y: &[f64], u: &[f64], t: usize) -> f64 {
+    if name == "1" {
+        return 1.0;
+    }
+    name.split('*')
+        .map(|factor| {
+            let (var, power) = match factor.split_once('^') {
+                Some((v, p)) => (v, p.parse::<i32>().unwrap()),
+                None => (factor, 1),
+            };
+            let signal = if var.starts_with('y') { y } else { u };
+            let delay: usize = var
+                .split_once("(k-")
+                .map_or(0, |(_, d)| d.trim_end_matches(')').parse().unwrap());
+            signal[t - delay].powi(power)
+        })
+        .product()
+}
+
+/// docs/decisions/frols-count-kfold.md, first test: on a small record (the three-term
+/// system with output noise, 403 samples so that the last of the 5 folds takes the
+/// remainder, FROLS capped at 8 terms), every count's pooled K-fold score equals a hand
+/// computation: per fold, the first `n` terms evaluated from their names on the recorded
+/// signals, coefficients by a direct least-squares solve (SVD) on the rows whose lag window
+/// t − 2 ..= t misses the fold, a free run over the fold from its first two measured
+/// samples, the squared errors after the first 5 samples of every fold pooled.
+#[test]
+fn kfold_scores_equal_a_hand_computation() {
+    let len = 403;
+    let u = input(len, 41);
+    let e = input(len, 43);
+    let y: Vec<f64> = three_term_truth(&u)
+        .iter()
+        .zip(&e)
+        .map(|(c, e)| c + 0.05 * e)
+        .collect();
+    let data = dataset(&u, &y, 1.0);
+    let fit = fit_frols(
+        &data,
+        &FrolsConfig {
+            max_terms: 8,
+            ..cubic_config(TermCount::Aic)
+        },
+    )
+    .unwrap();
+    assert_eq!(fit.ranking.len(), 8);
+    let (folds, skip, lag) = (5, 5, 2);
+    let lib = fit.kfold_scores(&data, folds, skip).unwrap();
+    assert_eq!(lib.len(), 8);
+    let bounds: Vec<(usize, usize)> = (0..folds)
+        .map(|f| (f * 80, if f + 1 == folds { len } else { f * 80 + 80 }))
+        .collect();
+    for (n, score) in (1..=8).zip(&lib) {
+        let names: Vec<&str> = fit.ranking[..n].iter().map(|r| r.name.as_str()).collect();
+        let (mut sse, mut count) = (0.0, 0);
+        for &(a, b) in &bounds {
+            let rows: Vec<usize> = (lag..len).filter(|&t| t < a || t - lag >= b).collect();
+            let p = DMatrix::from_fn(rows.len(), n, |i, j| term_at(names[j], &y, &u, rows[i]));
+            let target = nalgebra::DVector::from_iterator(rows.len(), rows.iter().map(|&t| y[t]));
+            let theta = p.svd(true, true).solve(&target, 1e-14).unwrap();
+            let mut sim = y[a..b].to_vec();
+            let uf = &u[a..b];
+            for t in lag..b - a {
+                sim[t] = (0..n)
+                    .map(|j| theta[j] * term_at(names[j], &sim, uf, t))
+                    .sum();
+            }
+            for t in skip..b - a {
+                sse += (sim[t] - y[a + t]).powi(2);
+                count += 1;
+            }
+        }
+        let by_hand = (sse / count as f64).sqrt();
+        let got = score
+            .value()
+            .unwrap_or_else(|| panic!("count {n}: {:?}", score.rmse));
+        assert_eq!(score.n, n);
+        assert!(
+            (got - by_hand).abs() <= 1e-9 * by_hand,
+            "count {n}: library {got:e}, by hand {by_hand:e}"
+        );
+    }
+    // Bad settings and records: typed errors, not panics.
+    let bad = |folds, skip, d: &Dataset| fit.kfold_scores(d, folds, skip).unwrap_err().to_string();
+    assert!(bad(1, 5, &data).contains("folds"));
+    assert!(bad(5, 1, &data).contains("skip"));
+    assert!(bad(5, 80, &data).contains("per K-fold fold"));
+    let shorter = dataset(&u[..400], &y[..400], 1.0);
+    assert!(bad(5, 5, &shorter).contains("record FROLS ranked on"));
+    let two = Dataset::new(
+        vec![Channel::new("u")],
+        vec![Channel::new("y")],
+        vec![data.experiments()[0].clone(), data.experiments()[0].clone()],
+    )
+    .unwrap();
+    assert!(bad(5, 5, &two).contains("experiments of a K-fold record"));
+    assert!(bad(403, 2, &data).contains("per K-fold fold"));
+}
+
+/// The rule's Duffing test (docs/decisions/frols-count-kfold.md) on discovery-suite case
+/// `case`: FROLS (na = nb = 3, nk = 1, degree 3, nl = 2, AIC) on all 2000 samples of
+/// est.csv, the K-fold count (5 folds, skip 3, 2 % tolerance) and AIC's count run free over
+/// val.csv, and the sparse linear model (degree 1, AIC) on the same samples. Returns
+/// (K-fold count, its validation RMSE, AIC's count, AIC's RMSE, linear RMSE, what to say).
+fn kfold_on_case(case: &str) -> (usize, f64, usize, f64, f64, String) {
+    let (u, y, dt) = crate::common::read_case(case, "est.csv");
+    assert_eq!(u.len(), 2000);
+    let est = dataset(&u, &y, dt);
+    let fit = fit_frols(&est, &duffing_config(3)).unwrap();
+    let scores: Vec<(usize, Option<f64>)> = fit
+        .kfold_scores(&est, sysid_baselines::KFOLD_FOLDS, 3)
+        .unwrap()
+        .iter()
+        .map(|s| (s.n, s.value()))
+        .collect();
+    let (n, _) = sysid_baselines::count_by_free_run(&scores, 0.02).expect("an eligible count");
+    let by_kfold = case_val_rmse(case, &fit.model_with(n).unwrap());
+    let by_aic = case_val_rmse(case, &fit.model);
+    let linear = case_val_rmse(case, &fit_frols(&est, &duffing_config(1)).unwrap().model);
+    let said = format!(
+        "{case}: K-fold {n} terms, {by_kfold:e}; AIC {} terms, {by_aic:e}; linear {linear:e}; \
+         pooled scores {scores:?}",
+        fit.n_terms
+    );
+    (n, by_kfold, fit.n_terms, by_aic, linear, said)
+}
+
+/// The K-fold count on the three scipy Duffing records of the discovery suite
+/// (docs/decisions/frols-count-kfold.md, second test). The rule asked (a) no more terms
+/// than AIC, (b) a validation free-run RMSE at most 1.10 × AIC's, (c) at most half the
+/// sparse linear model's, on each record. Measured (2026-11-28, recorded in the decision
+/// file's outcome): (b) holds on all three (the K-fold count is at or below AIC's error on
+/// softening and amplitude damping, 4.5 % above it on hardening); (a) fails on hardening
+/// (13 terms against AIC's 9) and on amplitude damping (16 against 10); (c) fails on
+/// softening, where no cubic FROLS model of these orders halves the linear model's error
+/// (K-fold 5.98e-2, AIC 9.28e-2, linear 6.06e-2). The findings are asserted as measured, so
+/// a change that flips any of them fails here and must update the decision record.
+#[test]
+fn the_kfold_count_on_three_duffing_records_keeps_aics_error_but_not_always_fewer_terms() {
+    // (case, (a) holds, (b) holds, (c) holds), as measured.
+    for (case, a, b, c) in [
+        ("duffing_hardening", false, true, true),
+        ("duffing_softening", true, true, false),
+        ("duffing_amplitude_damping", false, true, true),
+    ] {
+        let (n, by_kfold, aic_n, by_aic, linear, said) = kfold_on_case(case);
+        let flipped = "flipped: update docs/decisions/frols-count-kfold.md";
+        assert_eq!(n <= aic_n, a, "(a) {flipped}; {said}");
+        assert_eq!(by_kfold <= 1.10 * by_aic, b, "(b) {flipped}; {said}");
+        assert_eq!(by_kfold <= 0.5 * linear, c, "(c) {flipped}; {said}");
+    }
+}
+
+/// docs/decisions/frols-count-kfold.md, third test: the three-term system (output noise
+/// σ = 0.05) whose last fold's input is 4 times wider (its output from the same
+/// recursion). Refitted on the other four folds, the counts with terms fitted to noise
+/// diverge over the wide fold: each such count has no pooled score, its failure names a
+/// sample of that fold, and it is never chosen; the count chosen is the three true terms.
+#[test]
+fn a_count_whose_free_run_diverges_on_one_fold_is_not_eligible() {
+    let len = 2500;
+    let u: Vec<f64> = input(len, 5)
+        .iter()
+        .enumerate()
+        .map(|(k, v)| if k >= 2000 { 4.0 * v } else { *v })
+        .collect();
+    let e = input(len, 29);
+    let y: Vec<f64> = three_term_truth(&u)
+        .iter()
+        .zip(&e)
+        .map(|(c, e)| c + 0.05 * 3f64.sqrt() * e)
+        .collect();
+    let data = dataset(&u, &y, 1.0);
+    let fit = fit_frols(&data, &cubic_config(TermCount::Aic)).unwrap();
+    let scores = fit.kfold_scores(&data, 5, 10).unwrap();
+    let mut diverged = 0;
+    for s in &scores {
+        match &s.rmse {
+            Ok(v) => assert!(v.is_finite() && s.value() == Some(*v)),
+            Err(PrefixFailure::Run(BaselineError::Diverged { sample, .. })) => {
+                assert!((2000..2500).contains(sample), "count {}: {sample}", s.n);
+                assert_eq!(s.value(), None);
+                diverged += 1;
+            }
+            Err(other) => panic!("count {}: {other}", s.n),
+        }
+    }
+    let pairs: Vec<(usize, Option<f64>)> = scores.iter().map(|s| (s.n, s.value())).collect();
+    // Measured: counts 9–20 diverge over the wide fold, 1–8 run through every fold.
+    assert!(diverged >= 10, "{diverged} of 20 diverged: {pairs:?}");
+    assert!(pairs[19].1.is_none() && pairs[..3].iter().all(|p| p.1.is_some()));
+    let (n, _) = sysid_baselines::count_by_free_run(&pairs, 0.02).unwrap();
+    assert_eq!(n, 3, "{pairs:?}");
+    let mut kept: Vec<&str> = fit.ranking[..n].iter().map(|r| r.name.as_str()).collect();
+    kept.sort_unstable();
+    let mut truth = THREE_TERMS.to_vec();
+    truth.sort_unstable();
+    assert_eq!(kept, truth, "{pairs:?}");
 }

@@ -10,8 +10,8 @@ use anyhow::Result;
 use mmenn::benchmarks::{Benchmark, BenchmarkData};
 use mmenn::fit::{STRESS_FACTOR, stress_input};
 use mmenn::sysid_baselines::{
-    BaselineError, FrolsConfig, NarxConfig, NarxOrders, NetworkChoice, PolyNarxConfig, TermCount,
-    count_by_free_run, fit_frols, fit_narx, fit_poly_narx, poly_narx::Focus,
+    BaselineError, FrolsConfig, KFOLD_FOLDS, NarxConfig, NarxOrders, NetworkChoice, PolyNarxConfig,
+    TermCount, count_by_free_run, fit_frols, fit_narx, fit_poly_narx, poly_narx::Focus,
 };
 use mmenn::sysid_core::{Channel, Dataset, Experiment, InterSample, Model, Prediction};
 
@@ -151,7 +151,9 @@ pub fn narx_rows(
     }
     // docs/decisions/frols-polynomial-narx.md and, beside it,
     // docs/decisions/frols-term-count-by-free-run.md (the number of terms by held-out free
-    // run instead of AIC/BIC), from the same FROLS runs.
+    // run instead of AIC/BIC), from the same FROLS runs, and
+    // docs/decisions/frols-count-kfold.md (the number of terms by free run pooled over
+    // K folds of the whole selection record).
     frols_rows(data, mode, table, sims, offset);
 }
 
@@ -515,13 +517,15 @@ fn frols_grid(mode: Mode) -> (Vec<(usize, usize, usize)>, usize) {
     (grid, cap)
 }
 
-/// The two FROLS rows: the number of terms by AIC or BIC (docs/decisions/
-/// frols-polynomial-narx.md), or by held-out free run (docs/decisions/
-/// frols-term-count-by-free-run.md).
+/// The three FROLS rows: the number of terms by AIC or BIC (docs/decisions/
+/// frols-polynomial-narx.md), by held-out free run (docs/decisions/
+/// frols-term-count-by-free-run.md), or by free run pooled over K folds (docs/decisions/
+/// frols-count-kfold.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum FrolsRow {
     Criterion,
     FreeRun,
+    KFold,
 }
 
 /// One FROLS row's selection: every candidate's held-out score (or why it has none), the
@@ -543,18 +547,24 @@ impl FrolsChoice {
     }
 }
 
-/// Both FROLS rows' selections, from one FROLS run per candidate of [`frols_grid`] on the
-/// first 80 % of the samples the other NARX selections use: the AIC and the BIC count of
-/// each run (docs/decisions/frols-polynomial-narx.md) and the smallest prefix count within
-/// 2 % of the run's best (docs/decisions/frols-term-count-by-free-run.md), each run free
-/// over the rest.
+/// The FROLS rows' selections. The first two come from one FROLS run per candidate of
+/// [`frols_grid`] on the first 80 % of the samples the other NARX selections use: the AIC
+/// and the BIC count of each run (docs/decisions/frols-polynomial-narx.md) and the smallest
+/// prefix count within 2 % of the run's best (docs/decisions/
+/// frols-term-count-by-free-run.md), each run free over the rest. The K-fold row's
+/// FROLS runs rank on all the samples the selections use (docs/decisions/
+/// frols-count-kfold.md, rule 1), so it has runs of its own: each run's smallest prefix
+/// count within 2 % of its best pooled K-fold free-run score.
 struct FrolsSelection {
     used: usize,
     cap: usize,
-    /// Wall time of the FROLS runs the two rows share.
+    /// Wall time of the FROLS runs the first two rows share.
     shared_seconds: f64,
     criterion: FrolsChoice,
     free_run: FrolsChoice,
+    /// Wall time of the K-fold row's own FROLS runs (of its selection time).
+    kfold_runs_seconds: f64,
+    kfold: FrolsChoice,
 }
 
 fn frols_config(d: usize, degree: usize, nl: usize, cap: usize, count: TermCount) -> FrolsConfig {
@@ -574,13 +584,23 @@ fn frols_selection(data: &BenchmarkData, mode: Mode) -> Result<FrolsSelection> {
     let (scale, _) = b.reporting_unit();
     let est = &data.estimation.experiments()[0];
     let (used, head, tail, y_tail) = selection_split(est, plan(b, mode).select_samples)?;
+    let whole = dataset(est, 0, used, est.intersample())?;
     let (grid, cap) = frols_grid(mode);
     let (mut criterion, mut free_run) = (FrolsChoice::default(), FrolsChoice::default());
-    let mut shared_seconds = 0.0;
+    let mut kfold = FrolsChoice::default();
+    let (mut shared_seconds, mut kfold_runs_seconds) = (0.0, 0.0);
     for (d, degree, nl) in grid {
         if d > window {
             continue;
         }
+        kfold_candidate(
+            &whole,
+            (d, degree, nl, cap),
+            window,
+            scale,
+            &mut kfold,
+            &mut kfold_runs_seconds,
+        );
         let clock = Instant::now();
         let fit = fit_frols(&head, &frols_config(d, degree, nl, cap, TermCount::Aic));
         shared_seconds += clock.elapsed().as_secs_f64();
@@ -657,7 +677,73 @@ fn frols_selection(data: &BenchmarkData, mode: Mode) -> Result<FrolsSelection> {
         shared_seconds,
         criterion,
         free_run,
+        kfold_runs_seconds,
+        kfold,
     })
+}
+
+/// One candidate `(d, degree, nl, cap)` of the K-fold row (docs/decisions/
+/// frols-count-kfold.md): FROLS ranks on the whole selection record `whole`, every prefix
+/// count is scored by [`FrolsFit::kfold_scores`](mmenn::sysid_baselines::FrolsFit::kfold_scores)
+/// over [`KFOLD_FOLDS`] folds (each fold's first `window` samples its delay window), and
+/// the run's count is the smallest within the 2 % tolerance of its best pooled score. Adds
+/// the candidate's line (every count's pooled score, × where it has none) to `choice`, and
+/// the wall time to `choice.seconds` (of it the FROLS run to `runs_seconds`).
+fn kfold_candidate(
+    whole: &Dataset,
+    (d, degree, nl, cap): (usize, usize, usize, usize),
+    window: usize,
+    scale: f64,
+    choice: &mut FrolsChoice,
+    runs_seconds: &mut f64,
+) {
+    let clock = Instant::now();
+    let fit = fit_frols(whole, &frols_config(d, degree, nl, cap, TermCount::Aic));
+    let run = clock.elapsed().as_secs_f64();
+    *runs_seconds += run;
+    choice.seconds += run;
+    let fit = match fit {
+        Ok(f) => f,
+        Err(e) => {
+            choice
+                .tried
+                .push(format!("({d}, {degree}, {nl}): {}", failure(&e)));
+            return;
+        }
+    };
+    let clock = Instant::now();
+    let selected = fit.ranking.len();
+    match fit.kfold_scores(whole, KFOLD_FOLDS, window) {
+        Ok(scores) => {
+            let pairs: Vec<(usize, Option<f64>)> = scores
+                .iter()
+                .map(|s| (s.n, s.value().map(|v| scale * v)))
+                .collect();
+            let by_count: Vec<String> = pairs
+                .iter()
+                .map(|(_, r)| r.map_or("×".into(), |v| format!("{v:.3}")))
+                .collect();
+            match count_by_free_run(&pairs, FREE_RUN_COUNT_TOLERANCE) {
+                Some((n, r)) => {
+                    choice.tried.push(format!(
+                        "({d}, {degree}, {nl}) {n} of {selected} selected of {}: {r:.4} \
+                         [counts 1–{selected}: {}]",
+                        fit.candidates,
+                        by_count.join(" ")
+                    ));
+                    choice.consider((d, degree, nl, TermCount::Fixed(n)), r);
+                }
+                None => choice.tried.push(format!(
+                    "({d}, {degree}, {nl}): every prefix of its {selected} terms failed in \
+                     free run on some fold"
+                )),
+            }
+        }
+        Err(e) => choice
+            .tried
+            .push(format!("({d}, {degree}, {nl}): {}", failure(&e))),
+    }
+    choice.seconds += clock.elapsed().as_secs_f64();
 }
 
 /// Both FROLS rows; a failure of either is a note.
@@ -675,6 +761,9 @@ fn frols_rows(
             table.note(format!(
                 "Polynomial NARX, FROLS, terms by free run: not built: {e:#}"
             ));
+            table.note(format!(
+                "Polynomial NARX, FROLS, terms by K-fold free run: not built: {e:#}"
+            ));
             return;
         }
     };
@@ -683,6 +772,10 @@ fn frols_rows(
         (
             FrolsRow::FreeRun,
             "Polynomial NARX, FROLS, terms by free run",
+        ),
+        (
+            FrolsRow::KFold,
+            "Polynomial NARX, FROLS, terms by K-fold free run",
         ),
     ] {
         if let Err(e) = frols_row(data, &selection, row, table, sims, offset) {
@@ -708,10 +801,10 @@ fn frols_row(
     let est = &data.estimation.experiments()[0];
     let (used, cap) = (selection.used, selection.cap);
     let by_free_run = row == FrolsRow::FreeRun;
-    let choice = if by_free_run {
-        &selection.free_run
-    } else {
-        &selection.criterion
+    let choice = match row {
+        FrolsRow::Criterion => &selection.criterion,
+        FrolsRow::FreeRun => &selection.free_run,
+        FrolsRow::KFold => &selection.kfold,
     };
     let select_seconds = choice.seconds;
     let Some(((d, degree, nl, count), _)) = choice.best else {
@@ -720,17 +813,20 @@ fn frols_row(
     let clock = Instant::now();
     let fit = fit_frols(&data.estimation, &frols_config(d, degree, nl, cap, count))?;
     let fit_seconds = clock.elapsed().as_secs_f64();
-    let label = if by_free_run {
-        format!(
+    let label = match row {
+        FrolsRow::FreeRun => format!(
             "polynomial NARX, FROLS (sparse) (na = nb = {d}, degree {degree}, {} terms by held-out free run)",
             fit.n_terms
-        )
-    } else {
-        format!(
+        ),
+        FrolsRow::KFold => format!(
+            "polynomial NARX, FROLS (sparse) (na = nb = {d}, degree {degree}, {} terms by K-fold free run)",
+            fit.n_terms
+        ),
+        FrolsRow::Criterion => format!(
             "polynomial NARX, FROLS (sparse) (na = nb = {d}, degree {degree}, {} terms by {}, chosen on held-out data)",
             fit.n_terms,
             count.label()
-        )
+        ),
     };
     let protocol = format!(
         "{OFFICIAL}: all training samples at full rate; delay window = the first {d} of the {window} initialisation samples, RMSE after them"
@@ -740,10 +836,10 @@ fn frols_row(
         data,
         &label,
         &protocol,
-        if by_free_run {
-            "polynomial NARX, FROLS, terms by free run"
-        } else {
-            "polynomial NARX, FROLS"
+        match row {
+            FrolsRow::FreeRun => "polynomial NARX, FROLS, terms by free run",
+            FrolsRow::KFold => "polynomial NARX, FROLS, terms by K-fold free run",
+            FrolsRow::Criterion => "polynomial NARX, FROLS",
         },
         table,
         sims,
@@ -754,12 +850,46 @@ fn frols_row(
         .zip(&fit.coefficients)
         .map(|(r, c)| format!("{c:+.5e}·{} ({:.2e})", r.name, r.err))
         .collect();
-    let timing = format!(
-        "Time to accuracy: selection {select_seconds:.1} s (of it {:.1} s the FROLS runs both \
-         FROLS rows share, run once), final fit {fit_seconds:.1} s wall, 1 thread.",
-        selection.shared_seconds
-    );
-    if by_free_run {
+    let timing = match row {
+        FrolsRow::KFold => format!(
+            "Time to accuracy: selection {select_seconds:.1} s (of it {:.1} s its own FROLS runs \
+             on the whole selection record, the rest the per-fold refits and free runs), final \
+             fit {fit_seconds:.1} s wall, 1 thread.",
+            selection.kfold_runs_seconds
+        ),
+        _ => format!(
+            "Time to accuracy: selection {select_seconds:.1} s (of it {:.1} s the FROLS runs both \
+             FROLS rows share, run once), final fit {fit_seconds:.1} s wall, 1 thread.",
+            selection.shared_seconds
+        ),
+    };
+    if row == FrolsRow::KFold {
+        table.note(format!(
+            "Polynomial NARX, FROLS, terms by K-fold free run ({OFFICIAL}; \
+             docs/decisions/frols-count-kfold.md): the FROLS row's candidates (at most {cap} \
+             terms), but each FROLS run ranks its terms on all the first {used} of the {} \
+             training samples, which are cut into {KFOLD_FOLDS} contiguous folds; for each fold \
+             and each count n, the first n terms are refitted by least squares on the rows of \
+             the other folds (rows with a sample in the fold dropped) and run free \
+             over the fold from its measured start, and the squared errors after each fold's \
+             first {window} samples are pooled; each run keeps the smallest count whose pooled \
+             free-run RMSE is within {:.0} % of its best (a count whose free run fails on any \
+             fold is not eligible), instead of AIC or BIC (pooled K-fold free-run RMSE of each \
+             run's count, {unit}, then in brackets every count's, × where it has none: {}); \
+             chosen ({d}, {degree}, {nl}) with {} terms, FROLS run again on all training \
+             samples ({} rows, {} candidates) keeping its first {} terms: {}; one-step RMSE \
+             {:.3e} {unit}. {timing}",
+            est.len(),
+            100.0 * FREE_RUN_COUNT_TOLERANCE,
+            choice.tried.join(", "),
+            fit.n_terms,
+            fit.rows,
+            fit.candidates,
+            fit.n_terms,
+            terms.join(" "),
+            fit.one_step_rmse * scale,
+        ));
+    } else if by_free_run {
         table.note(format!(
             "Polynomial NARX, FROLS, terms by held-out free run ({OFFICIAL}; \
              docs/decisions/frols-term-count-by-free-run.md): the FROLS row's candidates and \
