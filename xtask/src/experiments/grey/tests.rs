@@ -420,3 +420,126 @@ fn recalibration_through_the_acquisition_filter_recovers_the_system() {
         "as recorded the cubic is off by {recorded:.2e}, through the filter by {through:.2e}"
     );
 }
+
+/// `model` written as a model file (its linear part, its terms as they are, the spec's
+/// intersample rule) and run by `mmenn::predict` — the one judge every command uses — from
+/// the state it fits to the record's first `window` outputs: the scored output and the RK4
+/// steps taken (`substeps`: `None`, the predict command's automatic rule).
+pub(super) fn predicted(
+    spec: &GreySpec,
+    model: &TermModel,
+    record: &Experiment,
+    window: usize,
+    substeps: Option<mmenn::sysid_core::Substeps>,
+) -> Result<(Vec<f64>, Option<usize>)> {
+    use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry};
+    use mmenn::predict::{InitialChoice, PredictOptions, compute_predict_record_with};
+    let lin = model.linear();
+    let names = lin.state_names();
+    let file = ModelSpec {
+        linear: lin.clone(),
+        noise_variance: NoiseVariance::Given(vec![1.0]),
+        units: Default::default(),
+        terms: model
+            .terms()
+            .iter()
+            .map(|t| TermEntry {
+                state: names[t.state].clone(),
+                into: t.into.map(|i| names[i].clone()),
+                effect: t.effect.clone(),
+                term: t.expr.to_string(),
+                coefficient: t.coefficient,
+            })
+            .collect(),
+        intersample: spec.intersample,
+        parameters: Vec::new(),
+        mechanics: None,
+        acquisition: None,
+    };
+    let loaded = mmenn::model::LoadedModel::from_spec(std::path::Path::new("grey.toml"), file)?;
+    let opts = PredictOptions {
+        x0: InitialChoice::Fit,
+        x0_window: Some(window),
+        horizon: None,
+        score_from: None,
+    };
+    let steps = substeps.unwrap_or_else(|| mmenn::predict::default_substeps(&loaded));
+    let out = compute_predict_record_with(&loaded, record, loaded.outputs(), &opts, steps)?;
+    let column = format!("{}_predicted", out.observation.names[0]);
+    let y = out
+        .column(&column)
+        .with_context(|| format!("no column {column}"))?
+        .to_vec();
+    Ok((y, out.summary.substeps))
+}
+
+/// One judge (SPEC §6): the tables score a grey box by `window_state` + `free_run` with the
+/// calibration's integrator; `mmenn predict` on the same model written as a model file must
+/// give the same run. Checked on the EMPS structure (a model other than the one that made
+/// the record, so the error is not zero) with the calibration's 1 RK4 step: the two runs
+/// agree to 1e-9 of the output's range (a predict state fitted to 30 samples instead of 20
+/// differs by 1.8e-8 of it and fails). On the real test records the same comparison
+/// (`explore_one_judge`) gave 5.965584 mm both ways.
+#[test]
+fn the_tables_grey_box_score_is_the_predict_commands() {
+    let spec = emps_spec(3e-4).unwrap();
+    let truth = spec.model.clone();
+    let n = 3000;
+    let dt = 1e-3;
+    let u: Vec<f64> = (0..n)
+        .map(|k| {
+            let t = k as f64 * dt;
+            2.0 * (2.0 * std::f64::consts::PI * 0.7 * t).sin()
+                + 0.8 * (2.0 * std::f64::consts::PI * 3.1 * t).sin()
+        })
+        .collect();
+    let q = run(&spec, &truth, &[0.0, 0.0], &u, dt);
+    let exp = Experiment::new(
+        0.0,
+        dt,
+        DMatrix::from_row_slice(1, n, &u),
+        q.rows(0, 1).into_owned(),
+    )
+    .unwrap()
+    .with_intersample(spec.intersample);
+    let c: Vec<f64> = spec
+        .model
+        .terms()
+        .iter()
+        .map(|t| 1.05 * t.coefficient)
+        .collect();
+    let other = with_coefficients(&spec.model, &c);
+    let window = 20;
+    let table = window_state(&spec, &other, &exp, window)
+        .map_err(|e| format!("{e:#}"))
+        .and_then(|x0| free_run(&spec, &other, &exp, &x0))
+        .unwrap();
+    let (judged, steps) = predicted(
+        &spec,
+        &other,
+        &exp,
+        window,
+        Some(mmenn::sysid_core::Substeps::Fixed(1)),
+    )
+    .unwrap();
+    assert_eq!(steps, Some(1));
+    let range = q.row(0).max() - q.row(0).min();
+    let worst = table
+        .iter()
+        .zip(&judged)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    let err = rmse_after(
+        &q.row(0).iter().copied().collect::<Vec<_>>(),
+        &table,
+        window,
+    );
+    assert!(
+        err > 1e-3 * range,
+        "the scored model should miss the record: {err:e}"
+    );
+    assert!(
+        worst <= 1e-9 * range,
+        "table and predict differ by {worst:e} (range {range:e})"
+    );
+}
