@@ -466,12 +466,20 @@ fn hybrid_rows_inner(
         .join(", ");
     table.note(format!(
         "{LABEL} ({OFFICIAL}): assumed model = the calibrated grey box ({chosen}, training \
-         free-run RMSE {:.4} {unit}) with its named terms; MME (noise variance {:.1e}, W by the covariance constraint: {}; its iteration at that W {}) on all {} training samples at full rate, correction on the {} \
+         free-run RMSE {:.4} {unit}) with its named terms{}; MME (noise variance {:.1e}, W by the covariance constraint: {}; its iteration at that W {}) on all {} training samples at full rate, correction on the {} \
          equation; network of {} hidden units picked by {} from a 1–{} × {} sweep on d̂; {refine}; {guard}; training free-run RMSE {train_rmse:.4} {unit} (from MME's x̂(t0)). \
          Test: x0 fitted to the first {window} samples, free run over the whole record ({}).{} \
          Time to accuracy: grey box {grey_seconds:.1} s, MME + network + refinement \
          {fit_seconds:.1} s wall, rayon pool of {} threads on 2 shared cores.",
         scale * gfit.train_rmse,
+        if gfit.model.terms().iter().any(|t| t.expr.to_string().contains("sqrt(")) {
+            " (its model file writes every square root with + 0.0001 under it: MME starts \
+             from a level of exactly 0, where the root's slope is infinite; so \"physics \
+             alone\" is this slightly different model and may differ from the grey-box row \
+             in the last digit)"
+        } else {
+            ""
+        },
         eff.noise,
         w_text,
         mmenn::words::termination(summary.mme_termination),
