@@ -4,6 +4,8 @@
 //! of this crate made it). `Ã` should be `G`; the scoring rule is the fixture README's,
 //! written before this test first ran.
 
+mod noise;
+
 use std::path::PathBuf;
 
 use nalgebra::Complex;
