@@ -743,6 +743,11 @@ pub struct TanksOptions {
     /// `−kr1·max(h1, 0)` and `−kr2·max(h2, 0)` in the upper tank's equation
     /// (docs/decisions/tanks-reservoir-head-rule.md).
     pub reservoir_head: bool,
+    /// Whether the upper tank's √h1 outflow and the lower tank's √h1 inflow are one flow
+    /// (a transfer term out of h1 into h2, one coefficient) instead of two calibrated terms:
+    /// both levels in one unit, both tanks of one section
+    /// (docs/decisions/tanks-one-flow-rule.md). `free_k2` then has no effect.
+    pub one_flow: bool,
 }
 
 /// The structure [`tanks_spec`] builds: `k2` free, both overflows at a held rate of 1/s,
@@ -767,6 +772,7 @@ impl Default for TanksOptions {
             pump_quadratic: false,
             pump_lag: None,
             reservoir_head: false,
+            one_flow: false,
         }
     }
 }
@@ -843,25 +849,35 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     let upper = format!("sqrt({})", positive("h1"));
     let spill = excess_term("h1", o.h1_top, o.smooth);
     let top2 = excess_term("h2", o.h2_top, o.smooth);
-    terms.push(("h1", "outflow", upper.clone(), -rate));
+    // With `one_flow` the first term is a transfer out of h1 into h2 (the only one).
+    terms.push((
+        "h1",
+        if o.one_flow { "flow" } else { "outflow" },
+        upper.clone(),
+        -rate,
+    ));
     terms.push(("h1", "pump", drive.into(), rate * 5f64.sqrt() / 2.8));
     let c_over = o.overflow_rate.unwrap_or(0.2);
     terms.push(("h1", "overflow", spill.clone(), -c_over));
-    terms.push(("h2", "inflow", upper, rate));
+    let mut free = vec![0, 1];
+    if o.overflow_rate.is_none() {
+        free.push(2);
+    }
+    if !o.one_flow {
+        if o.free_k2 {
+            free.push(terms.len());
+        }
+        terms.push(("h2", "inflow", upper, rate));
+    }
     let lower = if o.sensor_offset == 0.0 {
         format!("sqrt({})", positive("h2"))
     } else {
         format!("sqrt({})", positive(&format!("h2 - {:e}", o.sensor_offset)))
     };
+    free.push(terms.len());
     terms.push(("h2", "outflow", lower, -rate));
+    free.push(terms.len());
     terms.push(("h2", "overflow_inflow", spill, 0.05));
-    let mut free = vec![0, 1, 4, 5];
-    if o.overflow_rate.is_none() {
-        free.push(2);
-    }
-    if o.free_k2 {
-        free.push(3);
-    }
     match o.sensor {
         None => {
             if o.overflow_rate.is_none() {
@@ -928,13 +944,16 @@ pub fn tanks_model(o: &TanksOptions) -> Result<GreySpec> {
     )?;
     let model = TermModel::from_specs(
         linear,
-        terms.iter().map(|(state, effect, term, c)| TermSpec {
-            state,
-            into: None,
-            effect,
-            term,
-            coefficient: *c,
-        }),
+        terms
+            .iter()
+            .enumerate()
+            .map(|(i, (state, effect, term, c))| TermSpec {
+                state,
+                into: (o.one_flow && i == 0).then_some("h2"),
+                effect,
+                term,
+                coefficient: *c,
+            }),
     )?;
     // Levels (and the sensor) start at the first reading; a pump lag at the first input.
     let mut starts = vec![Start::Output; if o.sensor.is_some() { 3 } else { 2 }];

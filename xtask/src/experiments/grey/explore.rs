@@ -295,6 +295,7 @@ fn explore_tanks() {
                 "win" => win = v != 0.0,
                 "selfwin" => selfwin = v != 0.0,
                 "halves" => halves_only = v != 0.0,
+                "one" => o.one_flow = v != 0.0,
                 _ => panic!("unknown key {k}"),
             }
         }
