@@ -543,3 +543,35 @@ fn the_tables_grey_box_score_is_the_predict_commands() {
         "table and predict differ by {worst:e} (range {range:e})"
     );
 }
+
+/// `one_flow` (docs/decisions/tanks-one-flow-rule.md): the upper outflow and the lower
+/// inflow become one transfer term out of h1 into h2 — one coefficient fewer, the same
+/// free coefficients otherwise — and the water it moves leaves one tank and enters the
+/// other: started with only the upper tank holding water, pump off and no outflow from
+/// the lower tank, the total h1 + h2 stays constant.
+#[test]
+fn tanks_one_flow_is_one_transfer_that_conserves_water() {
+    let two = tanks_model(&TanksOptions::default()).unwrap();
+    let one = tanks_model(&TanksOptions {
+        one_flow: true,
+        ..TanksOptions::default()
+    })
+    .unwrap();
+    assert_eq!(one.model.terms().len() + 1, two.model.terms().len());
+    assert_eq!(one.free.len() + 1, two.free.len());
+    assert_eq!(one.model.terms()[0].into, Some(1));
+    assert!(two.model.terms().iter().all(|t| t.into.is_none()));
+    // Only the flow acts (every other coefficient zero).
+    let c: Vec<f64> = (0..one.model.terms().len())
+        .map(|i| if i == 0 { -0.05 } else { 0.0 })
+        .collect();
+    let flow_only = with_coefficients(&one.model, &c);
+    let x = run(&one, &flow_only, &[6.0, 1.0], &[0.0; 200], 4.0);
+    for k in 0..200 {
+        assert!((x[(0, k)] + x[(1, k)] - 7.0).abs() < 1e-9, "sample {k}");
+    }
+    assert!(
+        x[(0, 199)] < 1.0 && x[(1, 199)] > 6.0,
+        "the water moved down"
+    );
+}
