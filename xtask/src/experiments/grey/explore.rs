@@ -4,11 +4,13 @@
 //! pumpq lag res ontest (calibrate on the test record: a diagnosis, never a choice) win
 //! (calibrate with the training state fitted to the window, `TrainState::Window`) selfwin
 //! (print only the training record's free run from the window-fitted state)
-//! holdout (calibrate on the first 80 %, score the last 20 %) sub hz;
+//! holdout (calibrate on the first 80 %, score the last 20 %) halves (calibrate on each half,
+//! score the other; no test record) one (`TanksOptions::one_flow`) sub hz;
 //! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
-//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos holdout ref (the reference
-//! IDIM-LS coefficients uncalibrated); `GREY_SB` keys q dd vv
+//! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos load lim (drive clamped at
+//! ±lim V) holdout halves ontest ref (the reference IDIM-LS coefficients uncalibrated);
+//! `GREY_SB` keys q dd vv
 //! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
 //! `explore_silverbox_bandlimited` takes `GREY_SB` with `up=L` (records resampled `L`× by
 //! windowed sinc, scored at the recorded samples) and the input monomials u2 u3 u2y uv uyv
