@@ -248,6 +248,40 @@ pub fn fit_grey(
     })
 }
 
+/// A grey box as a model file: its linear part, its terms with their coefficients (each
+/// term's text passed through `term`), the correction where the linear part puts it, the
+/// spec's intersample rule and the given noise variance.
+pub fn model_file(
+    spec: &GreySpec,
+    model: &TermModel,
+    noise: f64,
+    term: fn(&str) -> String,
+) -> mmenn::model_file::ModelSpec {
+    use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry};
+    let lin = model.linear();
+    let names = lin.state_names();
+    ModelSpec {
+        linear: lin.clone(),
+        noise_variance: NoiseVariance::Given(vec![noise]),
+        units: Default::default(),
+        terms: model
+            .terms()
+            .iter()
+            .map(|t| TermEntry {
+                state: names[t.state].clone(),
+                into: t.into.map(|i| names[i].clone()),
+                effect: t.effect.clone(),
+                term: term(&t.expr.to_string()),
+                coefficient: t.coefficient,
+            })
+            .collect(),
+        intersample: spec.intersample,
+        parameters: Vec::new(),
+        mechanics: None,
+        acquisition: None,
+    }
+}
+
 /// Silverbox's acquisition filter (Rule 6 of docs/decisions/silverbox-schroeder-rule.md):
 /// one below 190 Hz, where the multisines and the arrow put their input, estimated in 5-Hz
 /// bands from 195 Hz to the Nyquist frequency.

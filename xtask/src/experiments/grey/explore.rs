@@ -396,16 +396,7 @@ fn held_out(bench: Benchmark, label: &str, spec: &GreySpec) {
     let est = &d.estimation.experiments()[0];
     let n = est.len();
     let cut = n * 4 / 5;
-    let part = |a: usize, b: usize| {
-        Experiment::new(
-            est.t0() + a as f64 * est.dt(),
-            est.dt(),
-            est.inputs().columns(a, b - a).into_owned(),
-            est.outputs().columns(a, b - a).into_owned(),
-        )
-        .unwrap()
-        .with_intersample(est.intersample())
-    };
+    let part = |a: usize, b: usize| est.window(a, b).unwrap();
     let (fit_part, held) = (part(0, cut), part(cut, n));
     match fit_and_score(spec, &fit_part, &held, w) {
         Ok((f, r)) => println!(
@@ -427,16 +418,7 @@ fn halves(bench: Benchmark, label: &str, spec: &GreySpec) {
     let (scale, unit) = bench.reporting_unit();
     let est = &d.estimation.experiments()[0];
     let n = est.len();
-    let part = |a: usize, b: usize| {
-        Experiment::new(
-            est.t0() + a as f64 * est.dt(),
-            est.dt(),
-            est.inputs().columns(a, b - a).into_owned(),
-            est.outputs().columns(a, b - a).into_owned(),
-        )
-        .unwrap()
-        .with_intersample(est.intersample())
-    };
+    let part = |a: usize, b: usize| est.window(a, b).unwrap();
     let (first, second) = (part(0, n / 2), part(n / 2, n));
     for (name, fit_on, other) in [
         ("first half", &first, &second),

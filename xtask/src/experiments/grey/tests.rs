@@ -432,30 +432,8 @@ pub(super) fn predicted(
     window: usize,
     substeps: Option<mmenn::sysid_core::Substeps>,
 ) -> Result<(Vec<f64>, Option<usize>)> {
-    use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry};
     use mmenn::predict::{InitialChoice, PredictOptions, compute_predict_record_with};
-    let lin = model.linear();
-    let names = lin.state_names();
-    let file = ModelSpec {
-        linear: lin.clone(),
-        noise_variance: NoiseVariance::Given(vec![1.0]),
-        units: Default::default(),
-        terms: model
-            .terms()
-            .iter()
-            .map(|t| TermEntry {
-                state: names[t.state].clone(),
-                into: t.into.map(|i| names[i].clone()),
-                effect: t.effect.clone(),
-                term: t.expr.to_string(),
-                coefficient: t.coefficient,
-            })
-            .collect(),
-        intersample: spec.intersample,
-        parameters: Vec::new(),
-        mechanics: None,
-        acquisition: None,
-    };
+    let file = model_file(spec, model, 1.0, str::to_string);
     let loaded = mmenn::model::LoadedModel::from_spec(std::path::Path::new("grey.toml"), file)?;
     let opts = PredictOptions {
         x0: InitialChoice::Fit,

@@ -8,7 +8,6 @@
 //! window, every sample after it scored. A test run that diverges is reported with its
 //! time, never as a number.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -18,7 +17,7 @@ use mmenn::data_file::write_csv;
 use mmenn::fit::{
     FitOptions, GuardHeldOut, InitialChoice, NetworkSelection, TrajectoryChoice, run_fit,
 };
-use mmenn::model_file::{ModelSpec, NoiseVariance, TermEntry, write_model};
+use mmenn::model_file::{ModelSpec, write_model};
 use mmenn::sysid_core::{Experiment, Integrator};
 
 use super::{ChosenGrey, OFFICIAL, grey, rmse_after};
@@ -132,32 +131,10 @@ fn fit_options(eff: &Effort, substeps: usize, window: usize) -> FitOptions {
     }
 }
 
-/// The calibrated grey box as a model file: its linear part, its terms with the
-/// calibrated coefficients, the correction where the linear part puts it.
+/// The calibrated grey box as the hybrid's model file ([`grey::model_file`]), every square
+/// root shifted by [`regularised`].
 fn model_spec(spec: &grey::GreySpec, fit: &grey::GreyFit, noise: f64) -> ModelSpec {
-    let lin = fit.model.linear();
-    let names = lin.state_names();
-    ModelSpec {
-        linear: lin.clone(),
-        noise_variance: NoiseVariance::Given(vec![noise]),
-        units: BTreeMap::new(),
-        terms: fit
-            .model
-            .terms()
-            .iter()
-            .map(|t| TermEntry {
-                state: names[t.state].clone(),
-                into: t.into.map(|i| names[i].clone()),
-                effect: t.effect.clone(),
-                term: regularised(&t.expr.to_string()),
-                coefficient: t.coefficient,
-            })
-            .collect(),
-        intersample: spec.intersample,
-        parameters: Vec::new(),
-        mechanics: None,
-        acquisition: None,
-    }
+    grey::model_file(spec, &fit.model, noise, regularised)
 }
 
 /// Every `sqrt((h + abs(h))/2)` (or `sqrt(abs(h))`) in a term, alone or inside a product

@@ -545,6 +545,52 @@ impl FrolsChoice {
             self.best = Some((candidate, r));
         }
     }
+
+    /// One FROLS run's prefix scores (held-out or pooled K-fold; recorded units times
+    /// `scale`): its count by [`count_by_free_run`] considered, every count's score listed in
+    /// `tried`; `where_failed` ends the line when no count is eligible.
+    #[allow(clippy::too_many_arguments)]
+    fn consider_scores(
+        &mut self,
+        (d, degree, nl): (usize, usize, usize),
+        fit: &mmenn::sysid_baselines::frols::FrolsFit,
+        scores: mmenn::sysid_baselines::Result<Vec<mmenn::sysid_baselines::PrefixScore>>,
+        scale: f64,
+        where_failed: &str,
+    ) {
+        let selected = fit.ranking.len();
+        let scores = match scores {
+            Ok(s) => s,
+            Err(e) => {
+                self.tried
+                    .push(format!("({d}, {degree}, {nl}): {}", failure(&e)));
+                return;
+            }
+        };
+        let pairs: Vec<(usize, Option<f64>)> = scores
+            .iter()
+            .map(|s| (s.n, s.value().map(|v| scale * v)))
+            .collect();
+        let by_count: Vec<String> = pairs
+            .iter()
+            .map(|(_, r)| r.map_or("×".into(), |v| format!("{v:.3}")))
+            .collect();
+        match count_by_free_run(&pairs, FREE_RUN_COUNT_TOLERANCE) {
+            Some((n, r)) => {
+                self.tried.push(format!(
+                    "({d}, {degree}, {nl}) {n} of {selected} selected of {}: {r:.4} \
+                     [counts 1–{selected}: {}]",
+                    fit.candidates,
+                    by_count.join(" ")
+                ));
+                self.consider((d, degree, nl, TermCount::Fixed(n)), r);
+            }
+            None => self.tried.push(format!(
+                "({d}, {degree}, {nl}): every prefix of its {selected} terms failed in free \
+                 run{where_failed}"
+            )),
+        }
+    }
 }
 
 /// The FROLS rows' selections. The first two come from one FROLS run per candidate of
@@ -636,37 +682,13 @@ fn frols_selection(data: &BenchmarkData, mode: Mode) -> Result<FrolsSelection> {
         }
         criterion.seconds += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
-        let selected = fit.ranking.len();
-        match fit.free_run_scores(std::slice::from_ref(&tail), window) {
-            Ok(scores) => {
-                let pairs: Vec<(usize, Option<f64>)> = scores
-                    .iter()
-                    .map(|s| (s.n, s.value().map(|v| scale * v)))
-                    .collect();
-                let by_count: Vec<String> = pairs
-                    .iter()
-                    .map(|(_, r)| r.map_or("×".into(), |v| format!("{v:.3}")))
-                    .collect();
-                match count_by_free_run(&pairs, FREE_RUN_COUNT_TOLERANCE) {
-                    Some((n, r)) => {
-                        free_run.tried.push(format!(
-                            "({d}, {degree}, {nl}) {n} of {selected} selected of {}: {r:.4} \
-                             [counts 1–{selected}: {}]",
-                            fit.candidates,
-                            by_count.join(" ")
-                        ));
-                        free_run.consider((d, degree, nl, TermCount::Fixed(n)), r);
-                    }
-                    None => free_run.tried.push(format!(
-                        "({d}, {degree}, {nl}): every prefix of its {selected} terms failed in \
-                         free run"
-                    )),
-                }
-            }
-            Err(e) => free_run
-                .tried
-                .push(format!("({d}, {degree}, {nl}): {}", failure(&e))),
-        }
+        free_run.consider_scores(
+            (d, degree, nl),
+            &fit,
+            fit.free_run_scores(std::slice::from_ref(&tail), window),
+            scale,
+            "",
+        );
         free_run.seconds += clock.elapsed().as_secs_f64();
     }
     criterion.seconds += shared_seconds;
@@ -712,37 +734,13 @@ fn kfold_candidate(
         }
     };
     let clock = Instant::now();
-    let selected = fit.ranking.len();
-    match fit.kfold_scores(whole, KFOLD_FOLDS, window) {
-        Ok(scores) => {
-            let pairs: Vec<(usize, Option<f64>)> = scores
-                .iter()
-                .map(|s| (s.n, s.value().map(|v| scale * v)))
-                .collect();
-            let by_count: Vec<String> = pairs
-                .iter()
-                .map(|(_, r)| r.map_or("×".into(), |v| format!("{v:.3}")))
-                .collect();
-            match count_by_free_run(&pairs, FREE_RUN_COUNT_TOLERANCE) {
-                Some((n, r)) => {
-                    choice.tried.push(format!(
-                        "({d}, {degree}, {nl}) {n} of {selected} selected of {}: {r:.4} \
-                         [counts 1–{selected}: {}]",
-                        fit.candidates,
-                        by_count.join(" ")
-                    ));
-                    choice.consider((d, degree, nl, TermCount::Fixed(n)), r);
-                }
-                None => choice.tried.push(format!(
-                    "({d}, {degree}, {nl}): every prefix of its {selected} terms failed in \
-                     free run on some fold"
-                )),
-            }
-        }
-        Err(e) => choice
-            .tried
-            .push(format!("({d}, {degree}, {nl}): {}", failure(&e))),
-    }
+    choice.consider_scores(
+        (d, degree, nl),
+        &fit,
+        fit.kfold_scores(whole, KFOLD_FOLDS, window),
+        scale,
+        " on some fold",
+    );
     choice.seconds += clock.elapsed().as_secs_f64();
 }
 
