@@ -188,15 +188,7 @@ fn duffing_val_rmse(model: &PolyNarxModel) -> f64 {
 /// its delay window.
 fn case_val_rmse(case: &str, model: &PolyNarxModel) -> f64 {
     let (uv, yv, dt) = crate::common::read_case(case, "val.csv");
-    let sim = model
-        .simulate(&dataset(&uv, &yv, dt).experiments()[0])
-        .unwrap();
-    let s = sim.initial_samples;
-    ((s..yv.len())
-        .map(|k| (sim.outputs[(0, k)] - yv[k]).powi(2))
-        .sum::<f64>()
-        / (yv.len() - s) as f64)
-        .sqrt()
+    crate::common::free_run_rmse(model, &dataset(&uv, &yv, dt), &yv)
 }
 
 /// The term count by held-out free run on the scipy Duffing record (rule written before
@@ -322,18 +314,7 @@ fn three_term_fit(noise: f64) -> (FrolsFit, Vec<f64>, Vec<f64>) {
         .collect();
     let fit = fit_frols(
         &dataset(&u[..1500], &y[..1500], 1.0),
-        &FrolsConfig {
-            orders: NarxOrders {
-                na: 2,
-                nb: 2,
-                nk: 1,
-            },
-            degree: 3,
-            nonlinear_lags: 2,
-            max_terms: 20,
-            count: TermCount::Aic,
-            ..FrolsConfig::default()
-        },
+        &cubic_config(TermCount::Aic),
     )
     .unwrap();
     (fit, u, y)

@@ -158,15 +158,7 @@ fn simulation_focus_refines_the_free_run_on_the_independent_duffing_record() {
         nonlinear_lags: 2,
         ..PolyNarxConfig::default()
     };
-    let val_rmse = |m: &sysid_baselines::PolyNarxModel| {
-        let sim = m.simulate(&val.experiments()[0]).unwrap();
-        let s = sim.initial_samples;
-        ((s..yv.len())
-            .map(|k| (sim.outputs[(0, k)] - yv[k]).powi(2))
-            .sum::<f64>()
-            / (yv.len() - s) as f64)
-            .sqrt()
-    };
+    let val_rmse = |m: &sysid_baselines::PolyNarxModel| crate::common::free_run_rmse(m, &val, &yv);
     let one_step = fit_poly_narx(&train, &config).unwrap();
     let refined = fit_poly_narx(
         &train,

@@ -31,25 +31,39 @@ struct Record {
     measured: Vec<f64>,
 }
 
-fn record() -> Record {
-    let text = fixture("record.csv");
+/// A committed CSV fixture's rows after its header (which must be `header`), each with
+/// `columns` numbers; a bad header, row or number names the file and row.
+fn csv_rows(name: &str, header: &str, columns: usize) -> Vec<Vec<f64>> {
+    let text = fixture(name);
     let mut lines = text.lines();
-    assert_eq!(
-        lines.next().map(str::trim),
-        Some("t,u,y_true_model,y"),
-        "record.csv header"
-    );
+    assert_eq!(lines.next().map(str::trim), Some(header), "{name} header");
+    lines
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+        .map(|(i, line)| {
+            let v: Vec<f64> = line
+                .split(',')
+                .map(|s| {
+                    s.trim()
+                        .parse()
+                        .unwrap_or_else(|e| panic!("{name} row {}: {s:?}: {e}", i + 2))
+                })
+                .collect();
+            assert_eq!(
+                v.len(),
+                columns,
+                "{name} row {}: {} columns",
+                i + 2,
+                v.len()
+            );
+            v
+        })
+        .collect()
+}
+
+fn record() -> Record {
     let (mut t, mut simulated, mut measured) = (Vec::new(), Vec::new(), Vec::new());
-    for (i, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let v: Vec<f64> = line
-            .split(',')
-            .map(|s| {
-                s.trim()
-                    .parse()
-                    .unwrap_or_else(|e| panic!("record.csv row {}: {s:?}: {e}", i + 2))
-            })
-            .collect();
-        assert_eq!(v.len(), 4, "record.csv row {}: {} columns", i + 2, v.len());
+    for v in csv_rows("record.csv", "t,u,y_true_model,y", 4) {
         t.push(v[0]);
         simulated.push(v[2]);
         measured.push(v[3]);

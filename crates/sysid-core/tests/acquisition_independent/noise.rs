@@ -7,7 +7,7 @@
 use nalgebra::Complex;
 use sysid_core::acquisition::{AcquisitionFilter, AcquisitionOptions};
 
-use super::{Truth, fixture, record};
+use super::{Truth, csv_rows, fixture, record};
 
 /// N1: Rust's gain and standard error against numpy's on the same committed record.
 const TIE_REL: f64 = 1e-6;
@@ -22,30 +22,11 @@ const MEDIAN_MEAN_SE_RATIO: (f64, f64) = (0.95, 1.05);
 
 /// The committed noisy realisation's `y` column (`t,y`), checked against the record's `t`.
 fn noisy_output(t: &[f64]) -> Vec<f64> {
-    let text = fixture("record_noisy.csv");
-    let mut lines = text.lines();
-    assert_eq!(
-        lines.next().map(str::trim),
-        Some("t,y"),
-        "record_noisy.csv header"
-    );
     let mut y = Vec::new();
-    for (i, line) in lines.enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let v: Vec<f64> = line
-            .split(',')
-            .map(|s| {
-                s.trim()
-                    .parse()
-                    .unwrap_or_else(|e| panic!("record_noisy.csv row {}: {s:?}: {e}", i + 2))
-            })
-            .collect();
-        assert_eq!(
-            v.len(),
-            2,
-            "record_noisy.csv row {}: {} columns",
-            i + 2,
-            v.len()
-        );
+    for (i, v) in csv_rows("record_noisy.csv", "t,y", 2)
+        .into_iter()
+        .enumerate()
+    {
         assert!(
             t.get(i).is_some_and(|&ti| (ti - v[0]).abs() < 1e-12),
             "record_noisy.csv row {}: t = {} is not record.csv's",
