@@ -93,6 +93,11 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              half fits itself (0.132 and 0.110 V) and predicts the other at 0.209 and \
              0.276 V, so the test record's 0.211 V is of the size this structure's \
              estimation variance on 512–1024 samples, one of two levels measured, gives. \
+             On the whole record too (docs/decisions/tanks-multistart-rule.md, 25 seeded \
+             starts): the reported calibration is its lowest training cost (0.1400 V), but a \
+             second minimum 0.6 % higher (0.1408 V) with a pump gain 8-fold larger and the \
+             √h2 outflow 100-fold smaller scores 0.2721 V on the test record: calibrations \
+             the training record cannot tell apart differ by 29 % there. \
              The grey box has a \
              4-s lag between the pump's voltage and its flow since \
              4df7330, chosen by a rule written before its runs (docs/decisions/\
