@@ -201,3 +201,66 @@ fn a_converged_estimate_gives_no_warning() {
         assert!(m.variance_ratio["theta"].is_finite(), "{m}");
     }
 }
+
+/// Under `Warn` with the K-fold guard, every fold's MME estimate that stopped at the
+/// iteration limit reaches the summary (and `summary.json`) beside the training estimate,
+/// each naming its fold and the piece of the record it ran on: the copy from the guard's
+/// fold scores into `FitSummary::mme_estimates` loses none and invents none.
+#[test]
+fn the_warn_policy_records_every_unconverged_fold_estimate_of_the_k_fold_guard() {
+    let data = record();
+    let opts = FitOptions {
+        guard: mmenn::fit::GuardHeldOut::Folds(4),
+        ..options(1, UnconvergedMme::Warn)
+    };
+    let (out, _) = fit_tasks(&data, &opts);
+    let outcome = out.unwrap();
+    let s = &outcome.summary;
+    assert!(!outcome.mme_converged());
+    // The guard ran four folds of 100 samples; the pieces left when a stretch is held out
+    // are one for the first and last fold and two for the inner ones.
+    let folds = &s.guard.folds;
+    assert_eq!(folds.len(), 4);
+    let in_folds: Vec<_> = folds
+        .iter()
+        .flat_map(|f| f.unconverged_mme.iter().cloned())
+        .collect();
+    assert_eq!(in_folds.len(), 6, "{in_folds:?}");
+    let copied: Vec<_> = s
+        .mme_estimates
+        .iter()
+        .filter(|m| m.stage == MmeStage::GuardFold)
+        .cloned()
+        .collect();
+    assert_eq!(copied, in_folds);
+    let mut seen = Vec::new();
+    for m in &copied {
+        assert_eq!(m.termination, Some(Termination::MaxIterations), "{m}");
+        let f = m.fold.as_ref().unwrap();
+        assert_eq!(f.folds, 4);
+        assert_eq!(f.stretch, ((f.index - 1) * 100, f.index * 100));
+        seen.push((f.index, f.record.clone()));
+    }
+    assert_eq!(
+        seen,
+        [
+            (1, "samples 100..400".to_owned()),
+            (2, "samples 0..100".to_owned()),
+            (2, "samples 200..400".to_owned()),
+            (3, "samples 0..200".to_owned()),
+            (3, "samples 300..400".to_owned()),
+            (4, "samples 0..300".to_owned()),
+        ]
+    );
+    // The training estimate is still the first, and everything unconverged is listed.
+    assert_eq!(s.mme_estimates[0].stage, MmeStage::Training);
+    assert_eq!(s.unconverged_mme().len(), 7);
+    let json = serde_json::to_value(s).unwrap();
+    let stages: Vec<&str> = json["mme_estimates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["stage"].as_str().unwrap())
+        .collect();
+    assert_eq!(stages.iter().filter(|s| **s == "guard_fold").count(), 6);
+}
