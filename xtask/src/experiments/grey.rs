@@ -334,14 +334,15 @@ pub fn acquisition_filtered(
     })
 }
 
-/// `exp` with its input through the filter's inverse (the system's own input under the
-/// measurement model) and its output as recorded.
+/// `exp` in both channels through the filter's inverse (the system's own signals under the
+/// measurement model): the record `mmenn predict` runs and fits the state on for a model
+/// with that `[acquisition]` table ([`mmenn::model::LoadedModel::record_for_model`]).
 pub fn deconvolved(filter: &AcquisitionFilter, exp: &Experiment) -> Result<Experiment> {
-    let u = mmenn::acquisition::filter_rows(filter, exp.inputs(), exp.dt(), true)?;
-    Ok(
-        Experiment::new(exp.t0(), exp.dt(), u, exp.outputs().clone())?
-            .with_intersample(exp.intersample()),
-    )
+    Ok(mmenn::acquisition::deconvolved(
+        filter,
+        exp,
+        &["y".to_string()],
+    )?)
 }
 
 /// The grey box recalibrated on the records' own signals under the measurement model (Rule 7
@@ -354,7 +355,7 @@ pub fn recalibrated_through(
     filter: &AcquisitionFilter,
     est: &Experiment,
 ) -> Result<(TermModel, Vec<f64>)> {
-    let dec = mmenn::acquisition::deconvolved(filter, est, &["y".to_string()])?;
+    let dec = deconvolved(filter, est)?;
     let data = record(&dec, dec.len(), spec.intersample)?;
     let cal = calibrate(
         &fit.model,
@@ -384,15 +385,17 @@ pub fn rmse_through_from(
         .ok()?
         .window(start, exp.len())
         .ok()?;
-    let y: Vec<f64> = dec.outputs().row(0).iter().copied().collect();
+    let y: Vec<f64> = exp.outputs().row(0).iter().skip(start).copied().collect();
     filtered_run_from(spec, model, filter, &dec, window)
         .ok()
         .map(|s| rmse_after(&y, &s, window))
         .filter(|v| v.is_finite())
 }
 
-/// One free run through the acquisition filter: the input deconvolved, the state fitted to
-/// the first `window` recorded outputs, the simulated output filtered.
+/// One free run through the acquisition filter, judged as `mmenn predict` judges a model
+/// with that `[acquisition]` table: the record deconvolved in both channels, the state
+/// fitted to the first `window` deconvolved outputs, the simulated output filtered (to be
+/// scored against the recorded outputs).
 pub fn filtered_run(
     spec: &GreySpec,
     model: &TermModel,
@@ -404,7 +407,7 @@ pub fn filtered_run(
     filtered_run_from(spec, model, filter, &dec, window)
 }
 
-/// [`filtered_run`] on a record whose input is already deconvolved (a window of a longer
+/// [`filtered_run`] on a record already deconvolved in both channels (a window of a longer
 /// deconvolved record).
 pub fn filtered_run_from(
     spec: &GreySpec,
