@@ -5,11 +5,13 @@
 //! (calibrate with the training state fitted to the window, `TrainState::Window`) selfwin
 //! (print only the training record's free run from the window-fitted state)
 //! holdout (calibrate on the first 80 %, score the last 20 %) halves (calibrate on each half,
-//! score the other; no test record) one (`TanksOptions::one_flow`) sub hz;
+//! score the other; no test record) one (`TanksOptions::one_flow`) starts (seeded multi-start,
+//! training only) seed (one seeded start) sub hz;
 //! `explore_emps_window_rule` applies docs/decisions/emps-window-state-calibration.md
 //! (bare options unless given: no pump offset, no linear outflow, calibrated overflow
 //! rates); `GREY_EMPS` keys eps asym g fv fc off sub full pos load lim (drive clamped at
-//! ±lim V) holdout halves ontest ref (the reference IDIM-LS coefficients uncalibrated);
+//! ±lim V) holdout halves ontest ref (the reference IDIM-LS coefficients uncalibrated)
+//! starts (seeded multi-start, training only; docs/decisions/tanks-multistart-rule.md);
 //! `GREY_SB` keys q dd vv
 //! (quadratic drag) q5 ft sub and the monomials v3 yv v2 yv2 ya yav vay.
 //! `explore_silverbox_bandlimited` takes `GREY_SB` with `up=L` (records resampled `L`× by
@@ -145,6 +147,7 @@ fn explore_emps() {
         let mut ontest = false;
         let mut halves_only = false;
         let mut reference = false;
+        let mut starts = 0;
         for (k, v) in kv(item) {
             match k.as_str() {
                 "ref" => reference = v != 0.0,
@@ -162,6 +165,7 @@ fn explore_emps() {
                 "holdout" => holdout = v != 0.0,
                 "ontest" => ontest = v != 0.0,
                 "halves" => halves_only = v != 0.0,
+                "starts" => starts = v as usize,
                 _ => panic!("unknown key {k}"),
             }
         }
@@ -176,6 +180,8 @@ fn explore_emps() {
         }
         if ontest {
             on_test(Benchmark::Emps, item.trim(), &spec);
+        } else if starts > 0 {
+            multistart(Benchmark::Emps, item.trim(), &spec, starts);
         } else if halves_only {
             halves(Benchmark::Emps, item.trim(), &spec);
         } else if holdout {
