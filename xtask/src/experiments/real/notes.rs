@@ -182,7 +182,10 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
              predicts the other half at 4.68 and 7.89 mm (from the 20-sample state), the \
              size of the test error: the open-loop position integrates a velocity set by the \
              small difference of drive force and friction, so a few per cent of friction or \
-             offset move it by millimetres. \
+             offset move it by millimetres. The whole record's calibration is its one \
+             minimum (20 of 24 seeded starts reach it to 5 digits; docs/decisions/\
+             tanks-multistart-rule.md): the coefficients are identified, and it is they, \
+             not an ambiguous fit, that the two days' runs move. \
              The published 2.64 mm was not measured on the test record: dynoNet's script scores \
              the estimation record (first note), and under that protocol the rows marked \
              \"estimation (dynoNet's protocol)\" compare with it. Under that protocol the grey box \
