@@ -4,6 +4,7 @@
 //! injected disturbance, and calibration by free-run error.
 
 mod calibration;
+mod calibration_se;
 mod common;
 mod known_plants;
 mod localisation;
