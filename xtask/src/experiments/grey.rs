@@ -248,6 +248,51 @@ pub fn fit_grey(
     })
 }
 
+/// `spec` with its calibrated coefficients drawn around their starting values
+/// (docs/decisions/tanks-multistart-rule.md): a non-zero start times `exp(z)`,
+/// z ~ N(0, 0.7²), sign kept; a zero start N(0, 0.05²); seeded ChaCha8, one draw per
+/// calibrated term in term order.
+pub fn perturbed(spec: &GreySpec, seed: u64) -> Result<GreySpec> {
+    use rand::SeedableRng;
+    use rand::rngs::ChaCha8Rng;
+    use rand_distr::{Distribution, StandardNormal};
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut terms = spec.model.terms().to_vec();
+    for &k in &spec.free {
+        let z: f64 = StandardNormal.sample(&mut rng);
+        let c = &mut terms[k].coefficient;
+        *c = if *c == 0.0 {
+            0.05 * z
+        } else {
+            *c * (0.7 * z).exp()
+        };
+    }
+    let mut out = spec.clone();
+    out.model = TermModel::new(spec.model.linear().clone(), terms)?;
+    Ok(out)
+}
+
+/// [`fit_grey`] on the training record alone from the starts [`perturbed`] draws with seeds
+/// `1..=n`, run in parallel and returned in seed order (so the same for any thread count);
+/// a failed start is its error's text.
+pub fn multistart(
+    spec: &GreySpec,
+    est: &Experiment,
+    window: usize,
+    n: u64,
+) -> Vec<(u64, std::result::Result<GreyFit, String>)> {
+    use rayon::prelude::*;
+    (1..=n)
+        .into_par_iter()
+        .map(|seed| {
+            let fit = perturbed(spec, seed)
+                .and_then(|s| fit_grey(&s, est, &[], window))
+                .map_err(|e| format!("{e:#}"));
+            (seed, fit)
+        })
+        .collect()
+}
+
 /// A grey box as a model file: its linear part, its terms with their coefficients (each
 /// term's text passed through `term`), the correction where the linear part puts it, the
 /// spec's intersample rule and the given noise variance.

@@ -321,7 +321,7 @@ fn explore_tanks() {
             spec.horizons = vec![0.1, 0.25, 0.5, 1.0];
         }
         if seed > 0 {
-            spec = perturbed(&spec, seed);
+            spec = perturbed(&spec, seed).unwrap();
         }
         if ontest {
             on_test(Benchmark::CascadedTanks, item.trim(), &spec);
@@ -451,29 +451,6 @@ fn halves(bench: Benchmark, label: &str, spec: &GreySpec) {
     }
 }
 
-/// `spec` with its calibrated coefficients drawn around their generic start
-/// (docs/decisions/tanks-multistart-rule.md): a non-zero start times `exp(z)`,
-/// z ~ N(0, 0.7²); a zero start N(0, 0.05²); seeded ChaCha8.
-fn perturbed(spec: &GreySpec, seed: u64) -> GreySpec {
-    use rand::SeedableRng;
-    use rand::rngs::ChaCha8Rng;
-    use rand_distr::{Distribution, StandardNormal};
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut terms = spec.model.terms().to_vec();
-    for &k in &spec.free {
-        let z: f64 = StandardNormal.sample(&mut rng);
-        let c = &mut terms[k].coefficient;
-        *c = if *c == 0.0 {
-            0.05 * z
-        } else {
-            *c * (0.7 * z).exp()
-        };
-    }
-    let mut out = spec.clone();
-    out.model = TermModel::new(spec.model.linear().clone(), terms).unwrap();
-    out
-}
-
 /// Training record only: the generic start and `n` seeded starts ([`perturbed`]), each
 /// calibrated as the table calibrates; prints each one's training free-run RMSE (from its
 /// calibrated state) and coefficients, sorted by that RMSE. No test record is run.
@@ -487,7 +464,7 @@ fn multistart(bench: Benchmark, label: &str, spec: &GreySpec, n: usize) {
             let s = if seed == 0 {
                 spec.clone()
             } else {
-                perturbed(spec, seed as u64)
+                perturbed(spec, seed as u64).unwrap()
             };
             let name = if seed == 0 {
                 "generic".to_string()
