@@ -5,6 +5,11 @@
 //! ([`sysid_core::greybox`]). Writes `model.toml` (the same model with the estimates and
 //! their `sigma`, which `mmenn show` prints), `greyest.json` (estimates, σ, correlations,
 //! start states, the solver reports, fit per output and record) and `report.md`.
+//!
+//! With [`GreyestOptions::starts`] above 0 the estimation also runs from that many seeded
+//! starts and keeps the lowest final cost, listing every start, the distinct minima and an
+//! identifiability warning when another minimum is nearly as good with materially
+//! different parameters ([`multistart`]).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -21,6 +26,10 @@ use crate::error::{MmennError, ModelProblem, Result};
 use crate::model::{LoadedModel, ModelDynamics};
 use crate::model_file::{ModelSpec, NoiseVariance, format_model};
 use crate::progress::{NoProgress, Progress, ProgressSink};
+
+pub mod multistart;
+
+pub use multistart::MultiStart;
 
 /// Options of [`run_greyest`].
 #[derive(Debug, Clone, PartialEq)]
@@ -42,6 +51,17 @@ pub struct GreyestOptions {
     /// `C x = y(t0)`. For an unmeasured state whose default start (0) is a singular point
     /// of a term, e.g. a level under `sqrt`. Default none.
     pub x0_start: Vec<(String, f64)>,
+    /// Seeded starts besides the model file's own (the CLI's `--starts N`). Default 0:
+    /// the file's start only. Start `k` (1..=`starts`) draws each free parameter from
+    /// `ChaCha8Rng::seed_from_u64(seed + k)`: a non-zero start value `v` becomes
+    /// `v·exp(0.7·z)`, `z ~ N(0, 1)`, sign kept; a zero one uniform within its bounds
+    /// when both are finite, else 0; a draw outside its bounds (or on one) moves halfway
+    /// between `v` and that bound. Every start runs the same estimation; the lowest final
+    /// free-run cost is kept (ties: the lower index, the file's own start being 0); a start
+    /// that fails is listed with its error ([`multistart`]).
+    pub starts: usize,
+    /// Seed of the seeded starts (the CLI's `--seed S`). Default 1.
+    pub seed: u64,
 }
 
 impl Default for GreyestOptions {
@@ -52,6 +72,8 @@ impl Default for GreyestOptions {
             max_iterations: 100,
             budget: sysid_core::Budget::default(),
             x0_start: Vec::new(),
+            starts: 0,
+            seed: 1,
         }
     }
 }
@@ -158,6 +180,10 @@ pub struct GreyestSummary {
     pub rank: (usize, usize),
     /// Files written.
     pub files: Vec<String>,
+    /// The starts, their minima and the identifiability warnings (`--starts N`; absent
+    /// from `greyest.json` without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub multi_start: Option<MultiStart>,
 }
 
 /// Everything `mmenn greyest` computes ([`write_greyest`] writes it).
@@ -302,17 +328,24 @@ pub fn compute_greyest(
         records,
         x0: &starts,
     };
-    let mut observer = |stage: &str, k: usize, cost: f64| {
-        progress.report(
-            &Progress::new(format!("grey-box estimation ({stage})"), k, None)
-                .with_note(format!("cost {cost:.4e}")),
-        );
+    let (fit, multi_start) = if opts.starts == 0 {
+        let mut observer = |stage: &str, k: usize, cost: f64| {
+            progress.report(
+                &Progress::new(format!("grey-box estimation ({stage})"), k, None)
+                    .with_note(format!("cost {cost:.4e}")),
+            );
+        };
+        let fit = estimate_parameters_with(physical, &data, &gopts, &mut observer)
+            .map_err(core("grey-box estimation"));
+        progress.finish("grey-box estimation (multiple shooting)");
+        progress.finish("grey-box estimation (free run)");
+        (fit?, None)
+    } else {
+        let (fit, starts) =
+            multistart::run(physical, &data, &gopts, opts.starts, opts.seed, progress)
+                .map_err(core("grey-box estimation"))?;
+        (fit, Some(starts))
     };
-    let fit = estimate_parameters_with(physical, &data, &gopts, &mut observer)
-        .map_err(core("grey-box estimation"));
-    progress.finish("grey-box estimation (multiple shooting)");
-    progress.finish("grey-box estimation (free run)");
-    let fit = fit?;
 
     let mut spec = model.spec.clone();
     for est in &fit.parameters {
@@ -440,6 +473,7 @@ pub fn compute_greyest(
         residual_variance_ratio: fit.residual_variance_ratio,
         rank: fit.rank,
         files: Vec::new(),
+        multi_start,
     };
     Ok(GreyestOutcome { summary, spec, fit })
 }
@@ -595,5 +629,8 @@ pub fn report(outcome: &GreyestOutcome) -> String {
         "\nThese are fits on the records the parameters were estimated on; judge the \
          model on other records with `mmenn predict --model model.toml`.\n",
     );
+    if let Some(ms) = &s.multi_start {
+        md.push_str(&ms.markdown());
+    }
     md
 }

@@ -11,6 +11,7 @@ mod fit;
 mod fit_guard;
 mod fit_mme_convergence;
 mod greyest;
+mod greyest_starts;
 mod hidden_effects;
 mod mme_ratio_band;
 mod model;

@@ -369,6 +369,8 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         max_iterations: args.max_iterations,
         budget: args.budget.start(),
         x0_start: args.x0,
+        starts: args.starts,
+        seed: args.seed,
     };
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "greyest", force, &inputs)?;
@@ -420,6 +422,11 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         s.rank.0,
         s.rank.1
     );
+    if let Some(ms) = &s.multi_start {
+        for line in ms.terminal_lines() {
+            outln!("{line}");
+        }
+    }
     outln!(
         "wrote model.toml, greyest.json, report.md into {}",
         args.out.display()

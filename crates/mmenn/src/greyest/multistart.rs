@@ -1,0 +1,696 @@
+//! Multi-start of `mmenn greyest` (`--starts N --seed S`): the same estimation from the
+//! model file's own start (start 0) and from `N` seeded starts, the lowest final free-run
+//! cost kept, and a plain statement when another start reaches nearly the same cost with
+//! materially different parameters (the data do not pin them).
+//!
+//! **The draw.** Start `k` (1 ≤ k ≤ N) takes a `ChaCha8Rng` seeded with `S + k` (wrapping)
+//! and goes through the free parameters in the model's order (fixed parameters, and free
+//! ones held by equal bounds, are left alone and consume no draw):
+//! - a non-zero start value `v` becomes `v·exp(0.7·z)`, `z ~ N(0, 1)` (a factor of 2 at one
+//!   standard deviation; the sign is kept);
+//! - a zero start value becomes uniform within its bounds when both are finite, and stays
+//!   0 otherwise (no draw);
+//! - a drawn value outside its bounds, or on one, is moved halfway between `v` and the
+//!   bound it reached (strictly inside); when `v` itself lies on that bound the start
+//!   keeps `v` (the estimator moves a start on a bound inside, as it does the file's own).
+//!
+//! Every start runs the same estimation (the same options, the same start states of the
+//! records). The starts run in parallel (rayon) and are combined in start order, so the
+//! result does not depend on the number of threads.
+//!
+//! **Kept.** The successful start with the lowest final free-run cost, ties to the lower
+//! start index. A start whose estimation fails (a diverging simulation, …) is listed with
+//! its error; only when every start fails is the file's own start's error returned. A
+//! spent budget ends the whole job ([`sysid_core::CoreError::BudgetExhausted`]).
+//!
+//! **Distinct minima.** Among the starts whose free-run solve converged, two starts end at
+//! the same minimum when their costs agree within [`SAME_COST`] and every free parameter
+//! within [`SAME_PARAMETER`] (relative to the larger magnitude of the two); the starts are
+//! grouped in order of cost, each joining the first group whose lowest-cost member it
+//! matches.
+//!
+//! **Not pinned.** A minimum other than the kept start's whose cost is within
+//! [`NEAR_COST`] of the kept cost but where some free parameter differs from the kept
+//! estimate by more than [`DIFFERENT_PARAMETER`] (relative to the larger magnitude) is
+//! reported as parameters these data do not pin.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use serde::Serialize;
+use sysid_core::{
+    CoreError, Estimation, GreyboxData, GreyboxFit, GreyboxOptions, Parameter, ParametricDynamics,
+    PhysicalModel, estimate_parameters,
+};
+
+use crate::progress::{Progress, ProgressSink};
+
+/// Standard deviation of `ln` of the factor a non-zero start value is multiplied by.
+pub const START_SPREAD: f64 = 0.7;
+/// Two starts are the same minimum only when their final costs agree within this
+/// (relative).
+pub const SAME_COST: f64 = 1e-6;
+/// … and every free parameter within this (relative).
+pub const SAME_PARAMETER: f64 = 1e-3;
+/// A minimum this close to the kept cost (relative) explains the data as well.
+pub const NEAR_COST: f64 = 0.01;
+/// A parameter differing by more than this (relative) between two such minima is not
+/// pinned by the data.
+pub const DIFFERENT_PARAMETER: f64 = 0.1;
+
+/// One start in `greyest.json`'s `multi_start.starts`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StartSummary {
+    /// 0: the model file's own start; `k ≥ 1`: seeded with `seed + k`.
+    pub index: usize,
+    /// Start value of each free parameter (`parameter_names` order).
+    pub start: Vec<f64>,
+    /// Final free-run cost (`null` when the estimation failed).
+    pub final_cost: Option<f64>,
+    /// `final_cost / best − 1` (`null` when the estimation failed).
+    pub relative_to_best: Option<f64>,
+    /// Whether its final free-run solve converged.
+    pub converged: bool,
+    /// Estimate of each free parameter (empty when the estimation failed).
+    pub values: Vec<f64>,
+    /// Its distinct minimum (index into `minima`; `null` when it did not converge).
+    pub minimum: Option<usize>,
+    /// Why the estimation failed.
+    pub error: Option<String>,
+}
+
+/// One distinct minimum.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MinimumSummary {
+    /// The starts that end there, lowest cost first.
+    pub starts: Vec<usize>,
+    /// Cost of its lowest-cost start.
+    pub cost: f64,
+    /// `cost / best − 1`.
+    pub relative_to_best: f64,
+    /// Free parameters of its lowest-cost start.
+    pub values: Vec<f64>,
+    /// Whether the kept start is one of them.
+    pub kept: bool,
+}
+
+/// A free parameter whose value differs between two nearly equally good minima.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParameterPair {
+    /// Name.
+    pub name: String,
+    /// The kept estimate.
+    pub kept: f64,
+    /// Its value at the other minimum.
+    pub other: f64,
+}
+
+/// An identifiability warning: a minimum other than the kept one, nearly as good, with
+/// materially different parameters.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NotPinned {
+    /// The other minimum (index into `minima`).
+    pub minimum: usize,
+    /// Its starts.
+    pub starts: Vec<usize>,
+    /// Its cost relative to the kept one (`cost / kept − 1`).
+    pub relative_cost: f64,
+    /// The parameters that differ by more than [`DIFFERENT_PARAMETER`].
+    pub parameters: Vec<ParameterPair>,
+}
+
+impl NotPinned {
+    /// The warning in plain words.
+    pub fn sentence(&self) -> String {
+        let names: Vec<&str> = self.parameters.iter().map(|p| p.name.as_str()).collect();
+        let pairs: Vec<String> = self
+            .parameters
+            .iter()
+            .map(|p| {
+                format!(
+                    "{} = {} there against {} in the kept estimate",
+                    p.name,
+                    crate::show::number(p.other),
+                    crate::show::number(p.kept)
+                )
+            })
+            .collect();
+        let starts: Vec<String> = self.starts.iter().map(usize::to_string).collect();
+        let cost = if self.relative_cost < 1e-4 {
+            format!(
+                "costs the same as the kept estimate (relative difference {:.1e})",
+                self.relative_cost
+            )
+        } else {
+            format!(
+                "costs only {:.2} % more than the kept estimate (within {} %)",
+                100.0 * self.relative_cost,
+                100.0 * NEAR_COST
+            )
+        };
+        format!(
+            "these data do not pin {}: the minimum reached from start{} {} {cost}, yet {}. \
+             Both explain the records about equally well; the kept values are one of them, \
+             not the parameters of the system. Fix {} from other knowledge, or add records \
+             that tell the minima apart.",
+            names.join(", "),
+            if self.starts.len() == 1 { "" } else { "s" },
+            starts.join(", "),
+            pairs.join("; "),
+            if names.len() == 1 {
+                "it"
+            } else {
+                "some of them"
+            }
+        )
+    }
+}
+
+/// The multi-start in `greyest.json` (absent without `--starts`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MultiStart {
+    /// The seed: start `k` draws from `ChaCha8Rng::seed_from_u64(seed + k)`.
+    pub seed: u64,
+    /// Names of the free parameters, the columns of `start` and `values`.
+    pub parameter_names: Vec<String>,
+    /// The start whose estimate is reported (the lowest final cost).
+    pub kept: usize,
+    /// Every start, lowest final cost first (failed ones last, by index).
+    pub starts: Vec<StartSummary>,
+    /// The distinct minima of the converged starts, lowest cost first.
+    pub minima: Vec<MinimumSummary>,
+    /// Identifiability warnings (empty when no other minimum is nearly as good with
+    /// different parameters).
+    pub not_pinned: Vec<NotPinned>,
+}
+
+impl MultiStart {
+    /// How many starts failed.
+    pub fn failed(&self) -> usize {
+        self.starts.iter().filter(|s| s.error.is_some()).count()
+    }
+
+    /// How many starts converged.
+    pub fn converged(&self) -> usize {
+        self.starts.iter().filter(|s| s.converged).count()
+    }
+
+    /// The summary in lines for the terminal.
+    pub fn terminal_lines(&self) -> Vec<String> {
+        let mut lines = vec![format!(
+            "multi-start: {} starts (the model file's and {} seeded, seed {}); kept start {} \
+             (lowest cost); {} distinct minim{} among {} converged starts{}",
+            self.starts.len(),
+            self.starts.len() - 1,
+            self.seed,
+            self.kept,
+            self.minima.len(),
+            if self.minima.len() == 1 { "um" } else { "a" },
+            self.converged(),
+            match self.failed() {
+                0 => String::new(),
+                n => format!("; {n} failed"),
+            }
+        )];
+        lines.push(format!(
+            "  {:>5}  {:>12}  {:>9}  {:<9}{}",
+            "start",
+            "cost",
+            "vs best",
+            "converged",
+            self.parameter_names
+                .iter()
+                .map(|n| format!("  {n:>12}"))
+                .collect::<String>()
+        ));
+        for s in &self.starts {
+            lines.push(match (&s.error, s.final_cost) {
+                (None, Some(cost)) => format!(
+                    "  {:>5}  {:>12.6e}  {:>9}  {:<9}{}",
+                    s.index,
+                    cost,
+                    relative_words(s.relative_to_best),
+                    if s.converged { "yes" } else { "no" },
+                    s.values
+                        .iter()
+                        .map(|v| format!("  {v:>12.6e}"))
+                        .collect::<String>()
+                ),
+                (e, _) => format!(
+                    "  {:>5}  failed: {}",
+                    s.index,
+                    e.as_deref().unwrap_or("no estimate")
+                ),
+            });
+        }
+        for w in &self.not_pinned {
+            lines.push(format!("warning: {}", w.sentence()));
+        }
+        lines
+    }
+
+    /// The `report.md` section.
+    pub fn markdown(&self) -> String {
+        let number = crate::show::number;
+        let mut md = String::from("\n## Multi-start\n\n");
+        md.push_str(&format!(
+            "{} starts: the model file's own (start 0) and {} seeded ones (start k draws \
+             each free parameter from a ChaCha8 generator seeded with {} + k: a non-zero \
+             start value times exp(0.7·z), z ~ N(0, 1); a zero one uniform within finite \
+             bounds). **Kept: start {}**, the lowest final free-run cost.\n\n",
+            self.starts.len(),
+            self.starts.len() - 1,
+            self.seed,
+            self.kept
+        ));
+        md.push_str("| start | final cost | vs best | converged |");
+        for n in &self.parameter_names {
+            md.push_str(&format!(" {n} |"));
+        }
+        md.push_str("\n|---|---|---|---|");
+        md.push_str(&"---|".repeat(self.parameter_names.len()));
+        md.push('\n');
+        for s in &self.starts {
+            match (&s.error, s.final_cost) {
+                (None, Some(cost)) => {
+                    md.push_str(&format!(
+                        "| {}{} | {} | {} | {} |",
+                        s.index,
+                        if s.index == self.kept { " (kept)" } else { "" },
+                        number(cost),
+                        relative_words(s.relative_to_best),
+                        if s.converged { "yes" } else { "no" }
+                    ));
+                    for v in &s.values {
+                        md.push_str(&format!(" {} |", number(*v)));
+                    }
+                }
+                (e, _) => {
+                    md.push_str(&format!(
+                        "| {} | — | — | failed: {} |",
+                        s.index,
+                        e.as_deref().unwrap_or("no estimate").replace('|', "\\|")
+                    ));
+                    md.push_str(&" |".repeat(self.parameter_names.len()));
+                }
+            }
+            md.push('\n');
+        }
+        md.push_str(&format!(
+            "\n{} distinct minim{} among the {} converged starts (the same minimum: costs \
+             within {:.0e} and every free parameter within {:.0e}, relative):\n\n",
+            self.minima.len(),
+            if self.minima.len() == 1 { "um" } else { "a" },
+            self.converged(),
+            SAME_COST,
+            SAME_PARAMETER
+        ));
+        for m in &self.minima {
+            let values: Vec<String> = self
+                .parameter_names
+                .iter()
+                .zip(&m.values)
+                .map(|(n, v)| format!("{n} = {}", number(*v)))
+                .collect();
+            let starts: Vec<String> = m.starts.iter().map(usize::to_string).collect();
+            md.push_str(&format!(
+                "- cost {} ({}), starts {}{}: {}\n",
+                number(m.cost),
+                relative_words(Some(m.relative_to_best)),
+                starts.join(", "),
+                if m.kept { ", the kept estimate" } else { "" },
+                values.join(", ")
+            ));
+        }
+        if self.not_pinned.is_empty() {
+            md.push_str(&format!(
+                "\nNo other minimum comes within {} % of the kept cost with a free \
+                 parameter more than {} % different.\n",
+                100.0 * NEAR_COST,
+                100.0 * DIFFERENT_PARAMETER
+            ));
+        }
+        for w in &self.not_pinned {
+            md.push_str(&format!(
+                "\n**Identifiability warning**: {}\n",
+                w.sentence()
+            ));
+        }
+        md
+    }
+}
+
+fn relative_words(r: Option<f64>) -> String {
+    match r {
+        None => "—".into(),
+        Some(0.0) => "best".into(),
+        Some(r) => format!("{:+.2e}", r),
+    }
+}
+
+/// `|a − b| ≤ tol · max(|a|, |b|)`.
+fn agree(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * a.abs().max(b.abs())
+}
+
+fn relative(cost: f64, best: f64) -> f64 {
+    if best > 0.0 {
+        cost / best - 1.0
+    } else if cost > best {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
+/// Every parameter value of seeded start `k` of `parameters` (module doc: the draw).
+pub fn seeded_start(parameters: &[Parameter], seed: u64, k: usize) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(k as u64));
+    parameters
+        .iter()
+        .map(|p| {
+            let v = p.value;
+            // Equal bounds hold a free parameter at its value (a loaded model's bounds are
+            // ordered around its value).
+            if p.estimation != Estimation::Free || p.upper <= p.lower {
+                return v;
+            }
+            let drawn = if v != 0.0 {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                v * (START_SPREAD * z).exp()
+            } else if p.lower.is_finite() && p.upper.is_finite() {
+                // lo·(1 − u) + hi·u: no overflow of hi − lo.
+                let u: f64 = rng.random();
+                p.lower * (1.0 - u) + p.upper * u
+            } else {
+                return v;
+            };
+            inside(drawn, v, p.lower, p.upper)
+        })
+        .collect()
+}
+
+/// `drawn` when strictly inside `(lo, hi)`, else halfway between `v` and the bound it
+/// reached, else `v`.
+fn inside(drawn: f64, v: f64, lo: f64, hi: f64) -> f64 {
+    if drawn > lo && drawn < hi {
+        return drawn;
+    }
+    let bound = if drawn <= lo { lo } else { hi };
+    let mid = v / 2.0 + bound / 2.0;
+    if mid > lo && mid < hi { mid } else { v }
+}
+
+/// One start's result.
+struct Run {
+    row: StartSummary,
+    fit: Option<GreyboxFit<PhysicalModel>>,
+    /// The file's own start's error (to return when every start fails) or a spent budget.
+    error: Option<CoreError>,
+}
+
+/// What combining the starts in order keeps: every row, the best fit with its key, the
+/// file's own start's error, the first spent budget.
+#[derive(Default)]
+struct Combined {
+    rows: Vec<StartSummary>,
+    best: Option<(f64, usize, GreyboxFit<PhysicalModel>)>,
+    own_error: Option<CoreError>,
+    budget: Option<CoreError>,
+}
+
+impl Combined {
+    fn of(run: Run) -> Self {
+        let mut c = Combined::default();
+        let index = run.row.index;
+        match run.error {
+            Some(e @ CoreError::BudgetExhausted(_)) => c.budget = Some(e),
+            Some(e) if index == 0 => c.own_error = Some(e),
+            _ => {}
+        }
+        if let (Some(fit), Some(cost)) = (run.fit, run.row.final_cost) {
+            c.best = Some((cost, index, fit));
+        }
+        c.rows.push(run.row);
+        c
+    }
+
+    /// `self` then `other` (`other`'s starts come after `self`'s).
+    fn then(mut self, other: Self) -> Self {
+        self.rows.extend(other.rows);
+        self.best = match (self.best, other.best) {
+            (Some(a), Some(b)) => {
+                // Lowest cost, ties to the lower index.
+                if (b.0.total_cmp(&a.0)).then(b.1.cmp(&a.1)).is_lt() {
+                    Some(b)
+                } else {
+                    Some(a)
+                }
+            }
+            (a, b) => a.or(b),
+        };
+        self.own_error = self.own_error.or(other.own_error);
+        self.budget = self.budget.or(other.budget);
+        self
+    }
+}
+
+/// Run the file's own start and `starts` seeded ones of `physical` (module doc); the kept
+/// fit and the summary.
+pub(crate) fn run(
+    physical: &PhysicalModel,
+    data: &GreyboxData<'_>,
+    gopts: &GreyboxOptions,
+    starts: usize,
+    seed: u64,
+    progress: &dyn ProgressSink,
+) -> Result<(GreyboxFit<PhysicalModel>, MultiStart), CoreError> {
+    let free: Vec<usize> = physical
+        .parameters()
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.estimation == Estimation::Free)
+        .map(|(j, _)| j)
+        .collect();
+    let names: Vec<String> = free
+        .iter()
+        .map(|&j| physical.parameters()[j].name.clone())
+        .collect();
+    let total = starts.saturating_add(1);
+    let done = AtomicUsize::new(0);
+    let task = "grey-box estimation (multi-start)";
+    let one = |k: usize| -> Run {
+        let values = if k == 0 {
+            physical.parameters().iter().map(|p| p.value).collect()
+        } else {
+            seeded_start(physical.parameters(), seed, k)
+        };
+        let start: Vec<f64> = free.iter().map(|&j| values[j]).collect();
+        let result = if k == 0 {
+            estimate_parameters(physical, data, gopts).map_err(|e| (e.to_string(), Some(e)))
+        } else {
+            match physical.with_parameters(&values) {
+                Ok(m) => estimate_parameters(&m, data, gopts).map_err(|e| (e.to_string(), Some(e))),
+                Err(e) => Err((e.to_string(), None)),
+            }
+        };
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        progress.report(&Progress::new(task, n, Some(total)));
+        match result {
+            Ok(fit) => {
+                let last = &fit.stages[fit.stages.len() - 1].report;
+                let cost = last.final_cost();
+                Run {
+                    row: StartSummary {
+                        index: k,
+                        start,
+                        final_cost: Some(cost),
+                        relative_to_best: None,
+                        converged: last.stationary(),
+                        values: fit.parameters.iter().map(|p| p.value).collect(),
+                        minimum: None,
+                        error: None,
+                    },
+                    fit: Some(fit),
+                    error: None,
+                }
+            }
+            Err((message, error)) => Run {
+                row: StartSummary {
+                    index: k,
+                    start,
+                    final_cost: None,
+                    relative_to_best: None,
+                    converged: false,
+                    values: Vec::new(),
+                    minimum: None,
+                    error: Some(message),
+                },
+                fit: None,
+                error,
+            },
+        }
+    };
+    // An indexed parallel iterator reduces neighbours in order: the rows come out in start
+    // order and the kept start is the same for any number of threads.
+    let combined = (0..total)
+        .into_par_iter()
+        .map(|k| Combined::of(one(k)))
+        .reduce(Combined::default, Combined::then);
+    progress.finish(task);
+    if let Some(e) = combined.budget {
+        return Err(e);
+    }
+    let Some((best_cost, kept, fit)) = combined.best else {
+        return Err(combined.own_error.unwrap_or(CoreError::NoFreeParameters {
+            parameters: physical.parameters().len(),
+        }));
+    };
+    let mut rows = combined.rows;
+    for r in &mut rows {
+        r.relative_to_best = r.final_cost.map(|c| relative(c, best_cost));
+    }
+    // Lowest cost first, failed starts last, ties by index.
+    rows.sort_by(|a, b| {
+        let ka = a.final_cost.unwrap_or(f64::INFINITY);
+        let kb = b.final_cost.unwrap_or(f64::INFINITY);
+        (a.error.is_some(), ka)
+            .partial_cmp(&(b.error.is_some(), kb))
+            .unwrap_or(std::cmp::Ordering::Equal)
+            .then(a.index.cmp(&b.index))
+    });
+    let minima = group(&mut rows, kept, best_cost);
+    let kept_values = fit.parameters.iter().map(|p| p.value).collect::<Vec<_>>();
+    let not_pinned = minima
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| !m.kept && relative(m.cost, best_cost) <= NEAR_COST)
+        .filter_map(|(i, m)| {
+            let parameters: Vec<ParameterPair> = names
+                .iter()
+                .zip(kept_values.iter().zip(&m.values))
+                .filter(|(_, (a, b))| !agree(**a, **b, DIFFERENT_PARAMETER))
+                .map(|(name, (a, b))| ParameterPair {
+                    name: name.clone(),
+                    kept: *a,
+                    other: *b,
+                })
+                .collect();
+            (!parameters.is_empty()).then(|| NotPinned {
+                minimum: i,
+                starts: m.starts.clone(),
+                relative_cost: m.relative_to_best,
+                parameters,
+            })
+        })
+        .collect();
+    Ok((
+        fit,
+        MultiStart {
+            seed,
+            parameter_names: names,
+            kept,
+            starts: rows,
+            minima,
+            not_pinned,
+        },
+    ))
+}
+
+/// The distinct minima of the converged rows (sorted by cost), each row's `minimum` set.
+fn group(rows: &mut [StartSummary], kept: usize, best: f64) -> Vec<MinimumSummary> {
+    let mut minima: Vec<MinimumSummary> = Vec::new();
+    for row in rows.iter_mut() {
+        let Some(cost) = row.final_cost.filter(|_| row.converged) else {
+            continue;
+        };
+        let same = minima.iter().position(|m| {
+            agree(m.cost, cost, SAME_COST)
+                && m.values.len() == row.values.len()
+                && m.values
+                    .iter()
+                    .zip(&row.values)
+                    .all(|(a, b)| agree(*a, *b, SAME_PARAMETER))
+        });
+        let i = match same {
+            Some(i) => {
+                minima[i].starts.push(row.index);
+                i
+            }
+            None => {
+                minima.push(MinimumSummary {
+                    starts: vec![row.index],
+                    cost,
+                    relative_to_best: relative(cost, best),
+                    values: row.values.clone(),
+                    kept: false,
+                });
+                minima.len() - 1
+            }
+        };
+        minima[i].kept |= row.index == kept;
+        row.minimum = Some(i);
+    }
+    minima
+}
+
+#[cfg(test)]
+#[allow(clippy::float_cmp)] // exact draws and halfway points
+mod tests {
+    use super::*;
+
+    fn parameter(value: f64, lower: f64, upper: f64) -> Parameter {
+        Parameter {
+            name: "p".into(),
+            value,
+            lower,
+            upper,
+            estimation: Estimation::Free,
+        }
+    }
+
+    #[test]
+    fn draws_stay_strictly_inside_and_keep_the_sign() {
+        let ps = [
+            parameter(0.5, 0.0, 1.0),
+            parameter(-3.0, f64::NEG_INFINITY, f64::INFINITY),
+            parameter(0.0, -2.0, 2.0),
+            parameter(0.0, 0.0, f64::INFINITY),
+            parameter(1.0, 1.0, 1.0),
+            Parameter {
+                estimation: Estimation::Fixed,
+                ..parameter(2.0, 0.0, 10.0)
+            },
+            parameter(0.2, 0.2, 0.3),
+        ];
+        let mut signs = [0usize; 2];
+        for k in 1..200 {
+            let v = seeded_start(&ps, 7, k);
+            assert!(v[0] > 0.0 && v[0] < 1.0, "{v:?}");
+            assert!(v[1] < 0.0, "{v:?}");
+            assert!(v[2] > -2.0 && v[2] < 2.0, "{v:?}");
+            signs[usize::from(v[2] > 0.0)] += 1;
+            assert_eq!(v[3], 0.0);
+            assert_eq!(v[4], 1.0);
+            assert_eq!(v[5], 2.0);
+            // On its lower bound: a draw below it keeps the start.
+            assert!(v[6] >= 0.2 && v[6] < 0.3, "{v:?}");
+        }
+        assert!(signs[0] > 50 && signs[1] > 50, "{signs:?}");
+        assert_eq!(seeded_start(&ps, 7, 3), seeded_start(&ps, 8, 2));
+        assert_ne!(seeded_start(&ps, 7, 3), seeded_start(&ps, 7, 4));
+    }
+
+    #[test]
+    fn a_draw_outside_is_moved_halfway_to_the_bound() {
+        assert_eq!(inside(1.5, 0.5, 0.0, 1.0), 0.75);
+        assert_eq!(inside(-1.0, 0.5, 0.0, 1.0), 0.25);
+        assert_eq!(inside(0.0, 0.5, 0.0, 1.0), 0.25);
+        assert_eq!(inside(0.7, 0.5, 0.0, 1.0), 0.7);
+        assert_eq!(inside(-1.0, 0.0, 0.0, 1.0), 0.0);
+        assert_eq!(inside(f64::INFINITY, 1e308, 0.0, f64::INFINITY), 1e308);
+    }
+}
