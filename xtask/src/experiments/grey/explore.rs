@@ -963,3 +963,64 @@ fn explore_one_judge() {
         println!("{line}");
     }
 }
+
+/// `mmenn greyest --starts` on the real Cascaded Tanks training record: the reported
+/// structure written as a physical model file (one parameter per term, the held terms
+/// fixed), estimated from the file's start and 24 seeded starts, the upper level and the
+/// pump lag started at 5 V and the first input (`--x0`). Prints greyest's report (its
+/// multi-start table and identifiability warning). Training record only.
+#[test]
+#[ignore]
+fn explore_tanks_greyest_starts() {
+    use mmenn::greyest::{GreyestOptions, compute_greyest_quietly, report};
+    use mmenn::model_file::ParameterEntry;
+    use mmenn::sysid_core::Estimation;
+    let spec = tanks_model(&TanksOptions {
+        pump_lag: Some(4.0),
+        area2: true,
+        ..TanksOptions::default()
+    })
+    .unwrap();
+    let mut file = model_file(&spec, &spec.model, 4.692e-4, str::to_string);
+    file.parameters = file
+        .terms
+        .iter()
+        .enumerate()
+        .map(|(i, t)| ParameterEntry {
+            name: format!("c{i}_{}_{}", t.state, t.effect),
+            value: t.coefficient,
+            unit: None,
+            bounds: None,
+            estimation: if spec.free.contains(&i) {
+                Estimation::Free
+            } else {
+                Estimation::Fixed
+            },
+            sigma: None,
+        })
+        .collect();
+    for (i, t) in file.terms.iter_mut().enumerate() {
+        t.term = format!("c{i}_{}_{}*({})", t.state, t.effect, t.term);
+        t.coefficient = 1.0;
+    }
+    let loaded =
+        mmenn::model::LoadedModel::from_spec(std::path::Path::new("tanks.toml"), file).unwrap();
+    let d = data(Benchmark::CascadedTanks);
+    let est = d.estimation.experiments()[0].clone();
+    let u0 = est.inputs()[(0, 0)];
+    let starts: usize = std::env::var("GREY_STARTS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(24);
+    let opts = GreyestOptions {
+        starts,
+        seed: 1,
+        substeps: mmenn::sysid_core::Substeps::Fixed(8),
+        x0_start: vec![("h1".into(), 5.0), ("w".into(), u0)],
+        ..GreyestOptions::default()
+    };
+    match compute_greyest_quietly(&loaded, &[est], &["estimation.csv".into()], &opts) {
+        Ok(outcome) => println!("{}", report(&outcome)),
+        Err(e) => println!("failed: {e}"),
+    }
+}
