@@ -53,4 +53,5 @@ pub use select::{
     Design, Screened, SelectedTerm, Selection, SelectionConfig, Step, StepAction, select,
 };
 pub use standin::{StandIn, StandInConfig, gains as stand_in_gains, stand_in};
+pub use stats::chi2_quantile;
 pub use transfer::{conserved_variant, refine_with_transfers, routings, transfer_candidates};

@@ -70,14 +70,13 @@ pub const NEAR_COST: f64 = 0.01;
 /// `M` residuals and `P` estimated quantities (module documentation); [`NEAR_COST`] when
 /// `M ≤ P` or `P = 0`.
 pub fn near_cost(residuals: usize, estimated: usize) -> f64 {
-    use statrs::distribution::{ChiSquared, ContinuousCDF};
     if estimated == 0 || residuals <= estimated {
         return NEAR_COST;
     }
-    let Ok(chi) = ChiSquared::new(estimated as f64) else {
+    let Ok(chi) = discovery::chi2_quantile(0.95, estimated as f64) else {
         return NEAR_COST;
     };
-    let bound = chi.inverse_cdf(0.95) / (residuals - estimated) as f64;
+    let bound = chi / (residuals - estimated) as f64;
     if bound.is_finite() {
         NEAR_COST.max(bound)
     } else {

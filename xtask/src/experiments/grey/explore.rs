@@ -451,32 +451,24 @@ fn halves(bench: Benchmark, label: &str, spec: &GreySpec) {
     }
 }
 
-/// Training record only: the generic start and `n` seeded starts ([`perturbed`]), each
-/// calibrated as the table calibrates; prints each one's training free-run RMSE (from its
+/// Training record only: the generic start and `n` seeded starts ([`super::multistart`]),
+/// each calibrated as the table calibrates; prints each one's training free-run RMSE (from its
 /// calibrated state) and coefficients, sorted by that RMSE. No test record is run.
 fn multistart(bench: Benchmark, label: &str, spec: &GreySpec, n: usize) {
     let d = data(bench);
     let w = bench.init_window();
     let (scale, unit) = bench.reporting_unit();
     let est = &d.estimation.experiments()[0];
-    let runs: Vec<(String, std::result::Result<GreyFit, String>)> = (0..=n)
-        .map(|seed| {
-            let s = if seed == 0 {
-                spec.clone()
-            } else {
-                perturbed(spec, seed as u64).unwrap()
-            };
-            let name = if seed == 0 {
-                "generic".to_string()
-            } else {
-                format!("seed {seed}")
-            };
-            (
-                name,
-                fit_grey(&s, est, &[], w).map_err(|e| format!("{e:#}")),
+    // The generic start, then the seeded ones as the full run draws them.
+    let generic = fit_grey(spec, est, &[], w).map_err(|e| format!("{e:#}"));
+    let runs: Vec<(String, std::result::Result<GreyFit, String>)> =
+        std::iter::once(("generic".to_string(), generic))
+            .chain(
+                super::multistart(spec, est, w, n as u64)
+                    .into_iter()
+                    .map(|(seed, fit)| (format!("seed {seed}"), fit)),
             )
-        })
-        .collect();
+            .collect();
     let mut rows: Vec<(f64, String)> = runs
         .iter()
         .map(|(name, r)| match r {
