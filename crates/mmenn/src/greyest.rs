@@ -6,6 +6,10 @@
 //! their `sigma`, which `mmenn show` prints), `greyest.json` (estimates, σ, correlations,
 //! start states, the solver reports, fit per output and record) and `report.md`.
 //!
+//! Each record is judged twice, by predict's code ([`PredictCheck`]): from the calibrated
+//! start state (the fit the estimate was made for) and as `mmenn predict` judges the written
+//! model by default, with a warning when the second is much worse ([`START_RELIANCE`]).
+//!
 //! With [`GreyestOptions::starts`] above 0 the estimation also runs from that many seeded
 //! starts and keeps the lowest final cost, listing every start, the distinct minima and an
 //! identifiability warning when another minimum is nearly as good with materially
@@ -17,7 +21,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 use sysid_core::{
     ActiveBound, Estimation, Experiment, GreyboxData, GreyboxFit, GreyboxOptions, PhysicalModel,
-    Shooting, estimate_parameters_with,
+    Shooting, Substeps, estimate_parameters_with,
 };
 
 use crate::atomic::{ensure_dir, write_atomic};
@@ -25,6 +29,7 @@ use crate::data_file::{read_table, table_to_experiment};
 use crate::error::{MmennError, ModelProblem, Result};
 use crate::model::{LoadedModel, ModelDynamics};
 use crate::model_file::{ModelSpec, NoiseVariance, format_model};
+use crate::predict::{InitialChoice, PredictOptions};
 use crate::progress::{NoProgress, Progress, ProgressSink};
 
 pub mod multistart;
@@ -133,6 +138,59 @@ pub struct RecordSummary {
     /// RK4 steps per sample interval of its final free run (more than the minimum where
     /// the model is stiff along this record).
     pub substeps: usize,
+    /// Free-run RMSE per output from the calibrated start state (the output's unit; the
+    /// free run `fit_percent` scores).
+    pub rmse: BTreeMap<String, f64>,
+    /// The estimated model judged on this record as `mmenn predict --model model.toml`
+    /// judges it by default: start state fitted to the first samples, not calibrated
+    /// with the parameters (`null` when that free run fails; see `as_predict_error`).
+    pub as_predict: Option<PredictCheck>,
+    /// Why the free run judged as `mmenn predict` judges it failed, when it did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub as_predict_error: Option<String>,
+}
+
+/// The estimated model judged on an estimation record by `mmenn predict`'s default rule
+/// ([`crate::predict::PredictOptions::default`]), so that `greyest` and `predict` give one
+/// number for one model on one record. Beside the calibrated-start fit it shows how much
+/// the fit owes to a start state calibrated together with the parameters: for a model
+/// with an integrating state (a position driven by a force), that start can absorb a
+/// drift the model does not explain.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PredictCheck {
+    /// How the start state was obtained (predict's rule, in words).
+    pub x0_rule: String,
+    /// The start state predict fitted, by state name.
+    pub x0: BTreeMap<String, f64>,
+    /// RK4 steps per sample interval of predict's free run (its `auto`).
+    pub substeps: Option<usize>,
+    /// Free-run fit % per output.
+    pub fit_percent: BTreeMap<String, f64>,
+    /// Free-run RMSE per output (the output's unit).
+    pub rmse: BTreeMap<String, f64>,
+}
+
+/// The predict-judged RMSE above this multiple of the calibrated-start RMSE is flagged in
+/// the report and on the terminal (the fit leans on its calibrated start state).
+pub const START_RELIANCE: f64 = 1.5;
+
+impl RecordSummary {
+    /// The outputs whose predict-judged RMSE exceeds [`START_RELIANCE`] × the
+    /// calibrated-start RMSE, with the ratio.
+    pub fn leans_on_start(&self) -> Vec<(String, f64)> {
+        let Some(p) = &self.as_predict else {
+            return Vec::new();
+        };
+        self.rmse
+            .iter()
+            .filter_map(|(k, &cal)| {
+                let judged = *p.rmse.get(k)?;
+                let ratio = judged / cal;
+                (cal > 0.0 && ratio.is_finite() && ratio > START_RELIANCE)
+                    .then(|| (k.clone(), ratio))
+            })
+            .collect()
+    }
 }
 
 /// One solve in `greyest.json`.
@@ -233,6 +291,20 @@ pub fn run_greyest(
     out: &Path,
     progress: &dyn ProgressSink,
 ) -> Result<GreyestOutcome> {
+    let names: Vec<String> = data.iter().map(|p| p.display().to_string()).collect();
+    run_greyest_named(model_path, data, &names, opts, out, progress)
+}
+
+/// [`run_greyest`] with the records named `names` in the summary and report (e.g. the
+/// file the user gave, where `data` are copies prepared from it with `--map`).
+pub fn run_greyest_named(
+    model_path: &Path,
+    data: &[PathBuf],
+    names: &[String],
+    opts: &GreyestOptions,
+    out: &Path,
+    progress: &dyn ProgressSink,
+) -> Result<GreyestOutcome> {
     let model = LoadedModel::read(model_path)?;
     physical_of(&model)?;
     let mut records = Vec::with_capacity(data.len());
@@ -245,8 +317,7 @@ pub fn run_greyest(
         )?;
         records.push(exp.with_intersample(model.spec.intersample));
     }
-    let names: Vec<String> = data.iter().map(|p| p.display().to_string()).collect();
-    let mut outcome = compute_greyest(&model, &records, &names, opts, progress)?;
+    let mut outcome = compute_greyest(&model, &records, names, opts, progress)?;
     write_greyest(&mut outcome, out)?;
     Ok(outcome)
 }
@@ -386,10 +457,22 @@ pub fn compute_greyest(
         .collect();
     let states = lin.state_names();
     let outputs = lin.output_names();
-    let records_out = records
+    // One judge: each record's free run scored by predict's code, from the calibrated start
+    // (the numbers `fit_percent` comes from) and by predict's default rule.
+    let loaded = LoadedModel::from_spec(&model.path, spec.clone())?;
+    let checks: Vec<(
+        BTreeMap<String, f64>,
+        std::result::Result<PredictCheck, String>,
+    )> = records
         .iter()
         .enumerate()
-        .map(|(r, exp)| RecordSummary {
+        .map(|(r, exp)| judged_as_predict(&loaded, exp, &fit.x0[r], fit.substeps[r]))
+        .collect();
+    let records_out = records
+        .iter()
+        .zip(checks)
+        .enumerate()
+        .map(|(r, (exp, (rmse, check)))| RecordSummary {
             file: names
                 .get(r)
                 .cloned()
@@ -411,6 +494,9 @@ pub fn compute_greyest(
                 .zip(fit.fit_percent[r].iter().copied())
                 .collect(),
             substeps: fit.substeps[r],
+            rmse,
+            as_predict_error: check.as_ref().err().cloned(),
+            as_predict: check.ok(),
         })
         .collect();
     let stages = fit
@@ -478,6 +564,69 @@ pub fn compute_greyest(
     Ok(GreyestOutcome { summary, spec, fit })
 }
 
+/// The calibrated-start RMSE per output (empty if predict's code cannot run that free
+/// run, which the estimator just ran) and the record judged by predict's default rule.
+fn judged_as_predict(
+    model: &LoadedModel,
+    exp: &Experiment,
+    x0: &[f64],
+    substeps: usize,
+) -> (
+    BTreeMap<String, f64>,
+    std::result::Result<PredictCheck, String>,
+) {
+    let rmse_of = |o: &crate::predict::PredictOutcome| -> BTreeMap<String, f64> {
+        o.summary
+            .free_run
+            .channels
+            .iter()
+            .map(|(k, m)| (k.clone(), m.rmse))
+            .collect()
+    };
+    let calibrated = crate::predict::compute_predict_record_with(
+        model,
+        exp,
+        model.outputs(),
+        &PredictOptions {
+            x0: InitialChoice::Given(x0.to_vec()),
+            x0_window: None,
+            horizon: None,
+            score_from: None,
+        },
+        Substeps::Fixed(substeps),
+    )
+    .map(|o| rmse_of(&o))
+    .unwrap_or_default();
+    let judged = crate::predict::compute_predict_record(
+        model,
+        exp,
+        model.outputs(),
+        &PredictOptions::default(),
+    )
+    .map(|o| PredictCheck {
+        x0_rule: o.summary.free_run.x0_source.clone(),
+        x0: model
+            .spec
+            .linear
+            .state_names()
+            .iter()
+            .cloned()
+            .zip(o.summary.free_run.x0.iter().copied())
+            .collect(),
+        substeps: o.summary.substeps,
+        fit_percent: o
+            .summary
+            .free_run
+            .channels
+            .iter()
+            .map(|(k, m)| (k.clone(), m.fit_percent))
+            .collect(),
+        rmse: rmse_of(&o),
+    })
+    .map_err(|e| e.to_string());
+    (calibrated, judged)
+}
+
 /// Write `model.toml`, `greyest.json` and `report.md` into `out` (atomically, each).
 pub fn write_greyest(outcome: &mut GreyestOutcome, out: &Path) -> Result<()> {
     ensure_dir(out)?;
@@ -503,6 +652,64 @@ pub fn write_greyest(outcome: &mut GreyestOutcome, out: &Path) -> Result<()> {
 
 fn number(v: f64) -> String {
     crate::show::number(v)
+}
+
+/// `q 97.14 % (RMSE 2.36e-3 m)` per output.
+pub fn fit_words(
+    fit: &BTreeMap<String, f64>,
+    rmse: &BTreeMap<String, f64>,
+    spec: &ModelSpec,
+) -> String {
+    fit.iter()
+        .map(|(k, v)| match rmse.get(k) {
+            Some(e) => {
+                let unit = spec.unit_of(k).map(|u| format!(" {u}")).unwrap_or_default();
+                format!("{k} {v:.2} % (RMSE {e:.4e}{unit})")
+            }
+            None => format!("{k} {v:.2} %"),
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The record judged as `mmenn predict` judges it, and the warning when the calibrated
+/// start carries the fit (report and terminal).
+pub fn predict_lines(r: &RecordSummary, spec: &ModelSpec) -> Vec<String> {
+    let mut lines = Vec::new();
+    match (&r.as_predict, &r.as_predict_error) {
+        (Some(p), _) => {
+            let steps = p
+                .substeps
+                .map(|n| format!(", {n} RK4 steps per sample"))
+                .unwrap_or_default();
+            lines.push(format!(
+                "as `mmenn predict` judges it (start state by its default rule: {}{steps}): {}",
+                p.x0_rule,
+                fit_words(&p.fit_percent, &p.rmse, spec)
+            ));
+        }
+        (None, Some(e)) => lines.push(format!(
+            "as `mmenn predict` judges it (its default start-state rule): the free run failed: {e}"
+        )),
+        (None, None) => {}
+    }
+    let leans = r.leans_on_start();
+    if !leans.is_empty() {
+        let which: Vec<String> = leans
+            .iter()
+            .map(|(k, ratio)| format!("{ratio:.1}× for {k}"))
+            .collect();
+        lines.push(format!(
+            "the fit leans on its calibrated start state: from a start fitted to the \
+             record's first samples the free-run RMSE is {} the calibrated start's. That \
+             start was estimated together with the parameters and can absorb what the \
+             model does not explain (with an integrating state such as a position, a \
+             drift); `mmenn predict` cannot calibrate it on new records, so expect its \
+             numbers there, not these",
+            which.join(", ")
+        ));
+    }
+    lines
 }
 
 /// The short report.
@@ -608,26 +815,26 @@ pub fn report(outcome: &GreyestOutcome) -> String {
     }
     md.push_str("\n## Free-run fit (estimation records)\n\n");
     for r in &s.records {
-        let fits: Vec<String> = r
-            .fit_percent
-            .iter()
-            .map(|(k, v)| format!("{k} {v:.2} %"))
-            .collect();
         md.push_str(&format!(
-            "- `{}` ({} samples, {} RK4 steps per sample): {}; x0 = {}\n",
+            "- `{}` ({} samples, {} RK4 steps per sample), from the calibrated start x0 = \
+             {}: {}\n",
             r.file,
             r.samples,
             r.substeps,
-            fits.join(", "),
             r.x0.iter()
                 .map(|(k, v)| format!("{k} {}", number(*v)))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join(", "),
+            fit_words(&r.fit_percent, &r.rmse, &outcome.spec)
         ));
+        for line in predict_lines(r, &outcome.spec) {
+            md.push_str(&format!("  - {line}\n"));
+        }
     }
     md.push_str(
         "\nThese are fits on the records the parameters were estimated on; judge the \
-         model on other records with `mmenn predict --model model.toml`.\n",
+         model on other records with `mmenn predict --model model.toml` (its default \
+         rule is the second line of each record above).\n",
     );
     if let Some(ms) = &s.multi_start {
         md.push_str(&ms.markdown());

@@ -132,6 +132,51 @@ fn two_link_parameters_are_recovered_from_an_independent_record() {
     for (name, m) in &predicted.free_run.channels {
         assert!(m.fit_percent > 95.0, "validation {name}: {}", m.fit_percent);
     }
+    // One judge: the record as `mmenn predict` judges the written model on it by default
+    // (greyest's `as_predict`) is what predict itself gives, and the calibrated-start
+    // fit the estimator reports is predict's free run from that start with the
+    // estimator's RK4 steps.
+    let record = &s.records[0];
+    let check = record
+        .as_predict
+        .as_ref()
+        .unwrap_or_else(|| panic!("{record:?}"));
+    let by_predict = run_predict(
+        &out.join("model.toml"),
+        &fixture("est.csv"),
+        &InitialChoice::Fit,
+        200,
+        &dir.join("est-predict"),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let from_calibrated = mmenn::predict::run_predict_substeps(
+        &out.join("model.toml"),
+        &fixture("est.csv"),
+        &mmenn::predict::PredictOptions {
+            x0: InitialChoice::Given(outcome.fit.x0[0].clone()),
+            x0_window: None,
+            horizon: None,
+            score_from: None,
+        },
+        Some(mmenn::sysid_core::Substeps::Fixed(record.substeps)),
+        &dir.join("est-calibrated"),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-300);
+    for (name, fit) in &record.fit_percent {
+        let judged = &by_predict.free_run.channels[name];
+        assert!(close(check.fit_percent[name], judged.fit_percent), "{name}");
+        assert!(close(check.rmse[name], judged.rmse), "{name}");
+        let calibrated = &from_calibrated.free_run.channels[name];
+        assert!(
+            close(*fit, calibrated.fit_percent),
+            "{name}: {fit} vs {calibrated:?}"
+        );
+        assert!(close(record.rmse[name], calibrated.rmse), "{name}");
+    }
+    // A well-specified model on an independent record does not lean on its calibrated
+    // start: the start fitted to the first 200 samples free-runs nearly as well.
+    assert!(record.leans_on_start().is_empty(), "{record:?}");
     // `mmenn show` prints the estimates with their σ.
     let shown = mmenn::show::show_model(&out.join("model.toml")).unwrap_or_else(|e| panic!("{e}"));
     let lc1 = shown
@@ -370,4 +415,46 @@ fn cli_calibrates_two_records_by_multiple_shooting_then_free_run() {
             .any(|l| l.trim_start().starts_with("fc2 ") && l.contains('±')),
         "{text}"
     );
+}
+
+/// A record whose columns are renamed with `--map` is read from a copy the command
+/// prepares in its staging folder; the terminal and `report.md` name the file the user
+/// gave and where the copy ends up, never the staging folder (which no longer exists
+/// when they are read).
+#[test]
+fn cli_names_a_mapped_record_by_the_file_given() {
+    let dir = scratch("map");
+    let model = write(&dir, "start.toml", &perturbed(false));
+    let text = std::fs::read_to_string(fixture("est.csv")).unwrap_or_else(|e| panic!("{e}"));
+    let (header, rows) = text.split_once('\n').unwrap_or_else(|| panic!("no header"));
+    let renamed = header.replace("theta1", "enc1");
+    assert_ne!(renamed, header, "the fixture has a theta1 column");
+    let data = write(&dir, "renamed.csv", &format!("{renamed}\n{rows}"));
+    let out = dir.join("out");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .args(["--quiet", "greyest", "--model"])
+        .arg(&model)
+        .arg("--data")
+        .arg(&data)
+        .args(["--map", "theta1=enc1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap_or_default();
+    let json = std::fs::read_to_string(out.join("greyest.json")).unwrap_or_default();
+    for (what, text) in [
+        ("terminal", &*stdout),
+        ("report.md", &report),
+        ("greyest.json", &json),
+    ] {
+        assert!(!text.contains("staging"), "{what}: {text}");
+        assert!(text.contains("renamed.csv"), "{what}: {text}");
+    }
+    assert!(stdout.contains("as `mmenn predict` judges it"), "{stdout}");
 }

@@ -321,3 +321,73 @@ term = "k2*sqrt(h1) - k3*sqrt(h2)"
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Janot et al.'s EMPS model as a user writes it (`[mechanics]`, the published IDIM-LS
+/// values as starts, the mass held): `M q'' = gτ·u − Fv·q' − Fc·tanh(q'/ε) − off`.
+const EMPS_MODEL: &str = r#"
+inputs = ["u"]
+measured = ["q"]
+corrected = ["v"]
+noise_variance = [1e-10]
+units = { q = "m", v = "m/s", u = "V" }
+
+[parameters]
+M = { value = 95.1089, unit = "kg", fixed = true }
+gtau = { value = 35.15, unit = "N/V", bounds = [0.0, 100.0] }
+Fv = { value = 203.5, unit = "N*s/m", bounds = [0.0, 1000.0] }
+Fc = { value = 20.39, unit = "N", bounds = [0.0, 100.0] }
+off = { value = -3.16, unit = "N" }
+
+[mechanics]
+q = ["q"]
+qdot = ["v"]
+mass = [["M"]]
+forces = ["gtau*u - Fv*v - Fc*tanh(v/0.0003) - off"]
+"#;
+
+/// On the EMPS estimation record greyest's calibrated start state carries the fit: the
+/// position integrates a velocity set by the small difference of drive force and
+/// friction, and the start velocity calibrated with the parameters absorbs a drift
+/// (−26 mm/s where the record starts near +7 mm/s; the reproduce's grey box shows the
+/// same, docs/decisions/emps-window-state-calibration.md). greyest must say so, with the
+/// number `mmenn predict` will give (when written: RMSE 2.36 mm calibrated, 7.09 mm from
+/// the first 200 samples, 3.0×).
+#[test]
+fn greyest_says_when_the_fit_leans_on_its_calibrated_start() {
+    let Some(folder) = folder(Benchmark::Emps) else {
+        return;
+    };
+    let dir = std::env::temp_dir().join(format!("mmenn-real-emps-start-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("model.toml"), EMPS_MODEL).unwrap();
+    let text = std::fs::read_to_string(folder.join("estimation.csv")).unwrap();
+    let (header, rows) = text.split_once('\n').unwrap();
+    assert_eq!(header.trim(), "k,t,u,y,q_ref", "the shared file's header");
+    std::fs::write(dir.join("est.csv"), format!("k,t,u,q,q_ref\n{rows}")).unwrap();
+    let outcome = mmenn::greyest::run_greyest(
+        &dir.join("model.toml"),
+        &[dir.join("est.csv")],
+        &mmenn::greyest::GreyestOptions::default(),
+        &dir.join("out"),
+        &mmenn::progress::NoProgress,
+    )
+    .unwrap();
+    let s = &outcome.summary;
+    assert!(s.stages.last().unwrap().converged, "{:?}", s.stages);
+    let record = &s.records[0];
+    let judged = record.as_predict.as_ref().unwrap();
+    let leans = record.leans_on_start();
+    assert_eq!(leans.len(), 1, "{record:?}");
+    assert_eq!(leans[0].0, "q");
+    assert!(
+        judged.rmse["q"] > mmenn::greyest::START_RELIANCE * record.rmse["q"],
+        "{record:?}"
+    );
+    let report = std::fs::read_to_string(dir.join("out/report.md")).unwrap();
+    assert!(
+        report.contains("leans on its calibrated start state"),
+        "{report}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

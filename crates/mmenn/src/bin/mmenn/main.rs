@@ -375,7 +375,29 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
     let inputs: Vec<&PathBuf> = args.data.iter().chain([&args.model]).collect();
     let staged = stage(&args.out, "greyest", force, &inputs)?;
     let data = prepared(&args.data, &args.prep, staged.path())?;
-    let outcome = mmenn::greyest::run_greyest(&args.model, &data, &opts, staged.path(), progress)?;
+    // Records are named by the files given; a copy prepared by --map/--resample lives in
+    // the staging folder, which becomes --out.
+    let names: Vec<String> = args
+        .data
+        .iter()
+        .zip(&data)
+        .map(|(given, used)| {
+            if given == used {
+                given.display().to_string()
+            } else {
+                let copy = used.strip_prefix(staged.path()).unwrap_or(used);
+                format!("{} (as {})", given.display(), args.out.join(copy).display())
+            }
+        })
+        .collect();
+    let outcome = mmenn::greyest::run_greyest_named(
+        &args.model,
+        &data,
+        &names,
+        &opts,
+        staged.path(),
+        progress,
+    )?;
     staged.commit()?;
     let s = &outcome.summary;
     outln!("grey-box estimate ({}):", s.weighting);
@@ -394,17 +416,15 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
         );
     }
     for r in &s.records {
-        let fits: Vec<String> = r
-            .fit_percent
-            .iter()
-            .map(|(k, v)| format!("{k} {v:.2} %"))
-            .collect();
         outln!(
-            "  free-run fit on {}: {} ({} RK4 steps per sample)",
+            "  free-run fit on {} from its calibrated start ({} RK4 steps per sample): {}",
             r.file,
-            fits.join(", "),
-            r.substeps
+            r.substeps,
+            mmenn::greyest::fit_words(&r.fit_percent, &r.rmse, &outcome.spec)
         );
+        for line in mmenn::greyest::predict_lines(r, &outcome.spec) {
+            outln!("    {line}");
+        }
     }
     for st in &s.stages {
         outln!(
