@@ -342,14 +342,24 @@ pub fn compute_predict_record_with(
     let requested = substeps;
     let (mut model, mut substeps) = with_substeps(model, &inner, &obs, &rule, requested)?;
     let mut free = judge_free_run(&model, &exp, &obs, &rule)?;
-    // The judged start may need more steps than the probe's (a stiff model, a start far
-    // from the measured one): probe it and judge again.
+    // The count is the judged start's: the first probe ran from the measured channels'
+    // first values with every other state at 0, which may be a singular point of the
+    // model (an unmeasured level under `sqrt` asks for the most steps there), or may need
+    // fewer steps than the judged start (a stiff model, a start far from the measured
+    // one). Probe the judged start and judge again with its count; if that judge's start
+    // asks for still more, take it (never judge with fewer than the final start needs).
     if let (Some(s), Substeps::Auto { min }) = (substeps, requested) {
         let again = probe_count(&model, &inner, &free.x0, min)?;
-        if again > s {
+        if again != s {
             model.integrator = sysid_core::Integrator::Rk4 { substeps: again };
             free = judge_free_run(&model, &exp, &obs, &rule)?;
             substeps = Some(again);
+            let last = probe_count(&model, &inner, &free.x0, min)?;
+            if last > again {
+                model.integrator = sysid_core::Integrator::Rk4 { substeps: last };
+                free = judge_free_run(&model, &exp, &obs, &rule)?;
+                substeps = Some(last);
+            }
         }
     }
     let model = &model;

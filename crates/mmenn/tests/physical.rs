@@ -557,3 +557,75 @@ fn measured_states_start_at_their_measured_values() {
         }
     }
 }
+
+/// Two tanks with Torricelli outflows, only the lower level measured. `predict` fits the
+/// start state from the measured channels' first values with the upper level at 0, where
+/// `sqrt` has no finite slope, so a probe from there asks for the most RK4 steps (1000).
+/// The count must be the judged start's instead: the same as a free run given that start,
+/// and the few steps this smooth trajectory needs. The record is made here by explicit
+/// Euler at 2000 steps per 4-s sample (not mmenn's integrator), from h1 = 6, h2 = 4.
+#[test]
+fn an_unmeasured_level_at_zero_does_not_set_the_free_runs_steps() {
+    let dir = scratch("tanks-steps");
+    std::fs::create_dir_all(&dir).unwrap();
+    let model_text = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+measured = ["h2"]
+corrected = ["h1", "h2"]
+noise_variance = [1e-6]
+A = [[0.0, 0.0], [0.0, 0.0]]
+B = [[0.0], [0.0]]
+
+[parameters]
+k1 = { value = 0.05, fixed = true }
+k2 = { value = 0.05, fixed = true }
+k3 = { value = 0.06, fixed = true }
+k4 = { value = 0.045, fixed = true }
+
+[[terms]]
+state = "h1"
+effect = "torricelli"
+term = "-k1*sqrt(max(h1, 0)) + k4*u"
+
+[[terms]]
+state = "h2"
+effect = "torricelli"
+term = "k2*sqrt(max(h1, 0)) - k3*sqrt(max(h2, 0))"
+"#;
+    std::fs::write(dir.join("model.toml"), model_text).unwrap();
+    let (dt, n, fine) = (4.0, 400, 2000);
+    let (mut h1, mut h2) = (6.0_f64, 4.0_f64);
+    let mut csv = String::from("t,u,h2\n");
+    for k in 0..n {
+        let u = 3.0 + 1.5 * (0.011 * k as f64).sin() + if (k / 37) % 2 == 0 { 0.8 } else { -0.8 };
+        csv.push_str(&format!("{},{u},{h2}\n", k as f64 * dt));
+        let h = dt / fine as f64;
+        for _ in 0..fine {
+            let d1 = -0.05 * h1.max(0.0).sqrt() + 0.045 * u;
+            let d2 = 0.05 * h1.max(0.0).sqrt() - 0.06 * h2.max(0.0).sqrt();
+            h1 += h * d1;
+            h2 += h * d2;
+        }
+    }
+    std::fs::write(dir.join("data.csv"), csv).unwrap();
+    let model = LoadedModel::read(&dir.join("model.toml")).unwrap();
+    let table = read_table(&dir.join("data.csv")).unwrap();
+    let fitted = compute_predict(&model, &table, &PredictOptions::default()).unwrap();
+    let steps = fitted.summary.substeps.unwrap();
+    let given = compute_predict(
+        &model,
+        &table,
+        &PredictOptions {
+            x0: InitialChoice::Given(fitted.summary.free_run.x0.clone()),
+            ..PredictOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(Some(steps), given.summary.substeps);
+    assert!(steps <= 8, "{steps} RK4 steps per sample");
+    // The true model from its judged start follows the record (Euler's error only).
+    let e = fitted.summary.free_run.channels["h2"].rmse;
+    assert!(e < 1e-3, "RMSE {e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
