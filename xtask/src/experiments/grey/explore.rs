@@ -319,6 +319,8 @@ fn explore_tanks() {
         spec.integrator = Integrator::Rk4 { substeps };
         if hz == 4 {
             spec.horizons = vec![0.1, 0.25, 0.5, 1.0];
+        } else if hz == 1 {
+            spec.horizons = vec![1.0];
         }
         if seed > 0 {
             spec = perturbed(&spec, seed).unwrap();
