@@ -10,10 +10,22 @@ pub(super) fn grey_candidates(
     mode: Mode,
 ) -> Result<(String, Vec<(String, grey::GreySpec)>)> {
     Ok(match data.benchmark {
-        Benchmark::Emps => (
-            "physics-first grey box (M q'' = gτ u − Fv q' − Fc tanh(q'/ε) − offset)".into(),
-            vec![("ε = 0.3 mm/s".into(), grey::emps_spec(3e-4)?)],
-        ),
+        Benchmark::Emps => {
+            // docs/decisions/emps-full-horizon-minimum.md: the same start descended over the
+            // whole record at once reaches a lower training cost than over growing horizons.
+            let mut whole = grey::emps_spec(3e-4)?;
+            whole.horizons = vec![1.0];
+            (
+                "physics-first grey box (M q'' = gτ u − Fv q' − Fc tanh(q'/ε) − offset)".into(),
+                vec![
+                    (
+                        "ε = 0.3 mm/s, growing horizons".into(),
+                        grey::emps_spec(3e-4)?,
+                    ),
+                    ("ε = 0.3 mm/s, one horizon".into(), whole),
+                ],
+            )
+        }
         Benchmark::CascadedTanks => {
             let base = grey::TanksOptions::default();
             let mut v = vec![(
