@@ -151,6 +151,29 @@ pub enum StartTrajectory {
     Given(Vec<Vec<f64>>),
 }
 
+/// A Gaussian prior on one state's initial value `x_i(t0) ~ N(mean, std²)`, in every
+/// experiment (see [`MmeConfig::x0_prior`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StatePrior {
+    /// The state's name (one of the model's state names).
+    pub state: String,
+    /// Prior mean of the state at the first sample (finite).
+    pub mean: f64,
+    /// Prior standard deviation (positive and finite), in the state's unit.
+    pub std: f64,
+}
+
+impl StatePrior {
+    /// A prior `N(mean, std²)` on state `state`.
+    pub fn new(state: impl Into<String>, mean: f64, std: f64) -> Self {
+        Self {
+            state: state.into(),
+            mean,
+            std,
+        }
+    }
+}
+
 /// Configuration of an MME estimate.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct MmeConfig {
@@ -173,6 +196,80 @@ pub struct MmeConfig {
     /// [`sysid_core::CoreError::BudgetExhausted`] (inside [`crate::MmeError::Core`]) once it
     /// is spent.
     pub budget: sysid_core::Budget,
+    /// Gaussian prior on the initial state, per state by name (default empty: every
+    /// initial state free, as in the classical MME). A state with a prior adds
+    /// `(x_i(t0) − mean)²/std²` to `J` in every experiment; the others stay free (diffuse).
+    /// It acts on the estimate and on the automatic `W` search; the noise-variance
+    /// likelihood ([`NoiseSpec::Auto`]) stays the restricted (diffuse-initial-state) one.
+    pub x0_prior: Vec<StatePrior>,
+}
+
+/// A validated initial-state prior in information form, in the model's state order.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Prior {
+    /// `1/std²` per state (0 for a state without a prior).
+    pub info: Vec<f64>,
+    /// Prior mean per state (0 for a state without a prior, never read there).
+    pub mean: Vec<f64>,
+}
+
+impl Prior {
+    /// `Σ_i info_i (x_i − mean_i)²`, the prior's share of `J`.
+    pub fn cost(&self, x0: &[f64]) -> f64 {
+        self.info
+            .iter()
+            .zip(&self.mean)
+            .zip(x0)
+            .filter(|((info, _), _)| **info > 0.0)
+            .map(|((info, m), x)| info * (x - m) * (x - m))
+            .sum()
+    }
+}
+
+/// Check the initial-state prior against the model's state names: every name known and
+/// given once, every mean finite, every standard deviation positive and finite. `None`
+/// when no state has a prior.
+pub(crate) fn resolve_prior(priors: &[StatePrior], states: &[String]) -> Result<Option<Prior>> {
+    if priors.is_empty() {
+        return Ok(None);
+    }
+    let n = states.len();
+    let mut info = vec![0.0; n];
+    let mut mean = vec![0.0; n];
+    for p in priors {
+        let Some(i) = states.iter().position(|s| *s == p.state) else {
+            return Err(MmeError::UnknownState {
+                setting: "initial-state prior",
+                name: p.state.clone(),
+            });
+        };
+        let bad = |field, value, reason| MmeError::InvalidPrior {
+            state: p.state.clone(),
+            field,
+            value,
+            reason,
+        };
+        if info[i] > 0.0 {
+            return Err(bad("state", f64::NAN, "given more than once"));
+        }
+        if !p.mean.is_finite() {
+            return Err(bad("mean", p.mean, "must be finite"));
+        }
+        if !(p.std.is_finite() && p.std > 0.0) {
+            return Err(bad("std", p.std, "must be positive and finite"));
+        }
+        let inv = 1.0 / (p.std * p.std);
+        if !(inv.is_finite() && inv > 0.0) {
+            return Err(bad(
+                "std",
+                p.std,
+                "its inverse square overflows or underflows",
+            ));
+        }
+        info[i] = inv;
+        mean[i] = p.mean;
+    }
+    Ok(Some(Prior { info, mean }))
 }
 
 /// A `W` validated against the number of corrections: either fixed, or a shape to scale.
@@ -412,6 +509,50 @@ mod tests {
                 matrix: "W shape",
                 ..
             })
+        ));
+    }
+
+    #[test]
+    fn prior_errors_are_typed_and_name_the_state() {
+        let states = vec!["h1".to_string(), "h2".to_string()];
+        assert_eq!(resolve_prior(&[], &states), Ok(None));
+        let ok = resolve_prior(&[StatePrior::new("h2", 3.0, 0.5)], &states)
+            .unwrap()
+            .unwrap();
+        assert_eq!(ok.info, vec![0.0, 4.0]);
+        assert_eq!(ok.mean, vec![0.0, 3.0]);
+        // The state without a prior costs nothing: (4 − 3)²·4.
+        assert!((ok.cost(&[100.0, 4.0]) - 4.0).abs() < 1e-15);
+        let field_of = |p: StatePrior| match resolve_prior(&[p], &states) {
+            Err(MmeError::InvalidPrior { state, field, .. }) => (state, field),
+            other => panic!("{other:?}"),
+        };
+        assert_eq!(
+            field_of(StatePrior::new("h1", 1.0, -1.0)),
+            ("h1".to_string(), "std")
+        );
+        assert_eq!(
+            field_of(StatePrior::new("h1", 1.0, 0.0)),
+            ("h1".to_string(), "std")
+        );
+        assert_eq!(
+            field_of(StatePrior::new("h2", 1.0, f64::INFINITY)),
+            ("h2".to_string(), "std")
+        );
+        assert_eq!(
+            field_of(StatePrior::new("h2", f64::NAN, 1.0)),
+            ("h2".to_string(), "mean")
+        );
+        assert!(matches!(
+            resolve_prior(&[StatePrior::new("h3", 1.0, 1.0)], &states),
+            Err(MmeError::UnknownState { ref name, .. }) if name == "h3"
+        ));
+        assert!(matches!(
+            resolve_prior(
+                &[StatePrior::new("h1", 1.0, 1.0), StatePrior::new("h1", 2.0, 1.0)],
+                &states
+            ),
+            Err(MmeError::InvalidPrior { ref state, field: "state", .. }) if state == "h1"
         ));
     }
 

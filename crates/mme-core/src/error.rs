@@ -50,6 +50,26 @@ pub enum MmeError {
         /// Columns expected.
         expected_cols: usize,
     },
+    /// A setting names a state the model does not have.
+    #[error("{setting}: the model has no state '{name}'")]
+    UnknownState {
+        /// Which setting (`initial-state prior`).
+        setting: &'static str,
+        /// The name given.
+        name: String,
+    },
+    /// An entry of the initial-state prior is invalid.
+    #[error("initial-state prior of state '{state}': {field} = {value} {reason}")]
+    InvalidPrior {
+        /// The state's name.
+        state: String,
+        /// Which field (`mean`, `std`, or `state` for a state given twice).
+        field: &'static str,
+        /// The value given (NaN for a repeated state).
+        value: f64,
+        /// What is required.
+        reason: &'static str,
+    },
     /// A scalar setting is outside its valid range.
     #[error("setting {name} = {value} is invalid: {reason}")]
     InvalidSetting {

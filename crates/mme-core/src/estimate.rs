@@ -8,7 +8,9 @@ use sysid_core::{
     Termination,
 };
 
-use crate::config::{MmeConfig, NoiseSpec, ResolvedWeight, check_noise, resolve_weight};
+use crate::config::{
+    MmeConfig, NoiseSpec, ResolvedWeight, check_noise, resolve_prior, resolve_weight,
+};
 use crate::error::Result;
 use crate::evaluate::{Solve, Summary};
 use crate::linear::LinearRun;
@@ -64,7 +66,8 @@ pub fn estimate_with_report(
     if let NoiseSpec::Given(v) = &config.noise_variance {
         check_noise(v, model.output_names())?;
     }
-    let mut run = LinearRun::new(model, data, config.substeps)?;
+    let prior = resolve_prior(&config.x0_prior, model.state_names())?;
+    let mut run = LinearRun::new(model, data, config.substeps)?.with_prior(prior);
     clock.mark("validate_and_discretize");
 
     let noise = resolve_noise(&mut run, &weight, config, data, model.output_names())?;
@@ -148,7 +151,12 @@ pub(crate) fn resolve_noise<S: Solve>(
                 ResolvedWeight::Auto { shape, .. } => shape.clone(),
             };
             let binding = crate::binding::bind(&[], outputs, data)?;
-            estimate_noise(solver, &shape, data, &binding, outputs)
+            // The restricted likelihood integrates over a diffuse initial state; a prior
+            // in absolute units would break the concentration over the common scale.
+            solver.use_prior(false);
+            let report = estimate_noise(solver, &shape, data, &binding, outputs);
+            solver.use_prior(true);
+            report
         }
     }
 }

@@ -53,6 +53,9 @@ pub(crate) trait Solve {
     fn n_corrections(&self) -> usize;
     /// Per experiment: number of correction pieces and the sub-step `h`.
     fn pieces(&self) -> Vec<(usize, f64)>;
+    /// Switch the initial-state prior (if the configuration has one) on or off for the
+    /// following solves; the noise-variance likelihood runs with it off.
+    fn use_prior(&mut self, on: bool);
     /// Solve with weight `w` and `1/R_i` = `inv_r`.
     fn solve(&mut self, w: &DMatrix<f64>, inv_r: &[f64], logdet: LogDet) -> Result<Summary>;
 }

@@ -266,16 +266,51 @@ where
     }
 
     // ---- Free initial state: minimise xᵀP_0x − 2q_0ᵀx ----
-    let ld0 = cholesky_in_place(&mut pm, P0_PIVOT_FLOOR).map_err(|(pivot, value)| {
-        MmeError::NotObservable {
-            experiment: pr.experiment,
-            pivot,
-            value,
+    let not_observable = |(pivot, value)| MmeError::NotObservable {
+        experiment: pr.experiment,
+        pivot,
+        value,
+    };
+    let (x, ld0, prior_cost) = match pr.prior {
+        None => {
+            let ld0 = cholesky_in_place(&mut pm, P0_PIVOT_FLOOR).map_err(not_observable)?;
+            let mut x = qv.clone();
+            forward_sub(&pm, &mut x);
+            backward_sub(&pm, &mut x);
+            (x, ld0, 0.0)
         }
-    })?;
-    let mut x = qv.clone();
-    forward_sub(&pm, &mut x);
-    backward_sub(&pm, &mut x);
+        Some(prior) => {
+            // Prior `x_0 ~ N(m, Π⁻¹)`: minimise xᵀ(P_0 + Π)x − 2(q_0 + Πm)ᵀx. A tight
+            // prior makes the diagonal of `P_0 + Π` span many decades, so the pivot test
+            // runs on the Jacobi-scaled matrix `D(P_0 + Π)D`, `D = diag(1/√(P_0 + Π)_ii)`.
+            for i in 0..n {
+                pm[(i, i)] += prior.info[i];
+                qv[i] += prior.info[i] * prior.mean[i];
+            }
+            let mut scale = OVector::<f64, D>::zeros_generic(d, U1);
+            for i in 0..n {
+                let dii = pm[(i, i)];
+                if !(dii.is_finite() && dii > 0.0) {
+                    return Err(not_observable((i, dii)));
+                }
+                scale[i] = 1.0 / dii.sqrt();
+            }
+            for a in 0..n {
+                for b in 0..n {
+                    pm[(a, b)] *= scale[a] * scale[b];
+                }
+            }
+            let ld_scaled = cholesky_in_place(&mut pm, P0_PIVOT_FLOOR).map_err(not_observable)?;
+            let mut x = qv.component_mul(&scale);
+            forward_sub(&pm, &mut x);
+            backward_sub(&pm, &mut x);
+            x.component_mul_assign(&scale);
+            let ld0 = ld_scaled - 2.0 * scale.iter().map(|v| v.ln()).sum::<f64>();
+            let cost = prior.cost(x.as_slice());
+            (x, ld0, cost)
+        }
+    };
+    let mut x = x;
 
     // ---- Forward pass ----
     let mut sse = vec![0.0; p];
@@ -330,7 +365,8 @@ where
             residuals((j + 1) / s, &x, states);
         }
     }
-    if !correction_cost.is_finite() || sse.iter().any(|v| !v.is_finite()) {
+    if !correction_cost.is_finite() || !prior_cost.is_finite() || sse.iter().any(|v| !v.is_finite())
+    {
         return Err(breakdown(steps, "non-finite trajectory"));
     }
     Ok(SweepOut {
@@ -343,6 +379,7 @@ where
         } else {
             0.0
         },
+        prior_cost,
         steady_steps,
     })
 }

@@ -18,7 +18,8 @@ pub mod tune_w;
 pub mod update;
 
 pub use config::{
-    AutoWeight, IterationOptions, MmeConfig, NoiseSpec, StartTrajectory, WeightShape, WeightSpec,
+    AutoWeight, IterationOptions, MmeConfig, NoiseSpec, StartTrajectory, StatePrior, WeightShape,
+    WeightSpec,
 };
 pub use discretize::default_substeps;
 pub use error::{MmeError, Result};

@@ -5,6 +5,7 @@ use nalgebra::DMatrix;
 use sysid_core::{Dataset, LinearModel};
 
 use crate::binding::{Binding, bind};
+use crate::config::Prior;
 use crate::discretize::{Discrete, discretize_all};
 use crate::error::Result;
 use crate::evaluate::{Solve, Summary};
@@ -23,6 +24,10 @@ pub(crate) struct LinearRun<'a> {
     pub states: Vec<DMatrix<f64>>,
     /// Correction pieces per experiment (`q × (N−1)s`) from the last solve.
     pub corrections: Vec<DMatrix<f64>>,
+    /// Prior on every experiment's initial state (`None`: free).
+    prior: Option<Prior>,
+    /// Whether the solves use [`Self::prior`].
+    prior_on: bool,
 }
 
 impl<'a> LinearRun<'a> {
@@ -58,7 +63,15 @@ impl<'a> LinearRun<'a> {
             ws: Workspace::default(),
             states,
             corrections,
+            prior: None,
+            prior_on: true,
         })
+    }
+
+    /// Put a prior on every experiment's initial state.
+    pub fn with_prior(mut self, prior: Option<Prior>) -> Self {
+        self.prior = prior;
+        self
     }
 }
 
@@ -79,8 +92,13 @@ impl Solve for LinearRun<'_> {
             .collect()
     }
 
+    fn use_prior(&mut self, on: bool) {
+        self.prior_on = on;
+    }
+
     fn solve(&mut self, w: &DMatrix<f64>, inv_r: &[f64], logdet: LogDet) -> Result<Summary> {
         let p = self.model.n_outputs();
+        let prior = self.prior.as_ref().filter(|_| self.prior_on);
         let mut total = Summary {
             sse: vec![0.0; p],
             count: vec![0; p],
@@ -105,6 +123,7 @@ impl Solve for LinearRun<'_> {
                 experiment: e,
                 t0: exp.t0(),
                 steady: SteadyState::Allow,
+                prior,
             };
             let steps = StepModel::Lti {
                 ad: &disc.ad,

@@ -33,7 +33,7 @@ use sysid_core::bandlimited::BL_FACTOR;
 
 use crate::binding::{Binding, bind};
 use crate::config::{IterationOptions, MmeConfig, NoiseSpec, ResolvedWeight, StartTrajectory};
-use crate::config::{check_iterations, check_noise, resolve_weight};
+use crate::config::{Prior, check_iterations, check_noise, resolve_prior, resolve_weight};
 use crate::discretize::{nonlinear_substeps, substeps_for};
 use crate::error::{MmeError, Result};
 use crate::estimate::{Phases, assemble, resolve_noise};
@@ -320,6 +320,10 @@ struct NonlinearRun<'a, F> {
     /// Per experiment: whether a stuck iteration may still restart once from the fitted
     /// start (only from [`StartTrajectory::FromData`]; see [`Self::solve`]).
     restart_left: Vec<bool>,
+    /// Prior on every experiment's initial state (`None`: free).
+    prior: Option<Prior>,
+    /// Whether the solves use [`Self::prior`] (off for the noise likelihood).
+    prior_on: bool,
 }
 
 impl<'a, F: Dynamics> NonlinearRun<'a, F> {
@@ -348,6 +352,8 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 matches!(config.start, StartTrajectory::FromData);
                 data.experiments().len()
             ],
+            prior: resolve_prior(&config.x0_prior, &model.names.states)?,
+            prior_on: true,
         };
         if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
@@ -429,6 +435,11 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
         Ok(run)
     }
 
+    /// The initial-state prior, when there is one and it is switched on.
+    fn active_prior(&self) -> Option<&Prior> {
+        self.prior.as_ref().filter(|_| self.prior_on)
+    }
+
     fn input(&self, e: usize, k: usize) -> Vec<f64> {
         let exp = &self.data.experiments()[e];
         self.binding
@@ -466,7 +477,10 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
                 }
             }
         }
-        let cost = sse.iter().zip(inv_r).map(|(s, r)| s * r).sum::<f64>() + correction_cost;
+        let mut cost = sse.iter().zip(inv_r).map(|(s, r)| s * r).sum::<f64>() + correction_cost;
+        if let Some(prior) = self.active_prior() {
+            cost += prior.cost(&traj.x[..n]);
+        }
         Eval {
             sse,
             count,
@@ -571,6 +585,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             experiment: e,
             t0: g.t0,
             steady: SteadyState::Never,
+            prior: self.prior.as_ref().filter(|_| self.prior_on),
         };
         let steps = StepModel::Tv {
             phi: &phi,
@@ -725,6 +740,10 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
 
     fn pieces(&self) -> Vec<(usize, f64)> {
         self.grids.iter().map(|g| (g.steps, g.h)).collect()
+    }
+
+    fn use_prior(&mut self, on: bool) {
+        self.prior_on = on;
     }
 
     fn solve(&mut self, w: &DMatrix<f64>, inv_r: &[f64], logdet: LogDet) -> Result<Summary> {

@@ -13,7 +13,10 @@
 //!
 //! `P̃ = P − PΓS⁻¹ΓᵀP`, `q̃ = q − PΓS⁻¹Γᵀq`, `P_j = ΦᵀP̃Φ`, `q_j = Φᵀ(q̃ − P̃c)`,
 //!
-//! plus `CᵀR⁻¹C` and `CᵀR⁻¹ỹ` (observed channels only) at each sample. The optimal
+//! plus `CᵀR⁻¹C` and `CᵀR⁻¹ỹ` (observed channels only) at each sample. At `j = 0` the
+//! free initial state minimises `V_0`; a Gaussian prior `x_0 ~ N(m, Π⁻¹)` adds
+//! `(x_0 − m)ᵀΠ(x_0 − m)` to `J`, i.e. `P_0 ← P_0 + Π`, `q_0 ← q_0 + Πm` (the
+//! information-form initial condition of the backward sweep; `Π = 0` is the diffuse case). The optimal
 //! correction is the affine policy `d_j = f_j − F_j x_j` with `F_j = S⁻¹ΓᵀPΦ` and
 //! `f_j = S⁻¹Γᵀ(q − Pc)`. The result is the exact least-squares optimum (a diffuse-prior
 //! Rauch–Tung–Striebel smoother; e.g. Bryson & Ho, *Applied Optimal Control*, ch. 13).
@@ -27,6 +30,8 @@
 //! (`n = 2, 4`) run on fixed-size matrices.
 
 use nalgebra::{DMatrix, Dim, Matrix, MatrixView, StorageMut};
+
+use crate::config::Prior;
 
 /// The measured side of one experiment's problem.
 #[derive(Debug, Clone, Copy)]
@@ -57,6 +62,9 @@ pub(crate) struct Problem<'a> {
     pub t0: f64,
     /// Whether the steady-state shortcut may be used (time-invariant steps only).
     pub steady: SteadyState,
+    /// Gaussian prior on `x_0` (`None`: free, diffuse). It adds `Π = diag(info)` to
+    /// `P_0` and `Π m` to `q_0` before the minimisation over `x_0`.
+    pub prior: Option<&'a Prior>,
 }
 
 /// Whether the backward pass may switch to the steady-state gains once the Riccati
@@ -139,16 +147,23 @@ pub(crate) struct SweepOut {
     pub correction_cost: f64,
     /// `Σ_j log det S_j` (0 unless [`LogDet::Accumulate`]).
     pub logdet_s: f64,
-    /// `log det P_0` (0 unless [`LogDet::Accumulate`]).
+    /// `log det P_0` (0 unless [`LogDet::Accumulate`]); with a prior, of `P_0 + Π`.
     pub logdet_p0: f64,
+    /// The prior's share of `J`, `(x_0 − m)ᵀΠ(x_0 − m)` (0 without a prior).
+    pub prior_cost: f64,
     /// Steps run on steady-state gains.
     pub steady_steps: usize,
 }
 
 impl SweepOut {
-    /// `J` = weighted misfit + correction cost.
+    /// `J` = weighted misfit + correction cost (+ the prior's share, if any).
     pub fn cost(&self, inv_r: &[f64]) -> f64 {
-        self.sse.iter().zip(inv_r).map(|(s, w)| s * w).sum::<f64>() + self.correction_cost
+        let j = self.sse.iter().zip(inv_r).map(|(s, w)| s * w).sum::<f64>() + self.correction_cost;
+        if self.prior_cost == 0.0 {
+            j
+        } else {
+            j + self.prior_cost
+        }
     }
 }
 
@@ -311,6 +326,7 @@ mod tests {
             experiment: 0,
             t0: 0.0,
             steady,
+            prior: None,
         };
         let steps = StepModel::Lti {
             ad: &z.ad,

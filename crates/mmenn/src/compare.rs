@@ -533,6 +533,8 @@ pub fn run_compare_outcome(
     progress: &dyn ProgressSink,
 ) -> Result<CompareOutcome> {
     let loaded = LoadedModel::read(model_path)?;
+    // Its hybrid row runs `fit`'s MME, which does not apply the table.
+    loaded.refuse_x0_prior("compare")?;
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &loaded.spec)?;
     let outcome = compute_compare_with_progress(&data, &loaded, val.as_ref(), opts, progress)?;
     progress.report(&crate::progress::Progress::new(EVALUATION, 0, None));

@@ -16,7 +16,7 @@ use sysid_core::{Dataset, MmeEstimate, TermModel};
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
 use crate::estimate::{EstimateOptions, estimate_term_model, mme_config};
-use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, read_model, write_model};
+use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, write_model};
 use crate::progress::{NoProgress, Progress, ProgressSink};
 use report::{figures, report};
 
@@ -445,7 +445,15 @@ pub fn run_discover_with_progress(
     out: &Path,
     progress: &dyn ProgressSink,
 ) -> Result<DiscoverSummary> {
-    let original = read_model(model_path)?;
+    let (original, x0_prior) = crate::model_file::read_model_and_prior(model_path)?;
+    if !x0_prior.is_empty() {
+        return Err(MmennError::Model {
+            path: model_path.to_path_buf(),
+            line: None,
+            column: None,
+            problem: crate::error::ModelProblem::PriorUnread { what: "discover" },
+        });
+    }
     // Discovery's MME, proposals and free-run gaps would ignore an acquisition filter.
     original.refuse_acquisition("discover", model_path)?;
     // Free-run simulations treat the inputs between samples as the model file says (the

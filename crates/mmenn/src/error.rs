@@ -222,6 +222,30 @@ pub enum ModelProblem {
         /// The step.
         what: &'static str,
     },
+    /// An entry of `[x0_prior]` is invalid: a `mean` that is not finite or a `std` that
+    /// is not positive and finite.
+    #[error(
+        "x0_prior.{state}.{field} = {value} must be {}",
+        if *field == "mean" { "finite" } else { "positive and finite" }
+    )]
+    Prior {
+        /// The state.
+        state: String,
+        /// `mean` or `std`.
+        field: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// A step that does not apply the initial-state prior was given a model with one.
+    #[error(
+        "{what} does not apply the [x0_prior] table (only estimate does: the MME runs of \
+         {what} start at other states, on validation records and folds), so take the table \
+         out for this step"
+    )]
+    PriorUnread {
+        /// The step.
+        what: &'static str,
+    },
     /// The file is none of the models mmenn writes (a model-file TOML, with or without
     /// `[[terms]]`, or `fit`'s `model.json`).
     #[error("not a model mmenn reads: {why}")]

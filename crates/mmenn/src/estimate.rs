@@ -58,6 +58,9 @@ pub struct EstimateOptions {
     /// the linear one). Default [`mme_core::IterationOptions::default`] (50 Gauss–Newton
     /// iterations per solve).
     pub iterations: mme_core::IterationOptions,
+    /// Gaussian prior on the initial state of every record (default empty: free). `mmenn
+    /// estimate` fills it from the model file's `[x0_prior]` table when it is empty here.
+    pub x0_prior: Vec<mme_core::StatePrior>,
 }
 
 /// The MME configuration a model file and options imply.
@@ -74,6 +77,7 @@ pub fn mme_config(spec: &ModelSpec, opts: &EstimateOptions) -> MmeConfig {
         substeps: opts.substeps,
         budget: opts.budget.clone(),
         iterations: opts.iterations,
+        x0_prior: opts.x0_prior.clone(),
         ..MmeConfig::default()
     }
 }
@@ -270,6 +274,19 @@ pub struct EstimateSummary {
     /// ratio target is not 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub convergence: Option<crate::fit::MmeConvergence>,
+    /// The Gaussian prior on the initial state MME used (the model file's `[x0_prior]`),
+    /// by state; absent when every initial state was free.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub x0_prior: BTreeMap<String, PriorEntry>,
+}
+
+/// One state's initial-state prior as `summary.json` records it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PriorEntry {
+    /// Prior mean at the first sample.
+    pub mean: f64,
+    /// Prior standard deviation.
+    pub std: f64,
 }
 
 /// How much larger than the difference-based scatter an estimated noise variance may be
@@ -378,8 +395,20 @@ pub fn run_estimate_with(
     out: &Path,
 ) -> Result<EstimateSummary> {
     let clock = Instant::now();
-    let spec = crate::model::LoadedModel::read(model_path)?.spec;
+    let loaded = crate::model::LoadedModel::read(model_path)?;
+    let spec = loaded.spec;
     spec.refuse_acquisition("estimate", model_path)?;
+    // The model file's `[x0_prior]`, unless the options already carry a prior.
+    let with_prior;
+    let opts = if opts.x0_prior.is_empty() && !loaded.x0_prior.is_empty() {
+        with_prior = EstimateOptions {
+            x0_prior: loaded.x0_prior,
+            ..opts.clone()
+        };
+        &with_prior
+    } else {
+        opts
+    };
     let data = read_dataset(
         data_paths,
         spec.linear.input_names(),
@@ -507,6 +536,19 @@ fn compute_estimate_owned(
         convergence: robust.is_none().then(|| {
             crate::fit::MmeConvergence::of(crate::fit::MmeStage::Training, &result, &data)
         }),
+        x0_prior: opts
+            .x0_prior
+            .iter()
+            .map(|p| {
+                (
+                    p.state.clone(),
+                    PriorEntry {
+                        mean: p.mean,
+                        std: p.std,
+                    },
+                )
+            })
+            .collect(),
     };
     Ok(EstimateOutcome {
         summary,

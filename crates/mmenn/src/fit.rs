@@ -277,6 +277,7 @@ pub(crate) fn hybrid_loaded(
         integrator: model.integrator,
         dynamics: ModelDynamics::Hybrid(model),
         hybrid: Some(file.clone()),
+        x0_prior: Vec::new(),
     };
     Ok((file, loaded))
 }
@@ -422,7 +423,9 @@ pub fn run_fit_with_progress(
     out: &Path,
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<FitSummary> {
-    let spec = LoadedModel::read(model_path)?.spec;
+    let loaded = LoadedModel::read(model_path)?;
+    loaded.refuse_x0_prior("fit")?;
+    let spec = loaded.spec;
     spec.refuse_mechanics("fit", model_path)?;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;

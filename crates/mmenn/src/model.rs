@@ -40,7 +40,7 @@ pub use sysid_core::{InitialRule, Judgement, Observation, ScoredWindow};
 
 use crate::error::{MmennError, ModelProblem, Result};
 use crate::hybrid::{HybridFile, HybridModel};
-use crate::model_file::{ModelSpec, parse_model};
+use crate::model_file::{ModelSpec, parse_model_and_prior};
 
 /// Free-run metrics of a model per judged channel of one record, by the one judge
 /// ([`judge_free_run`]).
@@ -158,6 +158,9 @@ pub struct LoadedModel {
     pub integrator: Integrator,
     /// The hybrid file, for a hybrid model.
     pub hybrid: Option<HybridFile>,
+    /// The model file's `[x0_prior]` table (empty without one, and for a hybrid
+    /// `model.json`), which only `estimate` applies.
+    pub x0_prior: Vec<mme_core::StatePrior>,
 }
 
 /// Bound on simulated states beyond which a free run counts as diverged.
@@ -209,7 +212,10 @@ impl LoadedModel {
                 },
             ))
         } else {
-            Self::from_spec(path, parse_model(path, text)?)
+            let (spec, x0_prior) = parse_model_and_prior(path, text)?;
+            let mut model = Self::from_spec(path, spec)?;
+            model.x0_prior = x0_prior;
+            Ok(model)
         }
     }
 
@@ -234,6 +240,7 @@ impl LoadedModel {
             dynamics,
             integrator: Integrator::Rk4 { substeps: 4 },
             hybrid: None,
+            x0_prior: Vec::new(),
         })
     }
 
@@ -248,7 +255,18 @@ impl LoadedModel {
             integrator: model.integrator,
             dynamics: ModelDynamics::Hybrid(model),
             hybrid: Some(file),
+            x0_prior: Vec::new(),
         })
+    }
+
+    /// Refuse a model file with an `[x0_prior]` table for a step that does not apply it
+    /// (every step but `estimate`).
+    pub fn refuse_x0_prior(&self, what: &'static str) -> Result<()> {
+        if self.x0_prior.is_empty() {
+            Ok(())
+        } else {
+            Err(model_error(&self.path, ModelProblem::PriorUnread { what }))
+        }
     }
 
     /// How its free runs treat the inputs between samples.

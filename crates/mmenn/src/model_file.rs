@@ -8,12 +8,15 @@
 //! expression) and `[mechanics]` (`q`, `qdot`, `mass`, `forces`: the mass-matrix form,
 //! whose states are `q` then `qdot` when `states` is left out), and `[acquisition]`
 //! (`pass_below_hz`, `bands` of `[centre Hz, real, imaginary]`: the filter the record's
-//! input and output channels share, [`crate::acquisition`]). `A` and `B` are zero when
-//! left out.
+//! input and output channels share, [`crate::acquisition`]), and `[x0_prior]`
+//! (`state = { mean, std }`: a Gaussian prior on that state's value at the first sample of
+//! every record, read by `mmenn estimate` only, [`parse_model_and_prior`]). `A` and `B`
+//! are zero when left out.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use mme_core::StatePrior;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use sysid_core::acquisition::AcquisitionFilter;
@@ -284,6 +287,14 @@ enum NoiseToml {
     Word(String),
 }
 
+/// One entry of `[x0_prior]`: `state = { mean = …, std = … }`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PriorToml {
+    mean: f64,
+    std: f64,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ModelToml {
@@ -315,6 +326,8 @@ struct ModelToml {
     mechanics: Option<MechanicsEntry>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     acquisition: Option<AcquisitionToml>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    x0_prior: BTreeMap<String, PriorToml>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
 }
@@ -442,7 +455,43 @@ fn check_names(key: &'static str, names: &[String]) -> Result<(), ModelProblem> 
     Ok(())
 }
 
-fn build(mut raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
+/// The `[x0_prior]` table checked against the states: every name a state, every mean
+/// finite, every `std` positive and finite. In the states' order.
+fn x0_prior(
+    table: &BTreeMap<String, PriorToml>,
+    states: &[String],
+) -> Result<Vec<StatePrior>, ModelProblem> {
+    for name in table.keys() {
+        if !states.contains(name) {
+            return Err(ModelProblem::UnknownName {
+                key: "x0_prior",
+                name: name.clone(),
+                kind: "state",
+            });
+        }
+    }
+    let mut out = Vec::new();
+    for state in states {
+        let Some(p) = table.get(state) else {
+            continue;
+        };
+        let bad = |field, value| ModelProblem::Prior {
+            state: state.clone(),
+            field,
+            value,
+        };
+        if !p.mean.is_finite() {
+            return Err(bad("mean", p.mean));
+        }
+        if !(p.std.is_finite() && p.std > 0.0) {
+            return Err(bad("std", p.std));
+        }
+        out.push(StatePrior::new(state.clone(), p.mean, p.std));
+    }
+    Ok(out)
+}
+
+fn build_with_prior(mut raw: ModelToml) -> Result<(ModelSpec, Vec<StatePrior>), ModelProblem> {
     if raw.states.is_empty()
         && let Some(m) = &raw.mechanics
     {
@@ -492,6 +541,7 @@ fn build(mut raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
         }
     };
     let e = selection("corrected", &raw.corrected, &raw.states, false)?;
+    let prior = x0_prior(&raw.x0_prior, &raw.states)?;
     let noise_variance = match raw.noise_variance {
         NoiseToml::Word(w) if w == "auto" => NoiseVariance::Auto,
         NoiseToml::Word(w) => return Err(ModelProblem::NoiseWord(w)),
@@ -589,7 +639,7 @@ fn build(mut raw: ModelToml) -> Result<ModelSpec, ModelProblem> {
     } else {
         spec.term_model()?;
     }
-    Ok(spec)
+    Ok((spec, prior))
 }
 
 /// Line and column (1-based) of the first quoted occurrence of `expression` in `text`,
@@ -639,8 +689,17 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
     (line, col)
 }
 
-/// Parse a model file's text; `path` is only used in errors.
+/// Parse a model file's text; `path` is only used in errors. An `[x0_prior]` table is
+/// checked and dropped (see [`parse_model_and_prior`]).
 pub fn parse_model(path: &Path, text: &str) -> Result<ModelSpec> {
+    parse_model_and_prior(path, text).map(|(spec, _)| spec)
+}
+
+/// Parse a model file's text with its `[x0_prior]` table: the Gaussian prior on the
+/// initial state that `mmenn estimate` hands to MME ([`mme_core::MmeConfig::x0_prior`]),
+/// in the states' order (empty without the table). The prior is not part of
+/// [`ModelSpec`]: [`format_model`] does not write it.
+pub fn parse_model_and_prior(path: &Path, text: &str) -> Result<(ModelSpec, Vec<StatePrior>)> {
     let err = |line, column, problem| MmennError::Model {
         path: path.to_path_buf(),
         line,
@@ -660,7 +719,7 @@ pub fn parse_model(path: &Path, text: &str) -> Result<ModelSpec> {
             },
         )
     })?;
-    build(raw).map_err(|p| {
+    build_with_prior(raw).map_err(|p| {
         let at = expression_of(&p).and_then(|(expr, column)| locate(text, expr, column));
         err(at.map(|a| a.0), at.map(|a| a.1), p)
     })
@@ -668,11 +727,16 @@ pub fn parse_model(path: &Path, text: &str) -> Result<ModelSpec> {
 
 /// Read a model file.
 pub fn read_model(path: &Path) -> Result<ModelSpec> {
+    read_model_and_prior(path).map(|(spec, _)| spec)
+}
+
+/// Read a model file with its `[x0_prior]` table ([`parse_model_and_prior`]).
+pub fn read_model_and_prior(path: &Path) -> Result<(ModelSpec, Vec<StatePrior>)> {
     let text = std::fs::read_to_string(path).map_err(|source| MmennError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    parse_model(path, &text)
+    parse_model_and_prior(path, &text)
 }
 
 fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
@@ -682,7 +746,8 @@ fn rows_of(m: &DMatrix<f64>) -> Vec<Vec<f64>> {
 }
 
 /// Render a model as TOML text in the contract's keys: `measured` when `C` is a selection
-/// (else `C` + `outputs`); `corrected` from `E`, which must be a selection.
+/// (else `C` + `outputs`); `corrected` from `E`, which must be a selection. An
+/// `[x0_prior]` table is not part of [`ModelSpec`] and is not written.
 pub fn format_model(spec: &ModelSpec) -> Result<String> {
     let lin = &spec.linear;
     let states = lin.state_names().to_vec();
@@ -757,6 +822,7 @@ pub fn format_model(spec: &ModelSpec) -> Result<String> {
         parameters,
         mechanics: spec.mechanics.clone(),
         acquisition: spec.acquisition.as_ref().map(AcquisitionToml::of),
+        x0_prior: BTreeMap::new(),
         terms: spec.terms.clone(),
     };
     toml::to_string(&raw).map_err(|e| MmennError::Model {

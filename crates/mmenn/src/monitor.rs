@@ -208,7 +208,9 @@ pub fn train_monitor(
     opts: &MonitorOptions,
     out: &Path,
 ) -> Result<MonitorFile> {
-    let spec = crate::model::LoadedModel::read(model_path)?.spec;
+    let loaded = crate::model::LoadedModel::read(model_path)?;
+    loaded.refuse_x0_prior("monitor")?;
+    let spec = loaded.spec;
     spec.refuse_acquisition("monitor", model_path)?;
     let records = classes
         .iter()

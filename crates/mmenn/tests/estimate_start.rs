@@ -358,3 +358,81 @@ fn a_crawl_along_a_kink_ends_on_the_cost_plateau_not_the_iteration_limit() {
         rb.termination
     );
 }
+
+/// The model file's `[x0_prior]` reaches MME through `mmenn estimate` and is recorded in
+/// `summary.json`. The assumed transfer coefficient is 20 % low and `W = 1` makes the
+/// corrections cheap, so the lower level says little about where the upper one started:
+/// without the prior `ĥ1(0)` lands volts away from the truth's 6 V; with
+/// `h1 = { mean = 6.3, std = 0.5 }` it must land within 0.5 V. `fit` and `discover`,
+/// whose records and folds start elsewhere, refuse the table.
+#[test]
+fn model_file_x0_prior_reaches_estimate_and_other_steps_refuse_it() {
+    let dir: PathBuf =
+        std::env::temp_dir().join(format!("mmenn-estimate-prior-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (data, upper) = record();
+    write_experiment(&dir.join("data.csv"), &data, 0).unwrap();
+    let biased = MODEL
+        .replace("coefficient = 0.0728", "coefficient = 0.05824")
+        .replace("noise_variance = \"auto\"", "noise_variance = [1.3e-4]");
+    let prior = format!("{biased}\n[x0_prior]\nh1 = {{ mean = 6.3, std = 0.5 }}\n");
+    std::fs::write(dir.join("free.toml"), &biased).unwrap();
+    std::fs::write(dir.join("prior.toml"), &prior).unwrap();
+    let opts = EstimateOptions {
+        w: mmenn::estimate::WeightChoice::Value(1.0),
+        ..EstimateOptions::default()
+    };
+    let start_error = |model: &str, out: &str| {
+        let s = run_estimate(
+            &[dir.join("data.csv")],
+            &dir.join(model),
+            &opts,
+            &dir.join(out),
+        )
+        .unwrap();
+        let table = read_table(&dir.join(out).join("estimate.csv")).unwrap();
+        let h1 = &table.columns[table.column_index("h1").unwrap()];
+        (s, (h1[0] - upper[0]).abs())
+    };
+    let (free, e_free) = start_error("free.toml", "free");
+    let (with, e_with) = start_error("prior.toml", "prior");
+    assert!(free.x0_prior.is_empty());
+    let entry = with.x0_prior["h1"];
+    assert_eq!((entry.mean, entry.std), (6.3, 0.5));
+    let json = std::fs::read_to_string(dir.join("prior").join("summary.json")).unwrap();
+    assert!(json.contains("\"x0_prior\""), "{json}");
+    let report = std::fs::read_to_string(dir.join("prior").join("report.md")).unwrap();
+    assert!(report.contains("h1(t0) ~ N(6.3, 0.5²)"), "{report}");
+    assert!(
+        e_with < 0.5 && e_free > 2.0,
+        "|ĥ1(0) − h1(0)|: with prior {e_with}, without {e_free}"
+    );
+    let fit = mmenn::fit::run_fit(
+        &[dir.join("data.csv")],
+        &dir.join("prior.toml"),
+        &[],
+        &mmenn::fit::FitOptions::default(),
+        &dir.join("fit"),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(
+            fit,
+            mmenn::MmennError::Model {
+                problem: mmenn::error::ModelProblem::PriorUnread { what: "fit" },
+                ..
+            }
+        ),
+        "{fit}"
+    );
+    let discover = mmenn::discover::run_discover(
+        &[dir.join("data.csv")],
+        &dir.join("prior.toml"),
+        &[],
+        &mmenn::discover::DiscoverOptions::default(),
+        &dir.join("discover"),
+    )
+    .unwrap_err();
+    assert!(discover.to_string().contains("x0_prior"), "{discover}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -22,8 +22,14 @@ impl<F: Dynamics> NonlinearRun<'_, F> {
         let rows: Vec<usize> = (0..self.binding.outputs.len())
             .filter(|&i| !exp.outputs()[(self.binding.outputs[i], k)].is_nan())
             .collect();
+        // With an initial-state prior, the directions the outputs leave open take the
+        // prior's means (states without a prior: 0) instead of 0.
+        let prior_mean = self
+            .prior
+            .as_ref()
+            .map(|p| nalgebra::DVector::from_column_slice(&p.mean));
         if rows.is_empty() {
-            return vec![0.0; n];
+            return prior_mean.map_or_else(|| vec![0.0; n], |m| m.iter().copied().collect());
         }
         let c = DMatrix::from_fn(rows.len(), n, |r, j| self.model.c[(rows[r], j)]);
         let y = nalgebra::DVector::from_iterator(
@@ -31,9 +37,14 @@ impl<F: Dynamics> NonlinearRun<'_, F> {
             rows.iter()
                 .map(|&i| exp.outputs()[(self.binding.outputs[i], k)]),
         );
-        match c.pseudo_inverse(1e-12) {
-            Ok(pinv) => (pinv * y).iter().copied().collect(),
-            Err(_) => vec![0.0; n],
+        match (c.clone().pseudo_inverse(1e-12), prior_mean) {
+            (Ok(pinv), None) => (pinv * y).iter().copied().collect(),
+            (Ok(pinv), Some(m)) => {
+                let open = &m - &pinv * (&c * &m);
+                (pinv * y + open).iter().copied().collect()
+            }
+            (Err(_), None) => vec![0.0; n],
+            (Err(_), Some(m)) => m.iter().copied().collect(),
         }
     }
 

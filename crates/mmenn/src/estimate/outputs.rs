@@ -295,6 +295,18 @@ pub(super) fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         s.samples,
         s.substeps
     ));
+    if !s.x0_prior.is_empty() {
+        let list: Vec<String> = s
+            .x0_prior
+            .iter()
+            .map(|(name, p)| format!("{name}(t0) ~ N({}, {}²)", p.mean, p.std))
+            .collect();
+        r.push_str(&format!(
+            "Initial-state prior (the model file's `[x0_prior]`, added to J at the first \
+             sample of every record): {}; the other states start free.\n\n",
+            list.join(", ")
+        ));
+    }
     r.push_str("| channel | noise variance R | residual variance | ratio |\n|---|---|---|---|\n");
     for (name, nv) in &s.noise_variance {
         r.push_str(&format!(

@@ -412,3 +412,61 @@ fn acquisition_table_round_trips_and_malformed_ones_name_key_and_row() {
     .to_string();
     assert!(text.contains("acquisition.bands, row 1"), "{text}");
 }
+
+/// `[x0_prior]` is read in the states' order, checked (unknown state, NaN mean, negative
+/// or missing std, unknown field are typed errors naming the state or key), and not part
+/// of the spec: `parse_model` drops it and `format_model` does not write it.
+#[test]
+fn x0_prior_table_is_read_checked_and_not_written() {
+    let with = |table: &str| format!("{SPEC_EXAMPLE}\n[x0_prior]\n{table}\n");
+    let path = Path::new("m.toml");
+    let (spec, prior) = parse_model_and_prior(
+        path,
+        &with("omega = { mean = 0.5, std = 2.0 }\ntheta = { mean = -1.0, std = 0.1 }"),
+    )
+    .unwrap();
+    assert_eq!(
+        prior,
+        vec![
+            StatePrior::new("theta", -1.0, 0.1),
+            StatePrior::new("omega", 0.5, 2.0)
+        ]
+    );
+    assert_eq!(spec, parse_model(path, SPEC_EXAMPLE).unwrap());
+    assert!(!format_model(&spec).unwrap().contains("x0_prior"));
+    let (_, none) = parse_model_and_prior(path, SPEC_EXAMPLE).unwrap();
+    assert!(none.is_empty());
+    let prior_problem = |table: &str| match parse_model_and_prior(path, &with(table)) {
+        Err(MmennError::Model { problem, .. }) => problem,
+        other => panic!("expected a model error, got {other:?}"),
+    };
+    assert!(matches!(
+        prior_problem("h9 = { mean = 1.0, std = 1.0 }"),
+        ModelProblem::UnknownName { key: "x0_prior", ref name, .. } if name == "h9"
+    ));
+    assert!(matches!(
+        prior_problem("omega = { mean = nan, std = 1.0 }"),
+        ModelProblem::Prior { ref state, field: "mean", .. } if state == "omega"
+    ));
+    assert!(matches!(
+        prior_problem("theta = { mean = 0.0, std = -0.5 }"),
+        ModelProblem::Prior { ref state, field: "std", value, .. } if state == "theta" && (value + 0.5).abs() < 1e-15
+    ));
+    assert!(matches!(
+        prior_problem("theta = { mean = 0.0, std = 0.0 }"),
+        ModelProblem::Prior { field: "std", .. }
+    ));
+    let msg = prior_problem("theta = { mean = 0.0, std = inf }").to_string();
+    assert!(
+        msg.contains("x0_prior.theta.std") && msg.contains("positive and finite"),
+        "{msg}"
+    );
+    assert!(matches!(
+        prior_problem("theta = { mean = 0.0 }"),
+        ModelProblem::Syntax { .. }
+    ));
+    assert!(matches!(
+        prior_problem("theta = { mean = 0.0, std = 1.0, sd = 2.0 }"),
+        ModelProblem::Syntax { .. }
+    ));
+}

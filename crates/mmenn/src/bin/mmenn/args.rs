@@ -505,7 +505,8 @@ pub(crate) struct EstimateArgs {
     /// Data file(s) (CSV); several files are several experiments.
     #[arg(long, required = true, num_args = 1..)]
     pub(crate) data: Vec<PathBuf>,
-    /// Model file (TOML).
+    /// Model file (TOML). An optional [x0_prior] table (state = { mean, std }) puts a
+    /// Gaussian prior on each record's initial state; states left out start free.
     #[arg(long)]
     pub(crate) model: PathBuf,
     /// Correction weight W: "auto" (covariance constraint) or a positive number (W = value·I).
