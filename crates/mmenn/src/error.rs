@@ -238,9 +238,14 @@ pub enum ModelProblem {
     },
     /// A step that does not apply the initial-state prior was given a model with one.
     #[error(
-        "{what} does not apply the [x0_prior] table (only estimate does: the MME runs of \
-         {what} start at other states, on validation records and folds), so take the table \
-         out for this step"
+        "{what} does not apply the [x0_prior] table (only estimate does: {}), so take the \
+         table out for this step",
+        if *what == "greyest" {
+            "greyest calibrates each record's start state by free-run error without a prior, \
+             and the model.toml it writes would not carry the table"
+        } else {
+            "the MME runs of this step start at other states, on validation records and folds"
+        }
     )]
     PriorUnread {
         /// The step.

@@ -307,6 +307,7 @@ pub fn run_greyest_named(
 ) -> Result<GreyestOutcome> {
     let model = LoadedModel::read(model_path)?;
     physical_of(&model)?;
+    model.refuse_x0_prior("greyest")?;
     let mut records = Vec::with_capacity(data.len());
     for p in data {
         let table = read_table(p)?;

@@ -319,6 +319,26 @@ fn bad_input_is_a_typed_error() {
         "{e:?}"
     );
 
+    // An initial-state prior (`[x0_prior]`, which only `estimate` applies): refused, not
+    // dropped from the model.toml greyest writes.
+    let with_prior = format!(
+        "{}\n[x0_prior]\ntheta1 = {{ mean = 0.2, std = 0.1 }}\n",
+        perturbed(false)
+    );
+    let e = run(&with_prior, std::slice::from_ref(&est), &dir).err();
+    assert!(
+        matches!(
+            &e,
+            Some(MmennError::Model {
+                problem: mmenn::error::ModelProblem::PriorUnread { what: "greyest" },
+                ..
+            })
+        ),
+        "{e:?}"
+    );
+    let text = e.map(|e| e.to_string()).unwrap_or_default();
+    assert!(text.contains("without a prior"), "{text}");
+
     // A start value outside its bounds: the model file is refused, naming the parameter.
     let outside = MODEL.replace("lc1 = { value = 0.14,", "lc1 = { value = 0.4,");
     let e = run(&outside, std::slice::from_ref(&est), &dir)
