@@ -194,6 +194,16 @@ pub struct CompareSummary {
     pub files: Vec<String>,
 }
 
+/// Whether `A` and `B` are zero in every row the default linear OE fits (the corrected
+/// states): such a model file keeps its dynamics in `[[terms]]`, and the output-error fit
+/// of its linear part has nothing to start from.
+fn linear_part_is_zero(lin: &LinearModel) -> bool {
+    let rows = lin.corrected_states().unwrap_or_default();
+    rows.iter().all(|&i| {
+        lin.a().row(i).iter().all(|v| *v == 0.0) && lin.b().row(i).iter().all(|v| *v == 0.0)
+    })
+}
+
 fn default_free(spec: &ModelSpec) -> Vec<String> {
     let lin = &spec.linear;
     let rows = lin.corrected_states().unwrap_or_default();
@@ -614,12 +624,23 @@ pub fn compute_compare_with_progress(
                 (Some(m), f.parameters, None)
             }
             Err(e) => {
+                let reason = if opts.oe_free.is_none() && linear_part_is_zero(&lin) {
+                    format!(
+                        "the model file's A and B are zero in the rows the linear OE fits (its \
+                         dynamics are all in [[terms]]), so an output-error fit of its linear \
+                         part starts where no coefficient moves the output; give A and B (e.g. \
+                         the terms linearised at an operating point) to get this row ({})",
+                        with_causes(&e)
+                    )
+                } else {
+                    with_causes(&e)
+                };
                 failures.push(Failure {
                     model: "linear OE".into(),
-                    reason: with_causes(&e),
+                    reason: reason.clone(),
                     at: FailedAt::Fit,
                 });
-                (None, Vec::new(), Some(with_causes(&e)))
+                (None, Vec::new(), Some(reason))
             }
         };
     let orders = match opts.narx_lags {

@@ -558,16 +558,13 @@ fn measured_states_start_at_their_measured_values() {
     }
 }
 
-/// Two tanks with Torricelli outflows, only the lower level measured. `predict` fits the
-/// start state from the measured channels' first values with the upper level at 0, where
-/// `sqrt` has no finite slope, so a probe from there asks for the most RK4 steps (1000).
-/// The count must be the judged start's instead: the same as a free run given that start,
-/// and the few steps this smooth trajectory needs. The record is made here by explicit
-/// Euler at 2000 steps per 4-s sample (not mmenn's integrator), from h1 = 6, h2 = 4.
-#[test]
-fn an_unmeasured_level_at_zero_does_not_set_the_free_runs_steps() {
-    let dir = scratch("tanks-steps");
-    std::fs::create_dir_all(&dir).unwrap();
+/// Two tanks with Torricelli outflows, only the lower level measured, all dynamics in
+/// `[[terms]]` (`A = B = 0`): the model file and a record made here by explicit Euler at
+/// 2000 steps per 4-s sample (not mmenn's integrator), from h1 = 6, h2 = 4, written into
+/// `dir` as `model.toml` and `data.csv`; the model's lower outflow coefficient is `k3`
+/// (the record's is 0.06).
+fn torricelli_record(dir: &Path, k3: f64) {
+    std::fs::create_dir_all(dir).unwrap();
     let model_text = r#"
 states = ["h1", "h2"]
 inputs = ["u"]
@@ -580,7 +577,7 @@ B = [[0.0], [0.0]]
 [parameters]
 k1 = { value = 0.05, fixed = true }
 k2 = { value = 0.05, fixed = true }
-k3 = { value = 0.06, fixed = true }
+k3 = { value = K3, fixed = true }
 k4 = { value = 0.045, fixed = true }
 
 [[terms]]
@@ -593,7 +590,11 @@ state = "h2"
 effect = "torricelli"
 term = "k2*sqrt(max(h1, 0)) - k3*sqrt(max(h2, 0))"
 "#;
-    std::fs::write(dir.join("model.toml"), model_text).unwrap();
+    std::fs::write(
+        dir.join("model.toml"),
+        model_text.replace("K3", &format!("{k3:e}")),
+    )
+    .unwrap();
     let (dt, n, fine) = (4.0, 400, 2000);
     let (mut h1, mut h2) = (6.0_f64, 4.0_f64);
     let mut csv = String::from("t,u,h2\n");
@@ -609,6 +610,16 @@ term = "k2*sqrt(max(h1, 0)) - k3*sqrt(max(h2, 0))"
         }
     }
     std::fs::write(dir.join("data.csv"), csv).unwrap();
+}
+
+/// `predict` fits the start state from the measured channels' first values with the upper
+/// level at 0, where `sqrt` has no finite slope, so a probe from there asks for the most RK4
+/// steps (1000). The count must be the judged start's instead: the same as a free run given
+/// that start, and the few steps this smooth trajectory needs.
+#[test]
+fn an_unmeasured_level_at_zero_does_not_set_the_free_runs_steps() {
+    let dir = scratch("tanks-steps");
+    torricelli_record(&dir, 0.06);
     let model = LoadedModel::read(&dir.join("model.toml")).unwrap();
     let table = read_table(&dir.join("data.csv")).unwrap();
     let fitted = compute_predict(&model, &table, &PredictOptions::default()).unwrap();
@@ -627,5 +638,37 @@ term = "k2*sqrt(max(h1, 0)) - k3*sqrt(max(h2, 0))"
     // The true model from its judged start follows the record (Euler's error only).
     let e = fitted.summary.free_run.channels["h2"].rmse;
     assert!(e < 1e-3, "RMSE {e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `compare` on a model file whose dynamics are all in `[[terms]]` cannot fit a linear OE
+/// of its (zero) linear part; the row's failure must say that, not only which parameter
+/// the solver found unidentifiable.
+#[test]
+fn compare_says_why_a_terms_only_model_has_no_linear_oe() {
+    // The model's lower outflow 20 % low: MME has a model error to estimate.
+    let dir = scratch("tanks-compare");
+    torricelli_record(&dir, 0.048);
+    let summary = mmenn::compare::run_compare(
+        &[dir.join("data.csv")],
+        &dir.join("model.toml"),
+        &[],
+        &mmenn::compare::CompareOptions {
+            fit: mmenn::fit::FitOptions {
+                max_hidden: 2,
+                inits: 1,
+                ..mmenn::fit::FitOptions::default()
+            },
+            ..mmenn::compare::CompareOptions::default()
+        },
+        &dir.join("out"),
+    )
+    .unwrap();
+    let oe = summary
+        .failures
+        .iter()
+        .find(|f| f.model == "linear OE")
+        .unwrap_or_else(|| panic!("{:?}", summary.failures));
+    assert!(oe.reason.contains("A and B are zero"), "{}", oe.reason);
     let _ = std::fs::remove_dir_all(&dir);
 }
