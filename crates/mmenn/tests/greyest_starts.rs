@@ -451,3 +451,63 @@ term = "a*x + u"
         "{e:?}"
     );
 }
+
+/// `x' = −a·x + b·u + d`, `y = x`: the offset `d` starts at 0 and is unbounded.
+const OFFSET: &str = r#"
+states = ["x"]
+inputs = ["u"]
+measured = ["x"]
+corrected = ["x"]
+noise_variance = [1.0e-4]
+
+[parameters]
+a = { value = 0.5, bounds = [0.01, 10.0] }
+b = { value = 0.8, bounds = [0.0, 10.0] }
+d = { value = 0.0 }
+
+[[terms]]
+state = "x"
+effect = "decay_offset"
+term = "-a*x + b*u + d"
+"#;
+
+/// A parameter that starts at 0 with infinite bounds is explored at the scale of the file's
+/// own start's estimate (before, it stayed 0 in every seeded start). Record: 400 samples of
+/// `x' = −x + u + 0.3` from x(0) = 0.2, exact under a zero-order hold, N(0, 0.01²) noise.
+/// Every seeded start must draw `d` away from 0 with an RMS within a factor of 3 of `|d̂|`
+/// of start 0 (about 0.3; 8 draws), and the starts still end at one minimum.
+#[test]
+fn a_zero_start_parameter_is_drawn_at_its_estimates_scale() {
+    let dir = scratch("offset");
+    let model = write(&dir, "model.toml", OFFSET);
+    let mut rng = ChaCha8Rng::seed_from_u64(13);
+    let n = 400;
+    let u = steps(n, &mut rng);
+    let phi = (-DT).exp();
+    let gamma = 1.0 - phi;
+    let mut x = 0.2;
+    let mut y = Vec::with_capacity(n);
+    for &uk in &u {
+        let e: f64 = StandardNormal.sample(&mut rng);
+        y.push(x + 0.01 * e);
+        x = phi * x + gamma * (uk + 0.3);
+    }
+    let data = write(&dir, "offset.csv", &csv("x", &u, &y));
+    let single = greyest(&model, &data, &GreyestOptions::default(), &dir.join("one"));
+    let d0 = single.parameter("d").unwrap().value;
+    assert!((d0 - 0.3).abs() < 0.05, "d̂ = {d0}");
+    let multi = greyest(&model, &data, &starts(8, 1), &dir.join("multi"));
+    let ms = multi.summary.multi_start.as_ref().unwrap();
+    let j = ms.parameter_names.iter().position(|p| p == "d").unwrap();
+    let drawn: Vec<f64> = ms
+        .starts
+        .iter()
+        .filter(|s| s.index > 0)
+        .map(|s| s.start[j])
+        .collect();
+    assert_eq!(drawn.len(), 8);
+    assert!(drawn.iter().all(|v| *v != 0.0), "{drawn:?}");
+    let rms = (drawn.iter().map(|v| v * v).sum::<f64>() / drawn.len() as f64).sqrt();
+    assert!(rms > d0 / 3.0 && rms < 3.0 * d0, "RMS {rms} against d̂ {d0}");
+    assert_eq!(ms.minima.len(), 1, "{ms:#?}");
+}

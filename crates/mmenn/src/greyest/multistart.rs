@@ -8,8 +8,14 @@
 //! ones held by equal bounds, are left alone and consume no draw):
 //! - a non-zero start value `v` becomes `v·exp(0.7·z)`, `z ~ N(0, 1)` (a factor of 2 at one
 //!   standard deviation; the sign is kept);
-//! - a zero start value becomes uniform within its bounds when both are finite, and stays
-//!   0 otherwise (no draw);
+//! - a zero start value becomes uniform within its bounds when both are finite;
+//! - a zero start value with an infinite bound becomes `s·z` — `s·|z|` on the allowed side
+//!   when one bound is finite — where the scale `s` is the magnitude of the file's own
+//!   start's estimate of that parameter, or its σ when the estimate is 0, and it stays 0
+//!   (no draw) when neither is a positive finite number or that start failed. Start 0 runs
+//!   first for this; the seeded starts then run in parallel. (Before, such a parameter
+//!   always stayed 0: on the Cascaded Tanks model, whose level-dependent section terms and
+//!   pump offset start at 0, 24 starts missed a valley 64 found.);
 //! - a drawn value outside its bounds, or on one, is moved halfway between `v` and the
 //!   bound it reached (strictly inside); when `v` itself lies on that bound the start
 //!   keeps `v` (the estimator moves a start on a bound inside, as it does the file's own).
@@ -398,12 +404,46 @@ fn relative(cost: f64, best: f64) -> f64 {
     }
 }
 
-/// Every parameter value of seeded start `k` of `parameters` (module doc: the draw).
+/// Every parameter value of seeded start `k` of `parameters` (module doc: the draw),
+/// without scales for zero starts with an infinite bound (they stay 0).
 pub fn seeded_start(parameters: &[Parameter], seed: u64, k: usize) -> Vec<f64> {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(k as u64));
+    seeded_start_scaled(parameters, &[], seed, k)
+}
+
+/// The scale of each parameter's zero-start draw (module doc): the magnitude of `fit`'s
+/// estimate, else its σ, for a free parameter that starts at 0 with an infinite bound;
+/// `None` for every other parameter.
+pub fn zero_start_scales(
+    parameters: &[Parameter],
+    fit: &GreyboxFit<PhysicalModel>,
+) -> Vec<Option<f64>> {
     parameters
         .iter()
         .map(|p| {
+            let open = !(p.lower.is_finite() && p.upper.is_finite());
+            if p.estimation != Estimation::Free || p.value != 0.0 || !open {
+                return None;
+            }
+            let est = fit.parameters.iter().find(|e| e.name == p.name)?;
+            let usable = |v: f64| (v.is_finite() && v > 0.0).then_some(v);
+            usable(est.value.abs()).or_else(|| est.sigma.and_then(usable))
+        })
+        .collect()
+}
+
+/// [`seeded_start`] with the zero-start scales of [`zero_start_scales`] (`scales` empty or
+/// one per parameter).
+pub fn seeded_start_scaled(
+    parameters: &[Parameter],
+    scales: &[Option<f64>],
+    seed: u64,
+    k: usize,
+) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(k as u64));
+    parameters
+        .iter()
+        .enumerate()
+        .map(|(j, p)| {
             let v = p.value;
             // Equal bounds hold a free parameter at its value (a loaded model's bounds are
             // ordered around its value).
@@ -417,6 +457,15 @@ pub fn seeded_start(parameters: &[Parameter], seed: u64, k: usize) -> Vec<f64> {
                 // lo·(1 − u) + hi·u: no overflow of hi − lo.
                 let u: f64 = rng.random();
                 p.lower * (1.0 - u) + p.upper * u
+            } else if let Some(scale) = scales.get(j).copied().flatten() {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                if p.lower.is_finite() {
+                    scale * z.abs()
+                } else if p.upper.is_finite() {
+                    -scale * z.abs()
+                } else {
+                    scale * z
+                }
             } else {
                 return v;
             };
@@ -514,11 +563,11 @@ pub(crate) fn run(
     let total = starts.saturating_add(1);
     let done = AtomicUsize::new(0);
     let task = "grey-box estimation (multi-start)";
-    let one = |k: usize| -> Run {
+    let one = |k: usize, scales: &[Option<f64>]| -> Run {
         let values = if k == 0 {
             physical.parameters().iter().map(|p| p.value).collect()
         } else {
-            seeded_start(physical.parameters(), seed, k)
+            seeded_start_scaled(physical.parameters(), scales, seed, k)
         };
         let start: Vec<f64> = free.iter().map(|&j| values[j]).collect();
         let result = if k == 0 {
@@ -568,10 +617,19 @@ pub(crate) fn run(
     };
     // An indexed parallel iterator reduces neighbours in order: the rows come out in start
     // order and the kept start is the same for any number of threads.
-    let combined = (0..total)
-        .into_par_iter()
-        .map(|k| Combined::of(one(k)))
-        .reduce(Combined::default, Combined::then);
+    // The file's own start first: its estimate scales the draws of zero starts.
+    let own = one(0, &[]);
+    let scales = own
+        .fit
+        .as_ref()
+        .map(|f| zero_start_scales(physical.parameters(), f))
+        .unwrap_or_default();
+    let combined = Combined::of(own).then(
+        (1..total)
+            .into_par_iter()
+            .map(|k| Combined::of(one(k, &scales)))
+            .reduce(Combined::default, Combined::then),
+    );
     progress.finish(task);
     if let Some(e) = combined.budget {
         return Err(e);
@@ -733,6 +791,41 @@ mod tests {
         assert!(signs[0] > 50 && signs[1] > 50, "{signs:?}");
         assert_eq!(seeded_start(&ps, 7, 3), seeded_start(&ps, 8, 2));
         assert_ne!(seeded_start(&ps, 7, 3), seeded_start(&ps, 7, 4));
+    }
+
+    /// Zero starts with an infinite bound are drawn at their scale, on the allowed side of
+    /// a finite bound; without a scale they stay 0, and the other parameters' draws are
+    /// those of [`seeded_start`] when no scale is given.
+    #[test]
+    fn zero_starts_are_drawn_at_their_scale() {
+        let ps = [
+            parameter(0.0, f64::NEG_INFINITY, f64::INFINITY),
+            parameter(0.0, 0.0, f64::INFINITY),
+            parameter(0.0, f64::NEG_INFINITY, 0.0),
+            parameter(0.0, f64::NEG_INFINITY, f64::INFINITY),
+            parameter(2.0, 0.0, 10.0),
+        ];
+        let scales = [Some(0.1), Some(3.0), Some(1.0), None, None];
+        let (mut signs, mut sum_sq) = ([0usize; 2], 0.0);
+        let n = 2000;
+        for k in 1..=n {
+            let v = seeded_start_scaled(&ps, &scales, 11, k);
+            signs[usize::from(v[0] > 0.0)] += 1;
+            sum_sq += v[0] * v[0];
+            assert!(v[1] > 0.0, "{v:?}");
+            assert!(v[2] < 0.0, "{v:?}");
+            assert_eq!(v[3], 0.0);
+            assert!(v[4] > 0.0 && v[4] < 10.0, "{v:?}");
+        }
+        assert!(signs[0] > 900 && signs[1] > 900, "{signs:?}");
+        // The draw's RMS is its scale (0.1) within sampling error (about 1.6 %).
+        let rms = (sum_sq / n as f64).sqrt();
+        assert!((rms - 0.1).abs() < 0.008, "{rms}");
+        assert_eq!(
+            seeded_start_scaled(&ps, &[], 11, 5),
+            seeded_start(&ps, 11, 5)
+        );
+        assert_eq!(seeded_start(&ps, 11, 5)[..4], [0.0; 4]);
     }
 
     #[test]
