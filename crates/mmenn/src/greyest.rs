@@ -60,7 +60,8 @@ pub struct GreyestOptions {
     /// the file's start only. Start `k` (1..=`starts`) draws each free parameter from
     /// `ChaCha8Rng::seed_from_u64(seed + k)`: a non-zero start value `v` becomes
     /// `v·exp(0.7·z)`, `z ~ N(0, 1)`, sign kept; a zero one uniform within its bounds
-    /// when both are finite, else 0; a draw outside its bounds (or on one) moves halfway
+    /// when both are finite, else `s·z` on its allowed side with `s` the magnitude of the
+    /// file's own start's estimate of it (or its σ; 0 when neither is usable); a draw outside its bounds (or on one) moves halfway
     /// between `v` and that bound. Every start runs the same estimation; the lowest final
     /// free-run cost is kept (ties: the lower index, the file's own start being 0); a start
     /// that fails is listed with its error ([`multistart`]).

@@ -298,7 +298,7 @@ impl MultiStart {
             "{} starts: the model file's own (start 0) and {} seeded ones (start k draws \
              each free parameter from a ChaCha8 generator seeded with {} + k: a non-zero \
              start value times exp(0.7·z), z ~ N(0, 1); a zero one uniform within finite \
-             bounds). **Kept: start {}**, the lowest final free-run cost.\n\n",
+             bounds, else s·z with s the size of start 0's estimate of it). **Kept: start {}**, the lowest final free-run cost.\n\n",
             self.starts.len(),
             self.starts.len() - 1,
             self.seed,

@@ -482,10 +482,11 @@ pub(crate) struct GreyestArgs {
     pub(crate) max_iterations: usize,
     /// Seeded starts besides the model file's own, run in parallel; the lowest final cost
     /// is kept, and report.md lists every start, the distinct minima, and warns when
-    /// another minimum is nearly as good (within 1 %) with a parameter more than 10 %
-    /// different (the data do not pin it). Start k multiplies each non-zero free start
+    /// another minimum is nearly as good (within 1 %, or the likelihood-ratio bound when
+    /// wider) with a parameter more than 10 % different (the data do not pin it). Start k multiplies each non-zero free start
     /// value by exp(0.7 z), z ~ N(0, 1) (sign kept), and draws a zero one uniformly within
-    /// its bounds. Default 0: the model file's start only.
+    /// its bounds, or, with an infinite bound, as s·z with s the size of the model file's
+    /// own start's estimate of it. Default 0: the model file's start only.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub(crate) starts: usize,
     /// Seed of --starts: start k draws from a ChaCha8 generator seeded with SEED + k.
