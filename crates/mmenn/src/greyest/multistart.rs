@@ -35,6 +35,14 @@
 //! grouped in order of cost, each joining the first group whose lowest-cost member it
 //! matches.
 //!
+//! **Valleys.** Descents into one flat basin end at slightly different points, which the
+//! strict rule above lists as different minima. Minima are grouped, in order of cost, each
+//! joining the first valley whose *lowest* minimum it matches: its cost within
+//! [`near_cost`] of that minimum's and every free parameter within
+//! [`DIFFERENT_PARAMETER`] of it (relative to the larger magnitude). Matching is against
+//! the lowest member only, so a chain A ~ B ~ C with A ≁ C puts C in a valley of its own.
+//! Each valley lists its starts, its cost range and the largest parameter spread in it.
+//!
 //! **Not pinned.** A minimum other than the kept start's whose cost is within
 //! [`near_cost`] of the kept cost but where some free parameter differs from the kept
 //! estimate by more than [`DIFFERENT_PARAMETER`] (relative to the larger magnitude) is
@@ -204,6 +212,51 @@ impl NotPinned {
     }
 }
 
+/// A valley: distinct minima that are one basin in practice (module doc, "Valleys").
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ValleySummary {
+    /// Its minima (indices into `minima`), lowest cost first.
+    pub minima: Vec<usize>,
+    /// The starts that end in it.
+    pub starts: Vec<usize>,
+    /// Cost of its lowest minimum relative to the kept cost (`cost / best − 1`).
+    pub lowest_relative: f64,
+    /// Cost of its highest minimum relative to the kept cost.
+    pub highest_relative: f64,
+    /// The largest relative difference of a free parameter between a member and the
+    /// lowest minimum (`|a − b| / max(|a|, |b|)`).
+    pub spread: f64,
+    /// Whether the kept start ends in it.
+    pub kept: bool,
+}
+
+impl ValleySummary {
+    /// One line: its starts, cost range and parameter spread.
+    pub fn sentence(&self) -> String {
+        let starts: Vec<String> = self.starts.iter().map(usize::to_string).collect();
+        let cost = if self.minima.len() == 1 {
+            relative_words(Some(self.lowest_relative))
+        } else {
+            format!(
+                "{} to {}",
+                relative_words(Some(self.lowest_relative)),
+                relative_words(Some(self.highest_relative))
+            )
+        };
+        format!(
+            "valley{}: {} start{} ({}), {} minim{}, cost {cost}, parameters within {:.2} % \
+             of its lowest",
+            if self.kept { " (kept)" } else { "" },
+            self.starts.len(),
+            if self.starts.len() == 1 { "" } else { "s" },
+            starts.join(", "),
+            self.minima.len(),
+            if self.minima.len() == 1 { "um" } else { "a" },
+            100.0 * self.spread
+        )
+    }
+}
+
 /// The multi-start in `greyest.json` (absent without `--starts`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MultiStart {
@@ -217,6 +270,8 @@ pub struct MultiStart {
     pub starts: Vec<StartSummary>,
     /// The distinct minima of the converged starts, lowest cost first.
     pub minima: Vec<MinimumSummary>,
+    /// The minima grouped into valleys, lowest cost first.
+    pub valleys: Vec<ValleySummary>,
     /// How close to the kept cost (relative) another minimum counts as nearly as good
     /// ([`near_cost`]).
     pub near_cost: f64,
@@ -240,13 +295,15 @@ impl MultiStart {
     pub fn terminal_lines(&self) -> Vec<String> {
         let mut lines = vec![format!(
             "multi-start: {} starts (the model file's and {} seeded, seed {}); kept start {} \
-             (lowest cost); {} distinct minim{} among {} converged starts{}",
+             (lowest cost); {} distinct minim{} in {} valley{} among {} converged starts{}",
             self.starts.len(),
             self.starts.len() - 1,
             self.seed,
             self.kept,
             self.minima.len(),
             if self.minima.len() == 1 { "um" } else { "a" },
+            self.valleys.len(),
+            if self.valleys.len() == 1 { "" } else { "s" },
             self.converged(),
             match self.failed() {
                 0 => String::new(),
@@ -283,6 +340,9 @@ impl MultiStart {
                     e.as_deref().unwrap_or("no estimate")
                 ),
             });
+        }
+        for v in &self.valleys {
+            lines.push(format!("  {}", v.sentence()));
         }
         for w in &self.not_pinned {
             lines.push(format!("warning: {}", w.sentence()));
@@ -362,6 +422,17 @@ impl MultiStart {
                 if m.kept { ", the kept estimate" } else { "" },
                 values.join(", ")
             ));
+        }
+        md.push_str(&format!(
+            "\nIn {} valley{} (minima within {:.2} % in cost of a valley's lowest and every \
+             free parameter within {} % of it):\n\n",
+            self.valleys.len(),
+            if self.valleys.len() == 1 { "" } else { "s" },
+            100.0 * self.near_cost,
+            100.0 * DIFFERENT_PARAMETER
+        ));
+        for v in &self.valleys {
+            md.push_str(&format!("- {}\n", v.sentence()));
         }
         if self.not_pinned.is_empty() {
             md.push_str(&format!(
@@ -619,6 +690,11 @@ pub(crate) fn run(
     // order and the kept start is the same for any number of threads.
     // The file's own start first: its estimate scales the draws of zero starts.
     let own = one(0, &[]);
+    if let Some(e @ CoreError::BudgetExhausted(_)) = own.error {
+        // A spent budget ends the whole job; the seeded starts would only fail on it.
+        progress.finish(task);
+        return Err(e);
+    }
     let scales = own
         .fit
         .as_ref()
@@ -658,6 +734,7 @@ pub(crate) fn run(
         .stages
         .last()
         .map_or(NEAR_COST, |st| near_cost(st.residuals, st.estimated));
+    let valleys = valleys(&minima, near);
     let not_pinned = minima
         .iter()
         .enumerate()
@@ -690,10 +767,60 @@ pub(crate) fn run(
             kept,
             starts: rows,
             minima,
+            valleys,
             near_cost: near,
             not_pinned,
         },
     ))
+}
+
+/// `minima` (sorted by cost) grouped into valleys (module doc, "Valleys").
+pub fn valleys(minima: &[MinimumSummary], near: f64) -> Vec<ValleySummary> {
+    let mut out: Vec<ValleySummary> = Vec::new();
+    for (i, m) in minima.iter().enumerate() {
+        let joins = out.iter().position(|v| {
+            let low = &minima[v.minima[0]];
+            relative(m.cost, low.cost) <= near
+                && m.values.len() == low.values.len()
+                && m.values
+                    .iter()
+                    .zip(&low.values)
+                    .all(|(a, b)| agree(*a, *b, DIFFERENT_PARAMETER))
+        });
+        match joins {
+            Some(j) => {
+                let v = &mut out[j];
+                let low = &minima[v.minima[0]];
+                let spread = m
+                    .values
+                    .iter()
+                    .zip(&low.values)
+                    .map(|(a, b)| {
+                        let scale = a.abs().max(b.abs());
+                        if scale > 0.0 {
+                            (a - b).abs() / scale
+                        } else {
+                            0.0
+                        }
+                    })
+                    .fold(v.spread, f64::max);
+                v.minima.push(i);
+                v.starts.extend(&m.starts);
+                v.highest_relative = v.highest_relative.max(m.relative_to_best);
+                v.spread = spread;
+                v.kept |= m.kept;
+            }
+            None => out.push(ValleySummary {
+                minima: vec![i],
+                starts: m.starts.clone(),
+                lowest_relative: m.relative_to_best,
+                highest_relative: m.relative_to_best,
+                spread: 0.0,
+                kept: m.kept,
+            }),
+        }
+    }
+    out
 }
 
 /// The distinct minima of the converged rows (sorted by cost), each row's `minimum` set.
@@ -826,6 +953,45 @@ mod tests {
             seeded_start(&ps, 11, 5)
         );
         assert_eq!(seeded_start(&ps, 11, 5)[..4], [0.0; 4]);
+    }
+
+    fn minimum(cost: f64, best: f64, values: Vec<f64>, start: usize) -> MinimumSummary {
+        MinimumSummary {
+            starts: vec![start],
+            cost,
+            relative_to_best: cost / best - 1.0,
+            values,
+            kept: start == 0,
+        }
+    }
+
+    /// Hand-made minima (sorted by cost): B is within 10 % of A, C within 10 % of B but
+    /// not of A (the chain: C gets its own valley), D is A's values at a cost beyond the
+    /// near bound (its own valley), E is C's twin.
+    #[test]
+    fn minima_are_grouped_into_valleys_against_each_valleys_lowest() {
+        let ms = [
+            minimum(100.0, 100.0, vec![1.0, 10.0], 0),
+            minimum(100.5, 100.0, vec![1.08, 10.0], 1),
+            minimum(100.6, 100.0, vec![1.16, 10.0], 2),
+            minimum(100.7, 100.0, vec![1.17, 10.1], 4),
+            minimum(105.0, 100.0, vec![1.0, 10.0], 3),
+        ];
+        let v = valleys(&ms, 0.02);
+        assert_eq!(v.len(), 3, "{v:#?}");
+        assert_eq!(v[0].minima, vec![0, 1]);
+        assert_eq!(v[0].starts, vec![0, 1]);
+        assert!(v[0].kept && !v[1].kept);
+        assert!((v[0].spread - 0.08 / 1.08).abs() < 1e-12, "{}", v[0].spread);
+        assert!((v[0].highest_relative - 0.005).abs() < 1e-12);
+        assert_eq!(v[1].minima, vec![2, 3]);
+        assert!((v[1].lowest_relative - 0.006).abs() < 1e-12);
+        assert_eq!(v[2].minima, vec![4]);
+        assert!(
+            v[2].sentence().contains("1 start (3), 1 minimum"),
+            "{}",
+            v[2].sentence()
+        );
     }
 
     #[test]
