@@ -247,10 +247,8 @@ fn nonlinear_path_applies_the_prior_like_the_linear_path() {
 
 // ---- Two cascaded tanks, only the lower level measured ----
 
-const K1: f64 = 0.0399;
-const K4: f64 = 0.0409;
-const K2: f64 = 0.0728;
-const K3: f64 = 0.0897;
+use super::start::{K1, K2, K3, K4, model_with as tank_model_with};
+
 const TS: f64 = 4.0;
 const TANK_LEN: usize = 250;
 const SIGMA: f64 = 0.02;
@@ -286,41 +284,6 @@ fn tank_truth(u: &[f64]) -> (Vec<f64>, Vec<f64>) {
 
 fn tank_model() -> NonlinearModel<TermModel> {
     tank_model_with(K2)
-}
-
-/// The cascade with transfer coefficient `k2` (the truth's is [`K2`]).
-fn tank_model_with(k2: f64) -> NonlinearModel<TermModel> {
-    let names = ModelNames {
-        states: vec!["h1".into(), "h2".into()],
-        inputs: vec!["u".into()],
-        outputs: vec!["y".into()],
-        corrections: vec!["h1".into(), "h2".into()],
-    };
-    let lin = LinearModel::with_names(
-        DMatrix::zeros(2, 2),
-        DMatrix::zeros(2, 1),
-        DMatrix::from_row_slice(1, 2, &[0.0, 1.0]),
-        DMatrix::identity(2, 2),
-        names.clone(),
-    )
-    .unwrap();
-    let terms = TermModel::from_specs(
-        lin,
-        [
-            ("h1", "orifice_outflow", "sqrt(abs(h1))", -K1),
-            ("h1", "pump", "u", K4),
-            ("h2", "orifice_inflow", "sqrt(abs(h1))", k2),
-            ("h2", "orifice_outflow", "sqrt(abs(h2))", -K3),
-        ],
-    )
-    .unwrap();
-    NonlinearModel::new(
-        terms,
-        DMatrix::from_row_slice(1, 2, &[0.0, 1.0]),
-        DMatrix::identity(2, 2),
-        names,
-    )
-    .unwrap()
 }
 
 /// The assumed model's transfer coefficient is 20 % low (the model error MME is for) and

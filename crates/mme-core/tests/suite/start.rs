@@ -15,10 +15,10 @@ use super::common::{dataset, gaussian};
 
 /// Outflow coefficients of the upper tank, inflow gain, transfer to and outflow of the
 /// lower tank (V^½/s, 1/s), about the values fitted to the Cascaded Tanks benchmark.
-const K1: f64 = 0.0399;
-const K4: f64 = 0.0409;
-const K2: f64 = 0.0728;
-const K3: f64 = 0.0897;
+pub(super) const K1: f64 = 0.0399;
+pub(super) const K4: f64 = 0.0409;
+pub(super) const K2: f64 = 0.0728;
+pub(super) const K3: f64 = 0.0897;
 /// Sample period, s (as the benchmark).
 const TS: f64 = 4.0;
 /// Samples.
@@ -58,6 +58,11 @@ fn truth(u: &[f64]) -> (Vec<f64>, Vec<f64>) {
 /// The assumed model (the truth's structure and coefficients), as `mmenn` builds it from
 /// a model file: zero linear part, `√|h|` terms, `y = h2`, corrections on both levels.
 fn model() -> NonlinearModel<TermModel> {
+    model_with(K2)
+}
+
+/// [`model`] with the transfer coefficient `k2` (the truth's is [`K2`]).
+pub(super) fn model_with(k2: f64) -> NonlinearModel<TermModel> {
     let names = ModelNames {
         states: vec!["h1".into(), "h2".into()],
         inputs: vec!["u".into()],
@@ -77,7 +82,7 @@ fn model() -> NonlinearModel<TermModel> {
         [
             ("h1", "orifice_outflow", "sqrt(abs(h1))", -K1),
             ("h1", "pump", "u", K4),
-            ("h2", "orifice_inflow", "sqrt(abs(h1))", K2),
+            ("h2", "orifice_inflow", "sqrt(abs(h1))", k2),
             ("h2", "orifice_outflow", "sqrt(abs(h2))", -K3),
         ],
     )
