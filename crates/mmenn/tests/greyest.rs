@@ -66,6 +66,28 @@ fn perturbed(masses_free: bool) -> String {
     text
 }
 
+/// `mmenn --quiet greyest --model MODEL --data DATA… EXTRA… --out OUT`; its stdout, after
+/// asserting that it succeeded.
+fn cli_greyest(model: &Path, data: &[PathBuf], extra: &[&str], out: &Path) -> String {
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
+        .args(["--quiet", "greyest", "--model"])
+        .arg(model)
+        .arg("--data")
+        .args(data)
+        .args(extra)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap_or_else(|e| panic!("{e}"));
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+    assert!(
+        run.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    stdout
+}
+
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap_or_else(|e| panic!("{e}"));
@@ -386,21 +408,11 @@ fn cli_calibrates_two_records_by_multiple_shooting_then_free_run() {
     let dir = scratch("cli");
     let model = write(&dir, "start.toml", &perturbed(false));
     let out = dir.join("out");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
-        .args(["--quiet", "greyest", "--model"])
-        .arg(&model)
-        .arg("--data")
-        .arg(fixture("est.csv"))
-        .arg(fixture("val.csv"))
-        .args(["--shooting", "500", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap_or_else(|e| panic!("{e}"));
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&run.stderr)
+    let stdout = cli_greyest(
+        &model,
+        &[fixture("est.csv"), fixture("val.csv")],
+        &["--shooting", "500"],
+        &out,
     );
     assert!(stdout.contains("free-run fit on"), "{stdout}");
     let json: serde_json::Value = serde_json::from_str(
@@ -451,21 +463,7 @@ fn cli_names_a_mapped_record_by_the_file_given() {
     assert_ne!(renamed, header, "the fixture has a theta1 column");
     let data = write(&dir, "renamed.csv", &format!("{renamed}\n{rows}"));
     let out = dir.join("out");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
-        .args(["--quiet", "greyest", "--model"])
-        .arg(&model)
-        .arg("--data")
-        .arg(&data)
-        .args(["--map", "theta1=enc1", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap_or_else(|e| panic!("{e}"));
-    let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let stdout = cli_greyest(&model, &[data], &["--map", "theta1=enc1"], &out);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap_or_default();
     let json = std::fs::read_to_string(out.join("greyest.json")).unwrap_or_default();
     for (what, text) in [

@@ -78,20 +78,25 @@ term = "-p^2*x + b*u"
 /// 400 samples of `x' = −x + u` (p² = 1, b = 1) from x(0) = 0.3, exact under a
 /// zero-order hold, with N(0, 0.01²) noise.
 fn square_record(dir: &Path) -> PathBuf {
-    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    first_order_record(dir, "square.csv", 11, 0.3, 0.0)
+}
+
+/// 400 samples of `x' = −x + u + d` from `x(0) = x0`, exact under a zero-order hold, with
+/// N(0, 0.01²) noise seeded by `seed`, written to `file` in `dir`.
+fn first_order_record(dir: &Path, file: &str, seed: u64, x0: f64, d: f64) -> PathBuf {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let n = 400;
     let u = steps(n, &mut rng);
-    let (a, b) = (1.0f64, 1.0);
-    let phi = (-a * DT).exp();
-    let gamma = b * (1.0 - phi) / a;
-    let mut x = 0.3;
+    let phi = (-DT).exp();
+    let gamma = 1.0 - phi;
+    let mut x = x0;
     let mut y = Vec::with_capacity(n);
     for &uk in &u {
         let e: f64 = StandardNormal.sample(&mut rng);
         y.push(x + 0.01 * e);
-        x = phi * x + gamma * uk;
+        x = phi * x + gamma * (uk + d);
     }
-    write(dir, "square.csv", &csv("x", &u, &y))
+    write(dir, file, &csv("x", &u, &y))
 }
 
 /// A damped oscillator `x'' = −k·x − c·v + u`, position measured; started at k = 3,
@@ -480,19 +485,7 @@ term = "-a*x + b*u + d"
 fn a_zero_start_parameter_is_drawn_at_its_estimates_scale() {
     let dir = scratch("offset");
     let model = write(&dir, "model.toml", OFFSET);
-    let mut rng = ChaCha8Rng::seed_from_u64(13);
-    let n = 400;
-    let u = steps(n, &mut rng);
-    let phi = (-DT).exp();
-    let gamma = 1.0 - phi;
-    let mut x = 0.2;
-    let mut y = Vec::with_capacity(n);
-    for &uk in &u {
-        let e: f64 = StandardNormal.sample(&mut rng);
-        y.push(x + 0.01 * e);
-        x = phi * x + gamma * (uk + 0.3);
-    }
-    let data = write(&dir, "offset.csv", &csv("x", &u, &y));
+    let data = first_order_record(&dir, "offset.csv", 13, 0.2, 0.3);
     let single = greyest(&model, &data, &GreyestOptions::default(), &dir.join("one"));
     let d0 = single.parameter("d").unwrap().value;
     assert!((d0 - 0.3).abs() < 0.05, "d̂ = {d0}");

@@ -465,6 +465,16 @@ fn agree(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol * a.abs().max(b.abs())
 }
 
+/// `|a − b| / max(|a|, |b|)` (0 when both are 0): the distance [`agree`] bounds.
+fn difference(a: f64, b: f64) -> f64 {
+    let scale = a.abs().max(b.abs());
+    if scale > 0.0 {
+        (a - b).abs() / scale
+    } else {
+        0.0
+    }
+}
+
 fn relative(cost: f64, best: f64) -> f64 {
     if best > 0.0 {
         cost / best - 1.0
@@ -795,14 +805,7 @@ pub fn valleys(minima: &[MinimumSummary], near: f64) -> Vec<ValleySummary> {
                     .values
                     .iter()
                     .zip(&low.values)
-                    .map(|(a, b)| {
-                        let scale = a.abs().max(b.abs());
-                        if scale > 0.0 {
-                            (a - b).abs() / scale
-                        } else {
-                            0.0
-                        }
-                    })
+                    .map(|(a, b)| difference(*a, *b))
                     .fold(v.spread, f64::max);
                 v.minima.push(i);
                 v.starts.extend(&m.starts);
