@@ -68,7 +68,7 @@ fn perturbed(masses_free: bool) -> String {
 
 /// `mmenn --quiet greyest --model MODEL --data DATA… EXTRA… --out OUT`; its stdout, after
 /// asserting that it succeeded.
-fn cli_greyest(model: &Path, data: &[PathBuf], extra: &[&str], out: &Path) -> String {
+pub(crate) fn cli_greyest(model: &Path, data: &[PathBuf], extra: &[&str], out: &Path) -> String {
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
         .args(["--quiet", "greyest", "--model"])
         .arg(model)

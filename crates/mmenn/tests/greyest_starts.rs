@@ -247,23 +247,7 @@ fn cli_prints_the_starts_and_the_warning() {
     let model = write(&dir, "model.toml", SQUARE);
     let data = square_record(&dir);
     let run = |extra: &[&str], out: &str| {
-        let run = std::process::Command::new(env!("CARGO_BIN_EXE_mmenn"))
-            .args(["--quiet", "greyest", "--model"])
-            .arg(&model)
-            .arg("--data")
-            .arg(&data)
-            .args(extra)
-            .arg("--out")
-            .arg(dir.join(out))
-            .output()
-            .unwrap_or_else(|e| panic!("{e}"));
-        let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
-        assert!(
-            run.status.success(),
-            "{stdout}\n{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-        stdout
+        super::greyest::cli_greyest(&model, std::slice::from_ref(&data), extra, &dir.join(out))
     };
     let multi = run(&["--starts", "6", "--seed", "1"], "multi");
     assert!(multi.contains("multi-start: 7 starts"), "{multi}");
