@@ -40,7 +40,9 @@ use sysid_core::{
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
-use crate::fit::{FitOptions, FitOutcome, HybridModel, compute_fit, judge_outputs, write_fit};
+use crate::fit::{
+    FitOptions, FitOutcome, HybridModel, ValidationUse, compute_fit, judge_outputs, write_fit,
+};
 use crate::model::{LoadedModel, ModelKind, evaluation, judge_free_run};
 use crate::model_file::ModelSpec;
 use crate::plot::{Figure, Panels, Series};
@@ -192,6 +194,9 @@ pub struct CompareSummary {
     pub residual_failures: Vec<Failure>,
     /// Files written.
     pub files: Vec<String>,
+    /// What the validation records were for (`None` without them): every row is judged
+    /// on them, and under [`ValidationUse::Select`] the MME/NN also chose on them.
+    pub validation_use: Option<ValidationUse>,
 }
 
 /// Whether `A` and `B` are zero in every row the default linear OE fits (the corrected
@@ -931,6 +936,7 @@ pub fn compute_compare_with_progress(
         residuals,
         residual_failures,
         files,
+        validation_use: val.is_some().then_some(opts.fit.validation_use),
     };
     Ok(CompareOutcome {
         summary,
@@ -1015,6 +1021,17 @@ fn compare_report(s: &CompareSummary) -> String {
     if let Some(v) = &s.validation {
         r.push('\n');
         r.push_str(&table_md(v, &s.failures));
+        r.push_str(match s.validation_use {
+            Some(ValidationUse::Select) => {
+                "\nThe MME/NN made its choices on the validation records (`--val-use \
+                 select`: the sweep's test set, early stopping, the guard); the baselines did \
+                 not, so its row there is favoured.\n"
+            }
+            _ => {
+                "\nEvery model was fitted and chosen on the estimation records; the \
+                 validation records were only judged (`--val-use score`).\n"
+            }
+        });
     }
     if !s.failures.is_empty() {
         r.push_str("\n## Models without numbers\n\n");

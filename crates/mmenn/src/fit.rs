@@ -8,15 +8,18 @@
 //!
 //! The hybrid is never kept when it is worse than the physics it starts from: the guard
 //! ([`GuardReport`]) runs the assumed model alone, the network before trajectory training
-//! and after it free on held-out data (the validation record, else the last fifth of the
-//! first training record) and keeps the best; the report says which and why, and whether
-//! the trajectory training hurt. Under [`DomainPolicy::Checked`] (the command line's
+//! and after it free on held-out training data (the last fifth of the first training
+//! record, or K folds) and keeps the best; the report says which and why, and whether
+//! the trajectory training hurt. Validation records are only judged, unless they are
+//! given for choosing too ([`ValidationUse::Select`], the thesis's use: then the guard
+//! judges on the first of them, the sweep tests on them and the trajectory training stops
+//! early on them, and their fit is optimistic). Under [`DomainPolicy::Checked`] (the command line's
 //! default) each network candidate first meets an amplitude stress check and holds its
 //! edge value outside its training box when it fails ([`DomainCheck`]).
 //!
 //! Nor is a hybrid built on an MME estimate that did not converge, unless asked for: every
 //! estimate [`compute_fit`] runs (on the training records, again after the regression
-//! update, on the validation records, and the K-fold guard's on each fold) is checked as
+//! update, on the validation records when they choose, and the K-fold guard's on each fold) is checked as
 //! soon as it ends, and one that ended anything but `exact` or `converged` — or a `W`
 //! search `not_bracketed` below 1 within the sampling band of a correct model
 //! ([`MmeConvergence::converged`], docs/decisions/mme-ratio-tolerance.md) — makes it return
@@ -50,7 +53,7 @@ pub use crate::predict::{
 };
 pub use choices::{
     DomainPolicy, HiddenChoice, ModelUpdateChoice, NetworkEnsemble, NetworkInputs,
-    NetworkSelection, Training,
+    NetworkSelection, Training, ValidationUse,
 };
 pub use convergence::{
     FoldEstimate, MmeConvergence, MmeStage, SAMPLING_BAND_Z, UnconvergedMme, sampling_band,
@@ -105,8 +108,8 @@ pub struct FitOptions {
     /// One network or the average of the equally good ones. Default
     /// [`NetworkEnsemble::Single`].
     pub ensemble: NetworkEnsemble,
-    /// Where the guard judges physics alone, the network and the refined network when no
-    /// validation data is given. Default [`GuardHeldOut::LastFifth`].
+    /// Where the guard judges physics alone, the network and the refined network unless
+    /// validation data choose ([`ValidationUse::Select`]). Default [`GuardHeldOut::LastFifth`].
     pub guard: GuardHeldOut,
     /// What the network does outside the box its training pairs spanned, or how the
     /// guard decides it per candidate. Default [`DomainPolicy::Extrapolate`] (the thesis
@@ -127,6 +130,9 @@ pub struct FitOptions {
     /// [`MmennError::MmeNotConverged`] before training any network. The command line uses
     /// [`UnconvergedMme::Warn`] (and exits with status 3 after writing the results).
     pub on_unconverged_mme: UnconvergedMme,
+    /// What validation records are for: scoring only (the default) or also the fit's
+    /// choices ([`ValidationUse`]; `--val-use` on the command line).
+    pub validation_use: ValidationUse,
 }
 
 /// Index of the network whose hybrid model simulates the training record best free-run,
@@ -196,6 +202,7 @@ impl Default for FitOptions {
             network_domain: DomainPolicy::Extrapolate,
             network_inputs: NetworkInputs::StatesAndInputs,
             on_unconverged_mme: UnconvergedMme::Refuse,
+            validation_use: ValidationUse::Score,
         }
     }
 }
@@ -343,7 +350,7 @@ pub struct FitSummary {
     pub mme_termination: Option<sysid_core::Termination>,
     /// How every MME estimate the fit ran ended, in order: the training estimate, the
     /// re-estimate after the regression update (when asked for), the validation estimate
-    /// (when validation data is given), then each of the K-fold guard's estimates that did
+    /// (when validation data choose, [`ValidationUse::Select`]), then each of the K-fold guard's estimates that did
     /// not converge (its fold's [`FoldScores::unconverged_mme`]). Any that did not converge
     /// ([`MmeConvergence::converged`]) makes `mmenn fit` exit with status 3, and is only
     /// here under [`UnconvergedMme::Warn`] (otherwise [`compute_fit`] refuses).
@@ -372,6 +379,9 @@ pub struct FitSummary {
     pub network_inputs: NetworkInputs,
     /// Files written.
     pub files: Vec<String>,
+    /// What the validation records were for (`None` without them): only judged, or also
+    /// chosen on (then their fit is optimistic).
+    pub validation_use: Option<ValidationUse>,
 }
 
 impl FitSummary {
@@ -387,6 +397,22 @@ impl FitSummary {
             .iter()
             .filter(|m| !m.converged())
             .collect()
+    }
+
+    /// What the validation records were for, in one sentence (`None` without them).
+    pub fn validation_use_line(&self) -> Option<&'static str> {
+        self.validation_use.map(|u| match u {
+            ValidationUse::Score => {
+                "The validation records were scored only: every choice of the fit was made \
+                 on the training records (`--val-use score`), so their fit is an independent \
+                 number."
+            }
+            ValidationUse::Select => {
+                "The validation records also chose the model (`--val-use select`: the \
+                 sweep's test set, trajectory training's early stopping and the guard), so \
+                 their fit is optimistic; judge the model on a further record with `predict`."
+            }
+        })
     }
 }
 
@@ -536,6 +562,13 @@ pub fn compute_fit(
         None => (recorded.clone(), recorded_val.clone()),
     };
     let data = &data;
+    // The validation records the fit chooses on: none unless they are given for
+    // choosing too (`ValidationUse::Select`); otherwise every choice is made on the
+    // training records as without them, and they are only judged at the end.
+    let select_val = match opts.validation_use {
+        ValidationUse::Select => val.as_ref(),
+        ValidationUse::Score => None,
+    };
     let config = mme_config(&spec, &opts.estimate);
     // Every estimate is checked as it ends: a refused one costs no network training.
     let mut mme_estimates = Vec::new();
@@ -573,7 +606,7 @@ pub fn compute_fit(
 
     // The sweep's test set: MME on the validation data at the training W and noise, or the
     // last 20 % of the training pairs when there is no validation data.
-    let (fit_pairs, test_pairs, test_source, val_est) = match &val {
+    let (fit_pairs, test_pairs, test_source, val_est) = match select_val {
         Some(v) => {
             let mut vconf = config.clone();
             vconf.w = mme_core::WeightSpec::Matrix(est.w.clone());
@@ -590,16 +623,21 @@ pub fn compute_fit(
         }
         None => {
             let (fit, test) = split_last_fifth(&x_train, &d_train);
+            let why = if val.is_some() {
+                "validation data scored only"
+            } else {
+                "no validation data given"
+            };
             (
                 fit,
                 test,
-                "last 20 % of the training pairs (no validation data given)".to_string(),
+                format!("last 20 % of the training pairs ({why})"),
                 None,
             )
         }
     };
     let x0 = first_state(est);
-    let val_pair = val_est.as_ref().zip(val.as_ref());
+    let val_pair = val_est.as_ref().zip(select_val);
     let whole = TrainingSet {
         fit: fit_pairs,
         test: test_pairs,
@@ -635,7 +673,7 @@ pub fn compute_fit(
     // The held-out data (the validation record, else the last fifth of the first training
     // record): the last-fifth guard judges on them, and under `DomainPolicy::Checked` the
     // stress check scales their input (the K-fold guard's too).
-    let held = guard::held_out(data, val.as_ref(), est, &x0, opts)?;
+    let held = guard::held_out(data, select_val, est, &x0, opts)?;
     let (candidates, domain_check) = guard::check_domains(
         &spec,
         candidates,
@@ -644,7 +682,7 @@ pub fn compute_fit(
         opts.substeps,
         opts.network_domain,
     )?;
-    let (guard_report, network, kept_domain) = match (opts.guard, &val) {
+    let (guard_report, network, kept_domain) = match (opts.guard, select_val) {
         (kind @ (GuardHeldOut::Folds(_) | GuardHeldOut::LastFifthRetrained), None) => {
             folds::choose_by_folds(
                 &spec,
@@ -741,6 +779,7 @@ pub fn compute_fit(
         network_domain: kept_domain,
         network_inputs: opts.network_inputs,
         files: fit_files(&spec, val.is_some(), opts.network_inputs),
+        validation_use: val.is_some().then_some(opts.validation_use),
     };
     Ok(FitOutcome {
         summary,

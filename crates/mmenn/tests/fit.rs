@@ -166,6 +166,11 @@ fn noisy_single_pendulum_predicts_the_truth_better_than_the_noise() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The thesis's protocol (§4.5): its validation record chooses the network
+/// (`ValidationUse::Select`) and is the record predicted, so these R² are optimistic. With
+/// the validation record scored only (the default since `ValidationUse` exists) the 10-Hz
+/// h2 fell to 0.943 (the one rate measured that way before this doc was written);
+/// `cargo xtask reproduce`'s sample-rate table fits without validation data.
 #[test]
 fn two_tank_at_every_thesis_sample_rate() {
     for fs in [10.0, 5.0, 1.0, 0.5] {
@@ -182,7 +187,10 @@ fn two_tank_at_every_thesis_sample_rate() {
             std::slice::from_ref(&train.data),
             &train.model,
             std::slice::from_ref(&test.data),
-            &quick(ModelUpdateChoice::None),
+            &FitOptions {
+                validation_use: mmenn::fit::ValidationUse::Select,
+                ..quick(ModelUpdateChoice::None)
+            },
             &dir.join("fit"),
         )
         .unwrap();
@@ -702,5 +710,83 @@ fn band_limited_model_file_is_read_shown_and_predicted() {
     assert!(shown.contains("band-limited"), "{shown}");
     let (_, foh) = run(InterSample::Foh);
     assert!(bl.is_finite() && 5.0 * bl < foh, "bl {bl} vs foh {foh}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `--val-use score` (the default): the validation records are only judged. The model a
+/// fit writes is byte-for-byte the one it writes without validation data, whichever
+/// record is given, and its training numbers are the same; `--val-use select` makes its
+/// choices on them, and its model differs (which shows the comparison can tell).
+#[test]
+fn validation_records_scored_only_do_not_change_the_model() {
+    use mmenn::fit::ValidationUse;
+    let dir = scratch("val-use");
+    let train = sim(&dir.join("train"), "msd_cubic", Recipe::Train, None, None);
+    let test = sim(&dir.join("test"), "msd_cubic", Recipe::Test, None, None);
+    let other = run_simulate(
+        &SimulationRequest {
+            system: "msd_cubic".into(),
+            recipe: Recipe::Test,
+            seed: 9,
+            ..Default::default()
+        },
+        &dir.join("other"),
+    )
+    .unwrap();
+    let fit = |val: &[PathBuf], use_: ValidationUse, name: &str| {
+        let out = dir.join(name);
+        let opts = FitOptions {
+            max_hidden: 3,
+            inits: 2,
+            validation_use: use_,
+            ..FitOptions::default()
+        };
+        let s = run_fit(
+            std::slice::from_ref(&train.data),
+            &train.model,
+            val,
+            &opts,
+            &out,
+        )
+        .unwrap();
+        (s, std::fs::read(out.join("model.json")).unwrap())
+    };
+    let (none, model_none) = fit(&[], ValidationUse::Score, "none");
+    assert_eq!(none.validation_use, None);
+    for (val, name) in [(&test.data, "score-test"), (&other.data, "score-other")] {
+        let (s, model) = fit(std::slice::from_ref(val), ValidationUse::Score, name);
+        assert!(model == model_none, "{name}: the model depends on --val");
+        assert_eq!(s.train, none.train, "{name}");
+        assert_eq!(s.guard.held_out, none.guard.held_out, "{name}");
+        assert_eq!(s.validation_use, Some(ValidationUse::Score));
+        assert!(
+            s.validation.is_some(),
+            "{name}: the validation record is still judged"
+        );
+        assert!(
+            s.test_source.contains("validation data scored only"),
+            "{}",
+            s.test_source
+        );
+    }
+    let (sel, model_sel) = fit(
+        std::slice::from_ref(&test.data),
+        ValidationUse::Select,
+        "select",
+    );
+    assert!(
+        model_sel != model_none,
+        "select: the validation record chose nothing"
+    );
+    assert!(
+        sel.guard.held_out.contains("validation"),
+        "{}",
+        sel.guard.held_out
+    );
+    assert!(
+        sel.test_source.contains("validation"),
+        "{}",
+        sel.test_source
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -178,11 +178,15 @@ fn the_warn_policy_builds_the_hybrid_and_says_mme_did_not_converge() {
 #[test]
 fn a_converged_estimate_gives_no_warning() {
     let data = record();
-    // Validation data too: its estimate is checked and recorded as well.
-    let opts = options(
-        IterationOptions::default().max_iterations,
-        UnconvergedMme::Refuse,
-    );
+    // Validation data that choose too (`ValidationUse::Select`, so MME runs on them):
+    // their estimate is checked and recorded as well.
+    let opts = FitOptions {
+        validation_use: mmenn::fit::ValidationUse::Select,
+        ..options(
+            IterationOptions::default().max_iterations,
+            UnconvergedMme::Refuse,
+        )
+    };
     let outcome = compute_fit(
         &data,
         &spec(),

@@ -214,3 +214,40 @@ impl From<nn::Domain> for DomainPolicy {
         }
     }
 }
+
+/// What the validation records (`--val`) are for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ValidationUse {
+    /// Scoring only (the default, as a validation set is in MATLAB's `compare`): every
+    /// choice of the fit (the sweep's test set, trajectory training's early stopping, the
+    /// guard) is made on the training records as without validation data, and the
+    /// validation fit is an independent number.
+    #[default]
+    Score,
+    /// Also for choosing: the sweep's test set is MME on the validation records, the
+    /// trajectory training stops early on them and the guard judges its candidates on
+    /// the first of them (the thesis's use of its validation data). The validation fit
+    /// is then the score of the chosen model on the data it was chosen on: optimistic.
+    Select,
+}
+
+impl std::str::FromStr for ValidationUse {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "score" => Ok(Self::Score),
+            "select" => Ok(Self::Select),
+            _ => Err(format!("'{s}' is neither \"score\" nor \"select\"")),
+        }
+    }
+}
+
+impl std::fmt::Display for ValidationUse {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Score => "score",
+            Self::Select => "select",
+        })
+    }
+}

@@ -355,6 +355,9 @@ fn fit_report(s: &FitSummary) -> String {
             "\n## Validation data — {}, {} scored\n\nInitial state: {}.\n\n",
             v.horizon, v.scored, v.x0_source
         ));
+        if let Some(line) = s.validation_use_line() {
+            r.push_str(&format!("{line}\n\n"));
+        }
         r.push_str(&metrics_table(v));
     }
     if let Some(refine) = &s.refinement {

@@ -167,11 +167,16 @@ pub(crate) struct CompareArgs {
     /// Model file (TOML).
     #[arg(long)]
     pub(crate) model: PathBuf,
-    /// Validation data file(s): every row is judged on them. The MME/NN also makes its
-    /// choices on them (as `fit --val` does); the baselines do not, so its row there is
-    /// favoured. Judge on a further record with `predict` for an independent number.
+    /// Validation data file(s): every row is judged on them, and by default no row is
+    /// chosen on them (see --val-use).
     #[arg(long, num_args = 1..)]
     pub(crate) val: Vec<PathBuf>,
+    /// What --val is for (as `fit --val-use`): score (the default: every model is chosen
+    /// on the estimation data, the validation fit is independent) or select (the MME/NN
+    /// also makes its choices on them, as the thesis did; the baselines do not, so its row
+    /// there is favoured).
+    #[arg(long, value_name = "USE", default_value = "score")]
+    pub(crate) val_use: mmenn::fit::ValidationUse,
     /// NARX delays (default: suggested from PACF/XCF).
     #[arg(long)]
     pub(crate) narx_lags: Option<usize>,
@@ -205,7 +210,7 @@ pub(crate) struct CompareArgs {
     /// How the MME/NN networks are trained: trainlm or accelerated (as `fit --training`).
     #[arg(long, default_value = "trainlm")]
     pub(crate) training: mmenn::fit::Training,
-    /// Where MME/NN's guard judges its candidates without --val: last-fifth or K-fold
+    /// Where MME/NN's guard judges its candidates unless --val-use select: last-fifth or K-fold
     /// (as `fit --guard`).
     #[arg(long, default_value = "last-fifth")]
     pub(crate) guard: mmenn::fit::GuardHeldOut,
@@ -317,12 +322,16 @@ pub(crate) struct FitArgs {
     /// Model file (TOML).
     #[arg(long)]
     pub(crate) model: PathBuf,
-    /// Validation data file(s). They take part in the MME/NN's choices (the network
-    /// sweep's test set, the guard that keeps physics alone, the network or the refined
-    /// network, early stopping of trajectory training), so the validation fit is not an
-    /// independent test: judge the model on a further record with `predict`.
+    /// Validation data file(s): the hybrid is judged free-run on them (see --val-use).
     #[arg(long, num_args = 1..)]
     pub(crate) val: Vec<PathBuf>,
+    /// What --val is for: score (the default: every choice — the network sweep's test
+    /// set, trajectory training's early stopping, the guard that keeps physics alone, the
+    /// network or the refined network — is made on the training data as without --val, so
+    /// the validation fit is independent) or select (those choices are made on the
+    /// validation data, as the thesis did; their fit is then optimistic).
+    #[arg(long, value_name = "USE", default_value = "score")]
+    pub(crate) val_use: mmenn::fit::ValidationUse,
     /// Hidden units: "auto" (sizing sweep 1–10 × inits) or a number.
     #[arg(long, default_value = "auto")]
     pub(crate) hidden: mmenn::fit::HiddenChoice,
@@ -356,8 +365,8 @@ pub(crate) struct FitArgs {
     /// `--refine-window`).
     #[arg(long, alias = "refine-window", default_value_t = 100, value_parser = at_least_one)]
     pub(crate) trajectory_window: usize,
-    /// Where physics alone, the network and the refined network are judged when no
-    /// validation data is given: last-fifth (the last fifth of the first record) or
+    /// Where physics alone, the network and the refined network are judged unless the
+    /// validation data choose (--val-use select): last-fifth (the last fifth of the first record) or
     /// K-fold, e.g. 5-fold (K stretches, the networks retrained without each; K more
     /// trainings).
     #[arg(long, default_value = "last-fifth")]

@@ -513,6 +513,7 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
         train_on_trajectories: args.train_on_trajectories,
         training: args.training,
         guard: args.guard,
+        validation_use: args.val_use,
         network_domain: domain(args.network_domain, args.hold_network_domain),
         network_inputs: args.network_inputs,
         trajectory: mmenn::nn::TrajectoryConfig {
@@ -552,6 +553,9 @@ fn fit(args: FitArgs, force: bool, progress: &Reporter) -> Result<()> {
     print_free_run("training data", &s.train);
     if let Some(v) = &s.validation {
         print_free_run("validation data", v);
+    }
+    if let Some(line) = s.validation_use_line() {
+        outln!("{line}");
     }
     for line in s.decision_lines() {
         outln!("{line}");
@@ -622,6 +626,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             seed: a.seed,
             training: a.training,
             guard: a.guard,
+            validation_use: a.val_use,
             network_domain: domain(a.network_domain, a.hold_network_domain),
             network_inputs: a.network_inputs,
             // As before the policy existed: the table is computed whatever MME's ending.
