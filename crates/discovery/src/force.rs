@@ -201,6 +201,10 @@ pub struct ForceProblem<'a, E> {
     pub validation: Option<&'a Dataset>,
     /// Noise variance of each output (given, or MME's estimate).
     pub noise_variance: &'a [f64],
+    /// Whether [`ForceProblem::noise_variance`] was given (the model file's) rather than
+    /// estimated: it sets the noise-level bound a `none` verdict is judged against
+    /// ([`crate::workflow::claim_bound`]).
+    pub noise_given: bool,
     /// The assumed model plus these force terms, their coefficients free parameters and
     /// every other parameter fixed.
     pub build: &'a dyn Fn(&[ForceTerm]) -> Result<PhysicalModel, E>,
@@ -211,8 +215,10 @@ pub struct ForceProblem<'a, E> {
 pub struct ForceOutcome {
     /// `found` when terms were kept (and, with validation records, lowered the validation
     /// cost); `unexplained` when kept terms failed that test or the calibration failed
-    /// (an error, or a start the solver could not leave: [`DiscoveryError::NoProgress`]);
-    /// `none` when nothing was proposed or every proposal was eliminated.
+    /// (an error, or a start the solver could not leave: [`DiscoveryError::NoProgress`]),
+    /// or when nothing was kept while the assumed model's free-run cost on the estimation
+    /// records is above the noise-level bound ([`ForceOutcome::assumed_cost`]); `none`
+    /// when nothing was kept and the assumed model simulates the records to that bound.
     pub verdict: Verdict,
     /// Kept effects.
     pub effects: Vec<ForceEffect>,
@@ -226,6 +232,10 @@ pub struct ForceOutcome {
     pub force_rms: Vec<f64>,
     /// Validation free-run cost of the assumed and of the final model.
     pub validation_cost: Option<[f64; 2]>,
+    /// When no force was kept: the assumed model's free-run cost `(1/M) Σ r²/R` on the
+    /// estimation records and the noise-level bound it was judged against (`none` at or
+    /// below it, `unexplained` above).
+    pub assumed_cost: Option<[f64; 2]>,
     /// The final model's calibration (start states, fit, correlations).
     pub fit: Option<GreyboxFit<PhysicalModel>>,
     /// Notes (why a step did not run, why terms were not confirmed).
@@ -536,6 +546,40 @@ pub fn validation_cost(
         .map(|run| run.cost)
 }
 
+/// No force was kept: `none` only if the assumed model already simulates the estimation
+/// records to the noise level (its free-run cost at most the bound the term-space
+/// workflow claims against, [`crate::workflow::claim_bound`]), else `unexplained` — a
+/// correction τ̂ that no catalogue force of a joint's own rate explains is not evidence
+/// that nothing is missing.
+fn judge_nothing_kept<E: From<DiscoveryError>>(
+    problem: &ForceProblem<'_, E>,
+    config: &ForceConfig,
+    outcome: &mut ForceOutcome,
+) -> Result<(), E> {
+    let cost = validation_cost(
+        problem.model,
+        problem.data,
+        problem.noise_variance,
+        config.x0_window,
+    )?;
+    let bound = crate::workflow::claim_bound(
+        problem.noise_given,
+        crate::augment::measured_values(problem.data),
+    );
+    outcome.assumed_cost = Some([cost, bound]);
+    if cost <= bound {
+        outcome.verdict = Verdict::None;
+        return Ok(());
+    }
+    outcome.verdict = Verdict::Unexplained;
+    outcome.notes.push(format!(
+        "the assumed model's free-run cost (1/M) Σ r²/R on the estimation records is \
+         {cost:.4e}, above the noise-level bound {bound:.4e}: something is missing that no \
+         catalogue force of a joint's own rate explains"
+    ));
+    Ok(())
+}
+
 /// The force-space discovery (module doc).
 pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
     problem: &ForceProblem<'_, E>,
@@ -586,6 +630,7 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         proposals,
         force_rms,
         validation_cost: None,
+        assumed_cost: None,
         fit: None,
         notes: Vec::new(),
         shapes: Vec::new(),
@@ -594,6 +639,7 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         outcome
             .notes
             .push("no catalogue force explains a share of any joint's τ̂ above min_share".into());
+        judge_nothing_kept(problem, config, &mut outcome)?;
         return Ok(outcome);
     }
     let x0: Vec<Vec<f64>> = problem
@@ -652,6 +698,7 @@ pub fn run_forces<E: From<DiscoveryError> + std::fmt::Display>(
         outcome
             .notes
             .push("every proposed force was eliminated by its interval".into());
+        judge_nothing_kept(problem, config, &mut outcome)?;
         return Ok(outcome);
     };
     let final_fit = choose_shapes(

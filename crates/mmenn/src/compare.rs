@@ -606,6 +606,7 @@ pub fn compute_compare_with_progress(
     // MME/NN needs the state-space form with named terms: say so before the baselines
     // run (minutes on a long record), not after.
     loaded.spec.refuse_mechanics("compare", &loaded.path)?;
+    loaded.spec.refuse_uncorrected("compare", &loaded.path)?;
     let spec = loaded.spec.clone();
     let lin = spec.linear.clone();
     let data = &data.clone().with_intersample(spec.intersample);

@@ -456,6 +456,7 @@ pub fn run_discover_with_progress(
     }
     // Discovery's MME, proposals and free-run gaps would ignore an acquisition filter.
     original.refuse_acquisition("discover", model_path)?;
+    original.refuse_uncorrected("discover", model_path)?;
     // Free-run simulations treat the inputs between samples as the model file says (the
     // records come back tagged with its `intersample`).
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &original)?;

@@ -203,6 +203,23 @@ pub enum ModelProblem {
         /// The step that needs the state-space form.
         what: &'static str,
     },
+    /// A step built on MME's correction was given a model that corrects no equation:
+    /// MME would only smooth, its `d̂` is zero by construction, and the step's answer
+    /// (nothing missing) would be an artefact of the file.
+    #[error(
+        "{what} estimates the correction d̂ of the equations the model file names in \
+         `corrected`, and this model file corrects none (`corrected` is missing or empty), so \
+         d̂ would be zero whatever the data: add `corrected = [{suggestion}]` (the equations \
+         that may be wrong{why})"
+    )]
+    Uncorrected {
+        /// The step that needs a correction.
+        what: &'static str,
+        /// The states to suggest, quoted and comma-separated.
+        suggestion: String,
+        /// Why those states, when the model says (e.g. the rates of `[mechanics]`).
+        why: &'static str,
+    },
     /// The `[acquisition]` table is malformed.
     #[error("{key}{}: {reason}", row.map(|r| format!(", row {r}")).unwrap_or_default())]
     Acquisition {

@@ -398,6 +398,7 @@ pub fn run_estimate_with(
     let loaded = crate::model::LoadedModel::read(model_path)?;
     let spec = loaded.spec;
     spec.refuse_acquisition("estimate", model_path)?;
+    spec.refuse_uncorrected("estimate", model_path)?;
     // The model file's `[x0_prior]`, unless the options already carry a prior.
     let with_prior;
     let opts = if opts.x0_prior.is_empty() && !loaded.x0_prior.is_empty() {
@@ -459,6 +460,7 @@ fn compute_estimate_owned(
     robust: Option<&mme_core::RobustConfig>,
 ) -> Result<EstimateOutcome> {
     spec.refuse_acquisition("estimate", Path::new("<model>"))?;
+    spec.refuse_uncorrected("estimate", Path::new("<model>"))?;
     let mut phases = BTreeMap::new();
     // MME follows the model file's inputs-between-samples setting.
     let data = data.with_intersample(spec.intersample);

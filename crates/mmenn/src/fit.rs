@@ -453,6 +453,7 @@ pub fn run_fit_with_progress(
     loaded.refuse_x0_prior("fit")?;
     let spec = loaded.spec;
     spec.refuse_mechanics("fit", model_path)?;
+    spec.refuse_uncorrected("fit", model_path)?;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     let outcome = compute_fit(&data, &spec, val.as_ref(), opts, progress)?;
@@ -542,6 +543,7 @@ pub fn compute_fit(
     // The hybrid `f + E·NN` needs the state-space form with named terms: say so before
     // MME runs, not after.
     spec.refuse_mechanics("fit", Path::new("<model>"))?;
+    spec.refuse_uncorrected("fit", Path::new("<model>"))?;
     let mut spec = spec.clone();
     // The measurement model (`[acquisition]`): MME, the network sweep, the guard and the
     // trajectory training work on the records deconvolved by the filter (inputs and

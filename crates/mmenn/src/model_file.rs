@@ -65,6 +65,39 @@ impl ModelSpec {
         Ok(TermModel::from_specs(self.linear.clone(), specs)?)
     }
 
+    /// `Err` naming the step `what` and the file `path` when the model corrects no
+    /// equation (`corrected` missing or empty): the steps built on MME's correction
+    /// (`estimate`, `discover`, `fit`, `compare`, `monitor`) would find `d̂ = 0` whatever
+    /// the data, and say so before doing any work. The error suggests the rates of a
+    /// `[mechanics]` part (forces left out enter there), else every state.
+    pub fn refuse_uncorrected(&self, what: &'static str, path: &Path) -> Result<()> {
+        if self.linear.n_corrections() > 0 {
+            return Ok(());
+        }
+        let (names, why) = match &self.mechanics {
+            Some(m) => (
+                m.qdot.clone(),
+                ": for [mechanics], the rates, where forces left out enter",
+            ),
+            None => (self.linear.state_names().to_vec(), ""),
+        };
+        let suggestion = names
+            .iter()
+            .map(|n| format!("\"{n}\""))
+            .collect::<Vec<_>>()
+            .join(", ");
+        Err(MmennError::Model {
+            path: path.to_path_buf(),
+            line: None,
+            column: None,
+            problem: ModelProblem::Uncorrected {
+                what,
+                suggestion,
+                why,
+            },
+        })
+    }
+
     /// `Err` naming the step `what` and the file `path` when the model has a
     /// `[mechanics]` part: steps built on `f + E·NN` over named terms (`fit`, `compare`)
     /// cannot take the mass-matrix form, and say so before doing any work.

@@ -212,6 +212,7 @@ pub fn train_monitor(
     loaded.refuse_x0_prior("monitor")?;
     let spec = loaded.spec;
     spec.refuse_acquisition("monitor", model_path)?;
+    spec.refuse_uncorrected("monitor", model_path)?;
     let records = classes
         .iter()
         .map(|(name, files)| {
@@ -245,6 +246,7 @@ pub fn compute_monitor(
     opts: &MonitorOptions,
 ) -> Result<MonitorFile> {
     spec.refuse_acquisition("monitor", Path::new("<model>"))?;
+    spec.refuse_uncorrected("monitor", Path::new("<model>"))?;
     let mut samples = Vec::new();
     let mut labels = Vec::new();
     for (label, (_, records)) in classes.iter().enumerate() {

@@ -99,8 +99,8 @@ pub fn discover_verdict(s: &crate::discover::DiscoverSummary) -> &'static str {
              judged against the noise level)"
         }
         discovery::Verdict::None => {
-            "none (no catalogue force of a joint's own rate explains a share of its force \
-             correction; not judged against the noise level)"
+            "none (no catalogue force of a joint's own rate was kept, and the assumed model \
+             simulates the estimation records to the noise level)"
         }
         discovery::Verdict::Unexplained => verdict(s.verdict),
     }

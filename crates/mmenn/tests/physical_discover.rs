@@ -421,3 +421,42 @@ fn discover_budget_running_out_in_the_calibration_is_an_error() {
         "{text}"
     );
 }
+
+/// The negative control on the scipy records: given the generator's own model (the
+/// fixture's `model.toml`: true parameters and both friction laws), force-space discovery
+/// names nothing, and its `none` is now judged against the noise level: the assumed
+/// model's free-run cost on `est.csv` is at most `1 + 3√(2/M)` (the noise variance is
+/// given: the encoder's quantisation). Rule fixed before the run: verdict `none`, no
+/// named or unconfirmed force, and the bound reported is that of the record's `M`.
+#[test]
+fn the_true_two_link_model_is_none_at_the_noise_level() {
+    let dir = scratch("true-model");
+    let s = run_discover(
+        &[fixture().join("est.csv")],
+        &fixture().join("model.toml"),
+        &[fixture().join("val.csv")],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+    )
+    .unwrap();
+    assert_eq!(s.verdict, Verdict::None, "{s:#?}");
+    assert!(s.effects.is_empty() && s.unconfirmed.is_empty(), "{s:#?}");
+    let table = mmenn::data_file::read_table(&fixture().join("est.csv")).unwrap();
+    let m = ["theta1", "theta2"]
+        .iter()
+        .map(|c| {
+            table.columns[table.column_index(c).unwrap()]
+                .iter()
+                .filter(|v| !v.is_nan())
+                .count()
+        })
+        .sum::<usize>();
+    let bound = 1.0 + 3.0 * (2.0 / m as f64).sqrt();
+    assert!(
+        (s.claim_bound - bound).abs() < 1e-12,
+        "{} vs {bound}",
+        s.claim_bound
+    );
+    assert!(mmenn::words::discover_verdict(&s).contains("noise level"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

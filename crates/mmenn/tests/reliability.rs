@@ -1208,3 +1208,76 @@ fn cli_poly_focus_reaches_compare_and_a_bad_value_is_refused() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A model file that corrects no equation (`corrected` missing, or written empty by
+/// `greyest` for a `[mechanics]` model) makes MME's `d̂` zero by construction. Every
+/// command built on it refuses the file, naming it and suggesting the equations to
+/// correct, before any estimate runs, instead of reporting "nothing missing" after
+/// minutes.
+#[test]
+fn commands_built_on_mme_refuse_a_model_that_corrects_nothing() {
+    let dir = scratch("uncorrected");
+    let linear = PENDULUM.replace("corrected = [\"omega\"]\n", "");
+    assert_ne!(linear, PENDULUM);
+    std::fs::write(dir.join("linear.toml"), &linear).unwrap();
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(
+        dir.join("mech.csv"),
+        oscillation_csv().replace("t,u,theta", "t,u,y"),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("mech.toml"),
+        r#"
+states = ["y", "v"]
+inputs = ["u"]
+measured = ["y"]
+corrected = []
+noise_variance = [1e-4]
+
+[parameters]
+m = { value = 1.0, fixed = true }
+k = { value = 4.0 }
+
+[mechanics]
+q = ["y"]
+qdot = ["v"]
+mass = [["m"]]
+forces = ["u - k*y"]
+"#,
+    )
+    .unwrap();
+    for (model, suggestion) in [
+        ("linear.toml", "corrected = [\"theta\", \"omega\"]"),
+        ("mech.toml", "corrected = [\"v\"]"),
+    ] {
+        let commands: &[&str] = if model == "mech.toml" {
+            // fit and compare refuse [mechanics] first, for their own reason.
+            &["estimate", "discover", "monitor"]
+        } else {
+            &["estimate", "discover", "fit", "compare", "monitor"]
+        };
+        for &cmd in commands {
+            let data = if model == "mech.toml" {
+                "mech.csv"
+            } else {
+                "d.csv"
+            };
+            let class = format!("healthy={data}");
+            let mut args = vec![cmd, "--model", model, "--out", "out"];
+            if cmd == "monitor" {
+                args.splice(0..1, ["monitor", "train"]);
+                args.extend(["--class", &class]);
+            } else {
+                args.extend(["--data", data]);
+            }
+            let (code, err) = mmenn(&dir, &args, &[]);
+            assert_ne!(code, 0, "{cmd} {model}: {err}");
+            assert!(err.contains(model), "{cmd} {model}: {err}");
+            assert!(err.contains("corrects none"), "{cmd} {model}: {err}");
+            assert!(err.contains(suggestion), "{cmd} {model}: {err}");
+            assert!(!dir.join("out").exists(), "{cmd} {model} wrote its output");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -136,6 +136,7 @@ pub(super) fn run_force_discover(
     progress: &dyn ProgressSink,
 ) -> Result<DiscoverSummary> {
     original.refuse_acquisition("discover", Path::new("<model>"))?;
+    original.refuse_uncorrected("discover", Path::new("<model>"))?;
     let step = |done: usize, stage: &str| {
         progress.report(&Progress::new(DISCOVER_TASK, done, Some(STEPS)).with_stage(stage));
     };
@@ -206,7 +207,8 @@ pub(super) fn run_force_discover(
         verdict: outcome.verdict,
         effects,
         unconfirmed,
-        claim_bound: f64::NAN,
+        // The noise-level bound a `none`/`unexplained` with nothing kept was judged by.
+        claim_bound: outcome.assumed_cost.map_or(f64::NAN, |c| c[1]),
         judgement: None,
         passengers: outcome
             .eliminated
@@ -286,6 +288,7 @@ fn search(
         data,
         validation: val,
         noise_variance: &noise,
+        noise_given: matches!(original.noise_variance, NoiseVariance::Given(_)),
         build: &build,
     };
     let config = ForceConfig {
