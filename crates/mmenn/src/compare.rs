@@ -603,9 +603,8 @@ pub fn compute_compare_with_progress(
     opts: &CompareOptions,
     progress: &dyn ProgressSink,
 ) -> Result<CompareOutcome> {
-    // MME/NN needs the state-space form with named terms: say so before the baselines
-    // run (minutes on a long record), not after.
-    loaded.spec.refuse_mechanics("compare", &loaded.path)?;
+    // MME/NN needs a corrected equation: say so before the baselines run (minutes on a
+    // long record), not after.
     loaded.spec.refuse_uncorrected("compare", &loaded.path)?;
     let spec = loaded.spec.clone();
     let lin = spec.linear.clone();

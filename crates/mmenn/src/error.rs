@@ -196,8 +196,7 @@ pub enum ModelProblem {
     /// named terms (`M⁻¹` is not a sum of terms).
     #[error(
         "{what} needs a state-space model with named terms; this model has a [mechanics] \
-         part (mass-matrix form), which estimate, predict, greyest, discover and show accept \
-         (fit and compare do not yet)"
+         part (mass-matrix form), whose dynamics are not A and B"
     )]
     Mechanical {
         /// The step that needs the state-space form.

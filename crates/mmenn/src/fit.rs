@@ -452,7 +452,6 @@ pub fn run_fit_with_progress(
     let loaded = LoadedModel::read(model_path)?;
     loaded.refuse_x0_prior("fit")?;
     let spec = loaded.spec;
-    spec.refuse_mechanics("fit", model_path)?;
     spec.refuse_uncorrected("fit", model_path)?;
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
@@ -540,9 +539,6 @@ pub fn compute_fit(
     opts: &FitOptions,
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<FitOutcome> {
-    // The hybrid `f + E·NN` needs the state-space form with named terms: say so before
-    // MME runs, not after.
-    spec.refuse_mechanics("fit", Path::new("<model>"))?;
     spec.refuse_uncorrected("fit", Path::new("<model>"))?;
     let mut spec = spec.clone();
     // The measurement model (`[acquisition]`): MME, the network sweep, the guard and the
@@ -588,6 +584,8 @@ pub fn compute_fit(
     check(MmeStage::Training, &result, data)?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
+        // The regression updates A and B; a `[mechanics]` model's dynamics are M⁻¹Q.
+        spec.refuse_mechanics("fit --update-model regression", Path::new("<model>"))?;
         let up = mme_core::update_model(
             &spec.linear,
             data,

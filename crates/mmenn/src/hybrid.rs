@@ -1,12 +1,15 @@
 //! The hybrid model file `model.json` written by `mmenn fit` (format tag, checks on
 //! reading) and the plant model it builds, `ẋ = f(x, u) + E·NN(x, u)` as sysid-core's
-//! [`CorrectedModel`].
+//! [`CorrectedModel`]. `f` is the model file's dynamics ([`AssumedDynamics`]): the linear
+//! model with named terms, or a `[mechanics]` model's `M(q)⁻¹·Q` (where `E·NN` is an
+//! acceleration added to the rates, as MME's correction is).
 
 use std::path::Path;
 
+use nalgebra::DMatrix;
 use nn::{Domain, Mlp, NetCorrection};
 use serde::{Deserialize, Serialize};
-use sysid_core::{CorrectedModel, TermModel};
+use sysid_core::{CorrectedModel, Dynamics, PhysicalModel, TermModel};
 
 use crate::error::{MmennError, Result};
 use crate::model_file::{ModelSpec, parse_model};
@@ -37,8 +40,56 @@ pub struct HybridFile {
     pub domain: Domain,
 }
 
-/// The completed plant model: assumed dynamics (with named terms) plus the network.
-pub type HybridModel = CorrectedModel<TermModel, NetCorrection>;
+/// The completed plant model: the assumed dynamics plus the network.
+pub type HybridModel = CorrectedModel<AssumedDynamics, NetCorrection>;
+
+/// The model file's own dynamics under a hybrid: a state-space model with named terms,
+/// or a mass-matrix (`[mechanics]`) model.
+#[derive(Debug, Clone)]
+pub enum AssumedDynamics {
+    /// `ẋ = A x + B u + Σ terms` (parameter values substituted).
+    Terms(Box<TermModel>),
+    /// `M(q) q̈ = Q(q, q̇, u) + Σ terms`, solved for `q̈` at every evaluation.
+    Physical(Box<PhysicalModel>),
+}
+
+impl AssumedDynamics {
+    /// The model file's dynamics: [`AssumedDynamics::Physical`] when it has a
+    /// `[mechanics]` part, else its terms.
+    pub fn of(spec: &ModelSpec) -> std::result::Result<Self, crate::error::ModelProblem> {
+        if spec.mechanics.is_some() {
+            return Ok(Self::Physical(Box::new(spec.physical_model()?)));
+        }
+        Ok(Self::Terms(Box::new(spec.term_model()?)))
+    }
+}
+
+impl Dynamics for AssumedDynamics {
+    fn n_states(&self) -> usize {
+        match self {
+            Self::Terms(m) => m.n_states(),
+            Self::Physical(m) => m.n_states(),
+        }
+    }
+    fn n_inputs(&self) -> usize {
+        match self {
+            Self::Terms(m) => m.n_inputs(),
+            Self::Physical(m) => m.n_inputs(),
+        }
+    }
+    fn rhs(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        match self {
+            Self::Terms(m) => m.rhs(t, x, u, dx),
+            Self::Physical(m) => m.rhs(t, x, u, dx),
+        }
+    }
+    fn jacobians(&self, t: f64, x: &[f64], u: &[f64], a: &mut DMatrix<f64>, b: &mut DMatrix<f64>) {
+        match self {
+            Self::Terms(m) => m.jacobians(t, x, u, a, b),
+            Self::Physical(m) => m.jacobians(t, x, u, a, b),
+        }
+    }
+}
 
 impl HybridFile {
     /// Parse and check `model.json` text (`path` only names the file in errors): the
@@ -127,7 +178,7 @@ pub fn hybrid_model(
     domain: Domain,
 ) -> Result<HybridModel> {
     let lin = &spec.linear;
-    let base = spec.term_model().map_err(model_problem)?;
+    let base = AssumedDynamics::of(spec).map_err(model_problem)?;
     // A network with as many inputs as the model has states reads the states alone.
     let corr =
         NetCorrection::for_model(network, lin.n_states(), lin.n_inputs())?.with_domain(domain);

@@ -99,8 +99,8 @@ impl ModelSpec {
     }
 
     /// `Err` naming the step `what` and the file `path` when the model has a
-    /// `[mechanics]` part: steps built on `f + E·NN` over named terms (`fit`, `compare`)
-    /// cannot take the mass-matrix form, and say so before doing any work.
+    /// `[mechanics]` part: steps that change or read `A` and `B` (`fit --update-model
+    /// regression`) cannot take the mass-matrix form, and say so before doing any work.
     pub fn refuse_mechanics(&self, what: &'static str, path: &Path) -> Result<()> {
         match self.mechanics {
             Some(_) => Err(MmennError::Model {

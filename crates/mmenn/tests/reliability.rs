@@ -1251,13 +1251,7 @@ forces = ["u - k*y"]
         ("linear.toml", "corrected = [\"theta\", \"omega\"]"),
         ("mech.toml", "corrected = [\"v\"]"),
     ] {
-        let commands: &[&str] = if model == "mech.toml" {
-            // fit and compare refuse [mechanics] first, for their own reason.
-            &["estimate", "discover", "monitor"]
-        } else {
-            &["estimate", "discover", "fit", "compare", "monitor"]
-        };
-        for &cmd in commands {
+        for cmd in ["estimate", "discover", "fit", "compare", "monitor"] {
             let data = if model == "mech.toml" {
                 "mech.csv"
             } else {
