@@ -453,6 +453,9 @@ pub fn run_fit_with_progress(
     loaded.refuse_x0_prior("fit")?;
     let spec = loaded.spec;
     spec.refuse_uncorrected("fit", model_path)?;
+    if opts.update == ModelUpdateChoice::Regression {
+        spec.refuse_mechanics("fit --update-model regression", model_path)?;
+    }
     // The regression update changes A and B only, so channel names stay valid for both.
     let (data, val) = crate::data_file::read_with_validation(data_paths, val_paths, &spec)?;
     let outcome = compute_fit(&data, &spec, val.as_ref(), opts, progress)?;
@@ -540,6 +543,10 @@ pub fn compute_fit(
     progress: &dyn crate::progress::ProgressSink,
 ) -> Result<FitOutcome> {
     spec.refuse_uncorrected("fit", Path::new("<model>"))?;
+    if opts.update == ModelUpdateChoice::Regression {
+        // The regression updates A and B; a `[mechanics]` model's dynamics are M⁻¹Q.
+        spec.refuse_mechanics("fit --update-model regression", Path::new("<model>"))?;
+    }
     let mut spec = spec.clone();
     // The measurement model (`[acquisition]`): MME, the network sweep, the guard and the
     // trajectory training work on the records deconvolved by the filter (inputs and
@@ -584,8 +591,6 @@ pub fn compute_fit(
     check(MmeStage::Training, &result, data)?;
     let mut update_report = None;
     if opts.update == ModelUpdateChoice::Regression {
-        // The regression updates A and B; a `[mechanics]` model's dynamics are M⁻¹Q.
-        spec.refuse_mechanics("fit --update-model regression", Path::new("<model>"))?;
         let up = mme_core::update_model(
             &spec.linear,
             data,

@@ -28,7 +28,7 @@ use crate::model_file::ModelSpec;
 /// Factor by which the stress check scales the held-out input about its mean.
 pub const STRESS_FACTOR: f64 = 1.5;
 
-/// Where the guard judges its candidates unless validation data choose ([`ValidationUse::Select`]).
+/// Where the guard judges its candidates unless validation data choose ([`crate::fit::ValidationUse::Select`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum GuardHeldOut {
