@@ -51,7 +51,11 @@ pub(crate) fn tune<S: Solve>(
             other => {
                 let s = other?;
                 let ratio = s.ratio(inv_r);
-                (s.residual_variance(), ratio, ratio / opts.target_ratio - 1.0)
+                (
+                    s.residual_variance(),
+                    ratio,
+                    ratio / opts.target_ratio - 1.0,
+                )
             }
         };
         curve.push(WCurvePoint {

@@ -6,10 +6,9 @@
 use std::sync::Mutex;
 
 use mme_core::{
-    MmeConfig, MmeEvent, MmeOutput, MmePhase, NoiseSpec, NonlinearModel, RobustConfig,
-    WeightSpec, estimate_nonlinear_with_observer, estimate_nonlinear_with_report,
-    estimate_robust, estimate_robust_with_observer, estimate_with_observer,
-    estimate_with_report,
+    MmeConfig, MmeEvent, MmeOutput, MmePhase, NoiseSpec, NonlinearModel, RobustConfig, WeightSpec,
+    estimate_nonlinear_with_observer, estimate_nonlinear_with_report, estimate_robust,
+    estimate_robust_with_observer, estimate_with_observer, estimate_with_report,
 };
 use nalgebra::DMatrix;
 use sysid_core::ModelNames;
@@ -40,10 +39,7 @@ fn bits(out: &MmeOutput) -> String {
 
 /// The events after the first `Phase(phase)` up to the next phase.
 fn in_phase(events: &[MmeEvent], phase: MmePhase) -> Vec<MmeEvent> {
-    let Some(at) = events
-        .iter()
-        .position(|e| *e == MmeEvent::Phase(phase))
-    else {
+    let Some(at) = events.iter().position(|e| *e == MmeEvent::Phase(phase)) else {
         return Vec::new();
     };
     events[at + 1..]
@@ -59,7 +55,10 @@ fn trials(events: &[MmeEvent]) -> Vec<(usize, f64, f64)> {
         .iter()
         .filter_map(|e| match *e {
             MmeEvent::WTrial {
-                trial, alpha, ratio, ..
+                trial,
+                alpha,
+                ratio,
+                ..
             } => Some((trial, alpha, ratio)),
             _ => None,
         })
@@ -140,10 +139,7 @@ fn linear_estimate_tells_noise_search_w_trials_and_final_sweep_in_order() {
         (start.len() + 1..=plain.noise.evaluations).collect::<Vec<_>>()
     );
     // The start's trials all come before the first likelihood evaluation.
-    assert!(matches!(
-        noise[start.len()],
-        MmeEvent::NoiseStep { .. }
-    ));
+    assert!(matches!(noise[start.len()], MmeEvent::NoiseStep { .. }));
     // The last evaluation is the solve at the optimum: its value is finite.
     match noise.last() {
         Some(MmeEvent::NoiseStep {
@@ -226,12 +222,11 @@ fn nonlinear_estimate_tells_every_gauss_newton_iteration_of_every_solve() {
                 run.push(iteration);
             }
             MmeEvent::WTrial { trial, .. } => {
-                assert_eq!(
-                    run,
-                    (1..=run.len()).collect::<Vec<_>>(),
-                    "trial {trial}"
+                assert_eq!(run, (1..=run.len()).collect::<Vec<_>>(), "trial {trial}");
+                assert!(
+                    !run.is_empty() && run.len() <= max,
+                    "trial {trial}: {run:?}"
                 );
-                assert!(!run.is_empty() && run.len() <= max, "trial {trial}: {run:?}");
                 run.clear();
             }
             other => panic!("{other:?} in the W search"),
