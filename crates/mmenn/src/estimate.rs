@@ -472,6 +472,10 @@ pub fn run_estimate_with_progress(
         .summary
         .phase_seconds
         .insert("read".to_string(), read);
+    progress.report(
+        &crate::progress::Progress::new(crate::progress::MME_TASK, 0, None)
+            .with_stage("writing the results"),
+    );
     write_estimate(&outcome, out)
 }
 

@@ -27,7 +27,9 @@
 //! A task that runs through named stages (discover's steps) says which one is running in
 //! [`Progress::stage`], named by the code that runs it; `done` then counts the stages
 //! finished, so the one running is `done + 1` of `total`. A task without stages is its
-//! own stage (a [`stage`] such as "MME estimate"). A display shows the stage in every
+//! own stage (a [`stage`] such as "network sizing sweep"). An MME estimate ([`MME_TASK`])
+//! runs through the estimator's phases ("noise-variance search", "W search", "final
+//! solve"; [`MmeProgress`]), `total` unknown, its latest step the note. A display shows the stage in every
 //! line, also in the "still running" line of a step that reports nothing for a while
 //! ([`Progress::running_line`]).
 //!

@@ -268,7 +268,10 @@ fn nonlinear_estimate_tells_every_gauss_newton_iteration_of_every_solve() {
         };
         let expected = (costs[k - 1] - costs[k]).abs() / costs[k].abs();
         assert_eq!(relative_change.to_bits(), expected.to_bits());
-        assert_eq!(tolerance, config.iterations.cost_tolerance);
+        assert_eq!(
+            tolerance.to_bits(),
+            config.iterations.cost_tolerance.to_bits()
+        );
     }
 }
 
