@@ -165,11 +165,23 @@ pub fn estimate_term_model(
     data: &Dataset,
     config: &MmeConfig,
 ) -> Result<MmeOutput> {
+    estimate_term_model_observed(model, data, config, &mme_core::NoObserver)
+}
+
+/// [`estimate_term_model`], telling `observer` each step as it runs (see
+/// [`estimate_spec_observed`]).
+pub fn estimate_term_model_observed(
+    model: &sysid_core::TermModel,
+    data: &Dataset,
+    config: &MmeConfig,
+    observer: &dyn mme_core::MmeObserver,
+) -> Result<MmeOutput> {
     if model.terms().is_empty() {
-        return Ok(mme_core::estimate_with_report(
+        return Ok(mme_core::estimate_with_observer(
             model.linear(),
             data,
             config,
+            observer,
         )?);
     }
     let names = model.linear().state_names().to_vec();
@@ -185,7 +197,7 @@ pub fn estimate_term_model(
         })
         .collect();
     let nonlinear = nonlinear_of(model.clone())?;
-    mme_core::estimate_nonlinear_with_report(&nonlinear, data, config)
+    mme_core::estimate_nonlinear_with_observer(&nonlinear, data, config, observer)
         .map_err(|e| with_terms(&described, e))
 }
 

@@ -20,7 +20,8 @@
 //! (the first MME run, four per round up to `--max-rounds`, three after the rounds;
 //! `discovery::workflow::Observer::steps`), shrinking when the rounds stop early, with
 //! the round and step that begins as the [`Progress::stage`] (named by the workflow,
-//! `discovery::workflow::Observer::stage`).
+//! `discovery::workflow::Observer::stage`); the MME runs of a step add their phase and
+//! latest step as the note of that step's report ([`MmeProgress::within`]).
 //!
 //! # Stages
 //!
@@ -184,10 +185,14 @@ pub const MME_TASK: &str = "MME estimate";
 /// it has none. Observing changes nothing the estimate computes.
 ///
 /// Pass it to `mmenn::estimate::estimate_spec_observed` inside a [`stage`] of the same
-/// task, which reports the start and the end.
+/// task, which reports the start and the end. An estimate that is one step of a larger
+/// task (discover's MME runs) reports [`MmeProgress::within`] that task's latest report
+/// instead, the phase and step as its note ("MME W search: W trial 3 of at most 80: …").
 pub struct MmeProgress<'a> {
     sink: &'a dyn ProgressSink,
     task: &'a str,
+    /// The report of the enclosing task that the estimate's notes go into, if any.
+    frame: Option<&'a (dyn Fn() -> Progress + Sync)>,
     state: std::sync::Mutex<MmeSeen>,
 }
 
@@ -210,6 +215,18 @@ impl<'a> MmeProgress<'a> {
         Self {
             sink,
             task,
+            frame: None,
+            state: std::sync::Mutex::new(MmeSeen::default()),
+        }
+    }
+
+    /// Reports of an estimate that is a step of another task: each is `frame()` (that
+    /// task's latest report) with the estimate's phase and step as the note.
+    pub fn within(sink: &'a dyn ProgressSink, frame: &'a (dyn Fn() -> Progress + Sync)) -> Self {
+        Self {
+            sink,
+            task: "",
+            frame: Some(frame),
             state: std::sync::Mutex::new(MmeSeen::default()),
         }
     }
@@ -323,11 +340,20 @@ impl mme_core::MmeObserver for MmeProgress<'_> {
         };
         let done = seen.phases.saturating_sub(1);
         drop(seen);
-        self.sink.report(
-            &Progress::new(self.task, done, None)
+        let report = match self.frame {
+            Some(frame) => {
+                let note = match (stage.is_empty(), note.is_empty()) {
+                    (true, _) => note,
+                    (false, true) => format!("MME {stage}"),
+                    (false, false) => format!("MME {stage}: {note}"),
+                };
+                frame().with_note(note)
+            }
+            None => Progress::new(self.task, done, None)
                 .with_stage(stage)
                 .with_note(note),
-        );
+        };
+        self.sink.report(&report);
     }
 }
 
