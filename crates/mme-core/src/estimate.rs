@@ -16,6 +16,7 @@ use crate::evaluate::{Solve, Summary};
 use crate::linear::LinearRun;
 use crate::noise::estimate_noise;
 use crate::nonlinear::NonlinearModel;
+use crate::observe::{MmeEvent, MmeObserver, MmePhase, NoObserver};
 use crate::result::{MmeOutput, NoiseMethod, NoiseReport};
 use crate::sweep::LogDet;
 use crate::tune_w::tune;
@@ -47,6 +48,18 @@ pub fn estimate_with_report(
     data: &Dataset,
     config: &MmeConfig,
 ) -> Result<MmeOutput> {
+    estimate_with_observer(model, data, config, &NoObserver)
+}
+
+/// [`estimate_with_report`], telling `observer` each step as it runs (see
+/// [`crate::observe`]: the noise-variance search's evaluations, the `W` trials, the
+/// final sweep). The result is the same, bit for bit, whatever the observer.
+pub fn estimate_with_observer(
+    model: &LinearModel,
+    data: &Dataset,
+    config: &MmeConfig,
+    observer: &dyn MmeObserver,
+) -> Result<MmeOutput> {
     if data
         .experiments()
         .iter()
@@ -59,7 +72,7 @@ pub fn estimate_with_report(
             corrections: model.correction_names().to_vec(),
         };
         let nl = NonlinearModel::new(model.clone(), model.c().clone(), model.e().clone(), names)?;
-        return crate::estimate_nonlinear_with_report(&nl, data, config);
+        return crate::estimate_nonlinear_with_observer(&nl, data, config, observer);
     }
     let mut clock = Phases::new();
     let weight = resolve_weight(&config.w, model.n_corrections())?;
@@ -70,7 +83,14 @@ pub fn estimate_with_report(
     let mut run = LinearRun::new(model, data, config.substeps)?.with_prior(prior);
     clock.mark("validate_and_discretize");
 
-    let noise = resolve_noise(&mut run, &weight, config, data, model.output_names())?;
+    let noise = resolve_noise(
+        &mut run,
+        &weight,
+        config,
+        data,
+        model.output_names(),
+        observer,
+    )?;
     clock.mark("noise");
 
     let inv_r: Vec<f64> = noise.variance.iter().map(|v| 1.0 / v).collect();
@@ -78,12 +98,14 @@ pub fn estimate_with_report(
     let (w, w_search) = match &weight {
         ResolvedWeight::Fixed(w) => (w.clone(), None),
         ResolvedWeight::Auto { shape, opts } => {
-            let search = tune(&mut run, shape, &inv_r, opts, &mut w_curve)?;
+            observer.event(&MmeEvent::Phase(MmePhase::WeightSearch));
+            let search = tune(&mut run, shape, &inv_r, opts, &mut w_curve, observer)?;
             (shape * search.alpha, Some(search))
         }
     };
     clock.mark("tune_w");
 
+    observer.event(&MmeEvent::Phase(MmePhase::FinalSolve));
     let summary = run.solve(&w, &inv_r, LogDet::Skip)?;
     clock.mark("sweep");
 
@@ -128,13 +150,15 @@ pub fn estimate_with_report(
     })
 }
 
-/// `R` as given, or estimated with the `W` shape of the configuration.
+/// `R` as given, or estimated with the `W` shape of the configuration (announced to
+/// `observer` as [`MmePhase::NoiseVariance`]).
 pub(crate) fn resolve_noise<S: Solve>(
     solver: &mut S,
     weight: &ResolvedWeight,
     config: &MmeConfig,
     data: &Dataset,
     outputs: &[String],
+    observer: &dyn MmeObserver,
 ) -> Result<NoiseReport> {
     match &config.noise_variance {
         NoiseSpec::Given(v) => Ok(NoiseReport {
@@ -154,7 +178,8 @@ pub(crate) fn resolve_noise<S: Solve>(
             // The restricted likelihood integrates over a diffuse initial state; a prior
             // in absolute units would break the concentration over the common scale.
             solver.use_prior(false);
-            let report = estimate_noise(solver, &shape, data, &binding, outputs);
+            observer.event(&MmeEvent::Phase(MmePhase::NoiseVariance));
+            let report = estimate_noise(solver, &shape, data, &binding, outputs, observer);
             solver.use_prior(true);
             report
         }

@@ -11,6 +11,7 @@ mod linear;
 mod linearize;
 pub mod noise;
 pub mod nonlinear;
+pub mod observe;
 pub mod result;
 pub mod robust;
 mod sweep;
@@ -23,11 +24,16 @@ pub use config::{
 };
 pub use discretize::default_substeps;
 pub use error::{MmeError, Result};
-pub use estimate::{estimate, estimate_with_report};
-pub use nonlinear::{NonlinearModel, estimate_nonlinear, estimate_nonlinear_with_report};
+pub use estimate::{estimate, estimate_with_observer, estimate_with_report};
+pub use nonlinear::{
+    NonlinearModel, estimate_nonlinear, estimate_nonlinear_with_observer,
+    estimate_nonlinear_with_report,
+};
+pub use observe::{MmeEvent, MmeObserver, MmePhase, NoObserver};
 pub use result::{MmeOutput, NoiseMethod, NoiseReport, WCurvePoint, WSearch};
 pub use robust::{
-    Outlier, RobustConfig, RobustOutput, estimate_nonlinear_robust, estimate_robust,
+    Outlier, RobustConfig, RobustOutput, estimate_nonlinear_robust,
+    estimate_nonlinear_robust_with_observer, estimate_robust, estimate_robust_with_observer,
     screen_outliers,
 };
 pub use update::{

@@ -37,6 +37,7 @@ use crate::binding::Binding;
 use crate::config::AutoWeight;
 use crate::error::{MmeError, Result};
 use crate::evaluate::{Solve, Summary};
+use crate::observe::{MmeEvent, MmeObserver};
 use crate::result::{NoiseMethod, NoiseReport};
 use crate::sweep::LogDet;
 use crate::tune_w::tune;
@@ -119,13 +120,15 @@ impl LikelihoodShape {
     }
 }
 
-/// Estimate `R` by maximum restricted marginal likelihood (see the module doc).
+/// Estimate `R` by maximum restricted marginal likelihood (see the module doc); each
+/// solve is told to `observer` as it finishes.
 pub(crate) fn estimate_noise<S: Solve>(
     solver: &mut S,
     shape: &DMatrix<f64>,
     data: &Dataset,
     binding: &Binding,
     names: &[String],
+    observer: &dyn MmeObserver,
 ) -> Result<NoiseReport> {
     let start = difference_variance(data, binding, names)?;
     let p = start.len();
@@ -163,7 +166,7 @@ pub(crate) fn estimate_noise<S: Solve>(
         tolerance: 1e-2,
         ..AutoWeight::default()
     };
-    let cc = tune(solver, shape, &inv_start, &opts, &mut curve)?;
+    let cc = tune(solver, shape, &inv_start, &opts, &mut curve, observer)?;
     let mut evaluations = cc.evaluations;
     let rho0: Vec<f64> = start.iter().map(|v| v / start[0]).collect();
     let z_beta0 = (cc.alpha * start[0]).ln();
@@ -184,11 +187,22 @@ pub(crate) fn estimate_noise<S: Solve>(
         // An undetermined initial state (W so small that d absorbs everything) has no
         // finite likelihood here: outside the feasible region.
         let s = match solver.solve(&(shape * beta), &inv, LogDet::Accumulate) {
-            Err(MmeError::NotObservable { .. }) => return Ok(f64::INFINITY),
+            Err(MmeError::NotObservable { .. }) => {
+                observer.event(&MmeEvent::NoiseStep {
+                    evaluation: evaluations,
+                    neg2_log_likelihood: f64::INFINITY,
+                });
+                return Ok(f64::INFINITY);
+            }
             other => other?,
         };
         let (v, _) = lik.concentrated(&s, beta, &rho);
-        Ok(if v.is_finite() { v } else { f64::INFINITY })
+        let v = if v.is_finite() { v } else { f64::INFINITY };
+        observer.event(&MmeEvent::NoiseStep {
+            evaluation: evaluations,
+            neg2_log_likelihood: v,
+        });
+        Ok(v)
     };
 
     // Grid over ln β (half-decade steps), extended while the minimum sits on an edge.
@@ -241,7 +255,11 @@ pub(crate) fn estimate_noise<S: Solve>(
         .collect();
     let inv: Vec<f64> = rho.iter().map(|r| 1.0 / r).collect();
     let s = solver.solve(&(shape * beta), &inv, LogDet::Accumulate)?;
-    let (_, sigma2) = lik.concentrated(&s, beta, &rho);
+    let (at_optimum, sigma2) = lik.concentrated(&s, beta, &rho);
+    observer.event(&MmeEvent::NoiseStep {
+        evaluation: evaluations + 1,
+        neg2_log_likelihood: at_optimum,
+    });
     let variance: Vec<f64> = rho.iter().map(|r| r * sigma2).collect();
     // Degenerate likelihood: when the corrections can interpolate the data, the likelihood
     // can keep rising as R → 0 (seen on the short, coarsely sampled Cascaded Tanks record:

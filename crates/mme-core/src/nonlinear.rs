@@ -40,6 +40,7 @@ use crate::estimate::{Phases, assemble, resolve_noise};
 use crate::evaluate::{Solve, Summary};
 use crate::kernel::sweep;
 use crate::linearize::Rk4;
+use crate::observe::{MmeEvent, MmeObserver, MmePhase, NoObserver};
 use crate::result::MmeOutput;
 use crate::sweep::{LogDet, Problem, SteadyState, StepModel, Workspace, gains};
 use crate::tune_w::tune;
@@ -135,27 +136,49 @@ pub fn estimate_nonlinear_with_report<F: Dynamics>(
     data: &Dataset,
     config: &MmeConfig,
 ) -> Result<MmeOutput> {
+    estimate_nonlinear_with_observer(model, data, config, &NoObserver)
+}
+
+/// [`estimate_nonlinear_with_report`], telling `observer` each step as it runs (see
+/// [`crate::observe`]: the noise-variance search's evaluations, the `W` trials, the final
+/// solve, and every Gauss–Newton iteration within each of those solves). The result is
+/// the same, bit for bit, whatever the observer.
+pub fn estimate_nonlinear_with_observer<F: Dynamics>(
+    model: &NonlinearModel<F>,
+    data: &Dataset,
+    config: &MmeConfig,
+    observer: &dyn MmeObserver,
+) -> Result<MmeOutput> {
     let mut clock = Phases::new();
     let weight = resolve_weight(&config.w, model.e.ncols())?;
     if let NoiseSpec::Given(v) = &config.noise_variance {
         check_noise(v, &model.names.outputs)?;
     }
     check_iterations(&config.iterations)?;
-    let mut run = NonlinearRun::new(model, data, config)?;
+    let mut run = NonlinearRun::new(model, data, config, observer)?;
     clock.mark("validate");
 
-    let noise = resolve_noise(&mut run, &weight, config, data, &model.names.outputs)?;
+    let noise = resolve_noise(
+        &mut run,
+        &weight,
+        config,
+        data,
+        &model.names.outputs,
+        observer,
+    )?;
     clock.mark("noise");
     let inv_r: Vec<f64> = noise.variance.iter().map(|v| 1.0 / v).collect();
     let mut w_curve = Vec::new();
     let (w, w_search) = match &weight {
         ResolvedWeight::Fixed(w) => (w.clone(), None),
         ResolvedWeight::Auto { shape, opts } => {
-            let search = tune(&mut run, shape, &inv_r, opts, &mut w_curve)?;
+            observer.event(&MmeEvent::Phase(MmePhase::WeightSearch));
+            let search = tune(&mut run, shape, &inv_r, opts, &mut w_curve, observer)?;
             (shape * search.alpha, Some(search))
         }
     };
     clock.mark("tune_w");
+    observer.event(&MmeEvent::Phase(MmePhase::FinalSolve));
     let summary = run.solve(&w, &inv_r, LogDet::Skip)?;
     clock.mark("gauss_newton");
 
@@ -324,10 +347,17 @@ struct NonlinearRun<'a, F> {
     prior: Option<Prior>,
     /// Whether the solves use [`Self::prior`] (off for the noise likelihood).
     prior_on: bool,
+    /// Told of every Gauss–Newton iteration.
+    observer: &'a dyn MmeObserver,
 }
 
 impl<'a, F: Dynamics> NonlinearRun<'a, F> {
-    fn new(model: &'a NonlinearModel<F>, data: &'a Dataset, config: &MmeConfig) -> Result<Self> {
+    fn new(
+        model: &'a NonlinearModel<F>,
+        data: &'a Dataset,
+        config: &MmeConfig,
+        observer: &'a dyn MmeObserver,
+    ) -> Result<Self> {
         let (n, q) = (model.dynamics.n_states(), model.e.ncols());
         if n == 0 {
             return Err(MmeError::NoStates);
@@ -354,6 +384,7 @@ impl<'a, F: Dynamics> NonlinearRun<'a, F> {
             ],
             prior: resolve_prior(&config.x0_prior, &model.names.states)?,
             prior_on: true,
+            observer,
         };
         if let StartTrajectory::Given(x0s) = &config.start
             && x0s.len() != data.experiments().len()
@@ -835,6 +866,13 @@ impl<F: Dynamics> Solve for NonlinearRun<'_, F> {
                 cost: after,
                 step_norm: step_norm.sqrt(),
                 step_length,
+            });
+            self.observer.event(&MmeEvent::Iteration {
+                iteration,
+                max_iterations: self.opts.max_iterations,
+                cost: after,
+                relative_change: (before - after).abs() / after.abs(),
+                tolerance: tol,
             });
             if failed && !small_prediction {
                 // A data-based start can lead the first full step into a region where the

@@ -27,6 +27,7 @@ use sysid_core::{Dataset, Dynamics, Experiment, LinearModel};
 use crate::config::{AutoWeight, MmeConfig, NoiseSpec, WeightSpec};
 use crate::error::{MmeError, Result};
 use crate::nonlinear::NonlinearModel;
+use crate::observe::{MmeEvent, MmeObserver, NoObserver};
 use crate::result::MmeOutput;
 
 /// Settings of the robust estimate.
@@ -257,13 +258,26 @@ pub fn estimate_robust(
     config: &MmeConfig,
     robust: &RobustConfig,
 ) -> Result<RobustOutput> {
+    estimate_robust_with_observer(model, data, config, robust, &NoObserver)
+}
+
+/// [`estimate_robust`], telling `observer` the steps of every inner estimate and each
+/// pass ([`MmeEvent::RobustPass`]); the result does not depend on the observer.
+pub fn estimate_robust_with_observer(
+    model: &LinearModel,
+    data: &Dataset,
+    config: &MmeConfig,
+    robust: &RobustConfig,
+    observer: &dyn MmeObserver,
+) -> Result<RobustOutput> {
     run_robust(
         model.output_names(),
         model.c(),
         data,
         config,
         robust,
-        |d, c| crate::estimate_with_report(model, d, c),
+        observer,
+        |d, c| crate::estimate_with_observer(model, d, c, observer),
     )
 }
 
@@ -274,13 +288,26 @@ pub fn estimate_nonlinear_robust<F: Dynamics>(
     config: &MmeConfig,
     robust: &RobustConfig,
 ) -> Result<RobustOutput> {
+    estimate_nonlinear_robust_with_observer(model, data, config, robust, &NoObserver)
+}
+
+/// [`estimate_nonlinear_robust`], telling `observer` the steps of every inner estimate
+/// and each pass ([`MmeEvent::RobustPass`]); the result does not depend on the observer.
+pub fn estimate_nonlinear_robust_with_observer<F: Dynamics>(
+    model: &NonlinearModel<F>,
+    data: &Dataset,
+    config: &MmeConfig,
+    robust: &RobustConfig,
+    observer: &dyn MmeObserver,
+) -> Result<RobustOutput> {
     run_robust(
         &model.names().outputs,
         model.c(),
         data,
         config,
         robust,
-        |d, c| crate::estimate_nonlinear_with_report(model, d, c),
+        observer,
+        |d, c| crate::estimate_nonlinear_with_observer(model, d, c, observer),
     )
 }
 
@@ -337,6 +364,7 @@ fn run_robust(
     data: &Dataset,
     config: &MmeConfig,
     robust: &RobustConfig,
+    observer: &dyn MmeObserver,
     solve: impl Fn(&Dataset, &MmeConfig) -> Result<MmeOutput>,
 ) -> Result<RobustOutput> {
     check_robust(robust)?;
@@ -471,6 +499,12 @@ fn run_robust(
         pseudo = next;
         clipped = n_clipped;
         output = Some((out, fits));
+        observer.event(&MmeEvent::RobustPass {
+            pass: passes,
+            max_passes: robust.max_passes,
+            moved,
+            tolerance: robust.tolerance,
+        });
         if moved <= robust.tolerance {
             converged = true;
             break;

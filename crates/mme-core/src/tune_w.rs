@@ -15,6 +15,7 @@ use sysid_core::Termination;
 use crate::config::AutoWeight;
 use crate::error::Result;
 use crate::evaluate::Solve;
+use crate::observe::{MmeEvent, MmeObserver};
 use crate::result::{WCurvePoint, WSearch};
 use crate::sweep::LogDet;
 
@@ -27,13 +28,15 @@ const BRACKET_SPAN: f64 = 69.077_552_789_821_37;
 /// `ρ` counts as saturated when two bracket steps change it by less than this (relative).
 const SATURATION: f64 = 1e-9;
 
-/// Find `α`; every evaluation is appended to `curve` (sorted by `α` on return).
+/// Find `α`; every evaluation is appended to `curve` (sorted by `α` on return) and told
+/// to `observer` as it finishes ([`MmeEvent::WTrial`]).
 pub(crate) fn tune<S: Solve>(
     solver: &mut S,
     shape: &DMatrix<f64>,
     inv_r: &[f64],
     opts: &AutoWeight,
     curve: &mut Vec<WCurvePoint>,
+    observer: &dyn MmeObserver,
 ) -> Result<WSearch> {
     let start = curve.len();
     let count = |curve: &[WCurvePoint]| curve.len() - start;
@@ -43,24 +46,31 @@ pub(crate) fn tune<S: Solve>(
         // So small a W that the corrections absorb everything leaves the free initial
         // state undetermined; that is the W → 0 limit, where the residuals vanish
         // (ratio 0), not a failure of the search.
-        let s = match solver.solve(&w, inv_r, LogDet::Skip) {
-            Err(crate::MmeError::NotObservable { .. }) => {
-                curve.push(WCurvePoint {
-                    alpha,
-                    residual_variance: vec![0.0; inv_r.len()],
-                    ratio: 0.0,
-                });
-                return Ok(-1.0);
+        let (residual_variance, ratio, f) = match solver.solve(&w, inv_r, LogDet::Skip) {
+            Err(crate::MmeError::NotObservable { .. }) => (vec![0.0; inv_r.len()], 0.0, -1.0),
+            other => {
+                let s = other?;
+                let ratio = s.ratio(inv_r);
+                (
+                    s.residual_variance(),
+                    ratio,
+                    ratio / opts.target_ratio - 1.0,
+                )
             }
-            other => other?,
         };
-        let ratio = s.ratio(inv_r);
         curve.push(WCurvePoint {
             alpha,
-            residual_variance: s.residual_variance(),
+            residual_variance,
             ratio,
         });
-        Ok(ratio / opts.target_ratio - 1.0)
+        observer.event(&MmeEvent::WTrial {
+            trial: curve.len() - start,
+            max_trials: opts.max_evaluations,
+            alpha,
+            ratio,
+            target: opts.target_ratio,
+        });
+        Ok(f)
     };
     let done = |z: f64, f: f64, termination, evaluations| WSearch {
         alpha: z.exp(),

@@ -15,9 +15,9 @@ use sysid_core::{Dataset, MmeEstimate, TermModel};
 
 use crate::atomic::{ensure_dir, write_atomic};
 use crate::error::{MmennError, Result};
-use crate::estimate::{EstimateOptions, estimate_term_model, mme_config};
+use crate::estimate::{EstimateOptions, estimate_term_model_observed, mme_config};
 use crate::model_file::{ModelSpec, NoiseVariance, TermEntry, write_model};
-use crate::progress::{NoProgress, Progress, ProgressSink};
+use crate::progress::{MmeProgress, NoProgress, Progress, ProgressSink};
 use report::{figures, report};
 
 pub use discovery::workflow::{
@@ -239,9 +239,25 @@ struct MmeCore<'a> {
     /// How the first estimate that ended ended (the workflow's first estimate: the
     /// assumed model, from the data start or, when that failed, from the retry).
     first_convergence: std::sync::Mutex<Option<crate::fit::MmeConvergence>>,
+    /// The workflow's progress, into whose latest report each MME run's steps go as the
+    /// note ([`MmeProgress::within`]).
+    reported: &'a Reported<'a>,
 }
 
 impl MmeCore<'_> {
+    /// MME on `data` with `model`, its steps noted in the workflow's progress.
+    fn observed(
+        &self,
+        model: &TermModel,
+        data: &Dataset,
+        config: &mme_core::MmeConfig,
+    ) -> Result<mme_core::MmeOutput> {
+        let reported = self.reported;
+        let frame = || reported.current();
+        let steps = MmeProgress::within(reported.sink, &frame);
+        estimate_term_model_observed(model, data, config, &steps)
+    }
+
     /// Every MME run of the workflow (one or more per round) first checks the job's
     /// budget: a linear MME charges nothing itself, so a spent budget stops the workflow
     /// here, between its steps.
@@ -270,7 +286,7 @@ impl workflow::Mme for MmeCore<'_> {
         if let Some(x0s) = start {
             config.start = mme_core::StartTrajectory::Given(x0s.to_vec());
         }
-        let out = estimate_term_model(model, data, &config)?;
+        let out = self.observed(model, data, &config)?;
         if let Ok(mut first) = self.first_noise.lock()
             && first.is_none()
         {
@@ -303,7 +319,7 @@ impl workflow::Mme for MmeCore<'_> {
         }
         config.w = mme_core::WeightSpec::Matrix(w.clone());
         config.noise_variance = mme_core::NoiseSpec::Given(noise.to_vec());
-        Ok(estimate_term_model(model, data, &config)?.estimate)
+        Ok(self.observed(model, data, &config)?.estimate)
     }
 }
 
@@ -316,6 +332,21 @@ pub const DISCOVER_TASK: &str = "discover";
 struct Reported<'a> {
     sink: &'a dyn ProgressSink,
     stage: std::sync::Mutex<String>,
+    /// The latest report (what an MME run of the step adds its note to).
+    latest: std::sync::Mutex<Option<Progress>>,
+}
+
+impl Reported<'_> {
+    /// The latest report, or the stage named so far when none was made yet.
+    fn current(&self) -> Progress {
+        if let Ok(latest) = self.latest.lock()
+            && let Some(p) = latest.as_ref()
+        {
+            return p.clone();
+        }
+        let stage = self.stage.lock().map(|s| s.clone()).unwrap_or_default();
+        Progress::new(DISCOVER_TASK, 0, None).with_stage(stage)
+    }
 }
 
 impl Observer for Reported<'_> {
@@ -332,8 +363,11 @@ impl Observer for Reported<'_> {
     fn steps(&self, done: usize, total: usize) {
         // The workflow names its steps (Observer::stage); done counts those finished.
         let stage = self.stage.lock().map(|s| s.clone()).unwrap_or_default();
-        self.sink
-            .report(&Progress::new(DISCOVER_TASK, done, Some(total)).with_stage(stage));
+        let report = Progress::new(DISCOVER_TASK, done, Some(total)).with_stage(stage);
+        self.sink.report(&report);
+        if let Ok(mut latest) = self.latest.lock() {
+            *latest = Some(report);
+        }
     }
 }
 
@@ -475,15 +509,17 @@ pub fn run_discover_with_progress(
         noise_given: matches!(original.noise_variance, NoiseVariance::Given(_)),
         ..opts.workflow.clone()
     };
+    let observer = Reported {
+        sink: progress,
+        stage: std::sync::Mutex::new(String::new()),
+        latest: std::sync::Mutex::new(None),
+    };
     let mme = MmeCore {
         spec: &original,
         options: &opts.estimate,
         first_noise: std::sync::Mutex::new(None),
         first_convergence: std::sync::Mutex::new(None),
-    };
-    let observer = Reported {
-        sink: progress,
-        stage: std::sync::Mutex::new(String::new()),
+        reported: &observer,
     };
     let outcome = workflow::run(
         &mme,

@@ -133,17 +133,30 @@ fn nonlinear_of(dynamics: sysid_core::TermModel) -> Result<NonlinearModel<sysid_
 /// Run MME with the model file's assumed model: the exact linear sweep, or the
 /// iterated-linearisation estimator when the model has named terms.
 pub fn estimate_spec(spec: &ModelSpec, data: &Dataset, config: &MmeConfig) -> Result<MmeOutput> {
+    estimate_spec_observed(spec, data, config, &mme_core::NoObserver)
+}
+
+/// [`estimate_spec`], telling `observer` each step as it runs (`mme_core::observe`;
+/// [`crate::progress::MmeProgress`] turns them into progress reports). The result does
+/// not depend on the observer.
+pub fn estimate_spec_observed(
+    spec: &ModelSpec,
+    data: &Dataset,
+    config: &MmeConfig,
+    observer: &dyn mme_core::MmeObserver,
+) -> Result<MmeOutput> {
     if spec.mechanics.is_some() {
         let model = nonlinear_physical(spec)?;
-        return mme_core::estimate_nonlinear_with_report(&model, data, config)
+        return mme_core::estimate_nonlinear_with_observer(&model, data, config, observer)
             .map_err(|e| name_terms(spec, e));
     }
     if spec.terms.is_empty() {
-        return mme_core::estimate_with_report(&spec.linear, data, config)
+        return mme_core::estimate_with_observer(&spec.linear, data, config, observer)
             .map_err(|e| name_terms(spec, e));
     }
     let model = nonlinear_model(spec)?;
-    mme_core::estimate_nonlinear_with_report(&model, data, config).map_err(|e| name_terms(spec, e))
+    mme_core::estimate_nonlinear_with_observer(&model, data, config, observer)
+        .map_err(|e| name_terms(spec, e))
 }
 
 /// [`estimate_spec`] for a model already in memory (a linear model with named terms).
@@ -152,11 +165,23 @@ pub fn estimate_term_model(
     data: &Dataset,
     config: &MmeConfig,
 ) -> Result<MmeOutput> {
+    estimate_term_model_observed(model, data, config, &mme_core::NoObserver)
+}
+
+/// [`estimate_term_model`], telling `observer` each step as it runs (see
+/// [`estimate_spec_observed`]).
+pub fn estimate_term_model_observed(
+    model: &sysid_core::TermModel,
+    data: &Dataset,
+    config: &MmeConfig,
+    observer: &dyn mme_core::MmeObserver,
+) -> Result<MmeOutput> {
     if model.terms().is_empty() {
-        return Ok(mme_core::estimate_with_report(
+        return Ok(mme_core::estimate_with_observer(
             model.linear(),
             data,
             config,
+            observer,
         )?);
     }
     let names = model.linear().state_names().to_vec();
@@ -172,7 +197,7 @@ pub fn estimate_term_model(
         })
         .collect();
     let nonlinear = nonlinear_of(model.clone())?;
-    mme_core::estimate_nonlinear_with_report(&nonlinear, data, config)
+    mme_core::estimate_nonlinear_with_observer(&nonlinear, data, config, observer)
         .map_err(|e| with_terms(&described, e))
 }
 
@@ -350,21 +375,36 @@ pub fn estimate_spec_robust(
     config: &MmeConfig,
     robust: &mme_core::RobustConfig,
 ) -> Result<mme_core::RobustOutput> {
+    estimate_spec_robust_observed(spec, data, config, robust, &mme_core::NoObserver)
+}
+
+/// [`estimate_spec_robust`], telling `observer` each step as it runs (see
+/// [`estimate_spec_observed`]).
+pub fn estimate_spec_robust_observed(
+    spec: &ModelSpec,
+    data: &Dataset,
+    config: &MmeConfig,
+    robust: &mme_core::RobustConfig,
+    observer: &dyn mme_core::MmeObserver,
+) -> Result<mme_core::RobustOutput> {
     if spec.mechanics.is_some() {
         let model = nonlinear_physical(spec)?;
-        return mme_core::estimate_nonlinear_robust(&model, data, config, robust)
-            .map_err(|e| name_terms(spec, e));
+        return mme_core::estimate_nonlinear_robust_with_observer(
+            &model, data, config, robust, observer,
+        )
+        .map_err(|e| name_terms(spec, e));
     }
     if spec.terms.is_empty() {
-        return Ok(mme_core::estimate_robust(
+        return Ok(mme_core::estimate_robust_with_observer(
             &spec.linear,
             data,
             config,
             robust,
+            observer,
         )?);
     }
     let model = nonlinear_model(spec)?;
-    mme_core::estimate_nonlinear_robust(&model, data, config, robust)
+    mme_core::estimate_nonlinear_robust_with_observer(&model, data, config, robust, observer)
         .map_err(|e| name_terms(spec, e))
 }
 
@@ -394,6 +434,28 @@ pub fn run_estimate_with(
     robust: Option<&mme_core::RobustConfig>,
     out: &Path,
 ) -> Result<EstimateSummary> {
+    run_estimate_with_progress(
+        data_paths,
+        model_path,
+        opts,
+        robust,
+        out,
+        &crate::progress::NoProgress,
+    )
+}
+
+/// [`run_estimate_with`], reporting MME's steps to `progress` as notes of the task
+/// [`crate::progress::MME_TASK`] ([`crate::progress::MmeProgress`]); the caller reports
+/// the task's start and end (a [`crate::progress::stage`] around this call). The
+/// results do not depend on the sink.
+pub fn run_estimate_with_progress(
+    data_paths: &[PathBuf],
+    model_path: &Path,
+    opts: &EstimateOptions,
+    robust: Option<&mme_core::RobustConfig>,
+    out: &Path,
+    progress: &dyn crate::progress::ProgressSink,
+) -> Result<EstimateSummary> {
     let clock = Instant::now();
     let loaded = crate::model::LoadedModel::read(model_path)?;
     let spec = loaded.spec;
@@ -417,11 +479,16 @@ pub fn run_estimate_with(
         &spec.units,
     )?;
     let read = clock.elapsed().as_secs_f64();
-    let mut outcome = compute_estimate_owned(data, &spec, opts, robust)?;
+    let observer = crate::progress::MmeProgress::new(progress, crate::progress::MME_TASK);
+    let mut outcome = compute_estimate_owned(data, &spec, opts, robust, &observer)?;
     outcome
         .summary
         .phase_seconds
         .insert("read".to_string(), read);
+    progress.report(
+        &crate::progress::Progress::new(crate::progress::MME_TASK, 0, None)
+            .with_stage("writing the results"),
+    );
     write_estimate(&outcome, out)
 }
 
@@ -449,7 +516,21 @@ pub fn compute_estimate(
     opts: &EstimateOptions,
     robust: Option<&mme_core::RobustConfig>,
 ) -> Result<EstimateOutcome> {
-    compute_estimate_owned(data.clone(), spec, opts, robust)
+    compute_estimate_owned(data.clone(), spec, opts, robust, &mme_core::NoObserver)
+}
+
+/// [`compute_estimate`], reporting MME's steps to `progress` as notes of the task
+/// [`crate::progress::MME_TASK`] (see [`run_estimate_with_progress`]). The results do not
+/// depend on the sink.
+pub fn compute_estimate_with_progress(
+    data: &Dataset,
+    spec: &ModelSpec,
+    opts: &EstimateOptions,
+    robust: Option<&mme_core::RobustConfig>,
+    progress: &dyn crate::progress::ProgressSink,
+) -> Result<EstimateOutcome> {
+    let observer = crate::progress::MmeProgress::new(progress, crate::progress::MME_TASK);
+    compute_estimate_owned(data.clone(), spec, opts, robust, &observer)
 }
 
 /// [`compute_estimate`] keeping `data` (no copy of the record).
@@ -458,6 +539,7 @@ fn compute_estimate_owned(
     spec: &ModelSpec,
     opts: &EstimateOptions,
     robust: Option<&mme_core::RobustConfig>,
+    observer: &dyn mme_core::MmeObserver,
 ) -> Result<EstimateOutcome> {
     spec.refuse_acquisition("estimate", Path::new("<model>"))?;
     spec.refuse_uncorrected("estimate", Path::new("<model>"))?;
@@ -468,11 +550,11 @@ fn compute_estimate_owned(
     let config = mme_config(spec, opts);
     let (result, outliers, robust_passes) = match robust {
         Some(r) => {
-            let ro = estimate_spec_robust(spec, &data, &config, r)?;
+            let ro = estimate_spec_robust_observed(spec, &data, &config, r, observer)?;
             (ro.output, ro.outliers, Some(ro.passes))
         }
         None => {
-            let result = estimate_spec(spec, &data, &config)?;
+            let result = estimate_spec_observed(spec, &data, &config, observer)?;
             let outliers = mme_core::screen_outliers(
                 &data,
                 spec.linear.output_names(),

@@ -585,8 +585,9 @@ pub fn compute_fit(
         mme_estimates.push(report);
         Ok(())
     };
-    let mut result = crate::progress::stage(progress, "MME estimate", || {
-        estimate_spec(&spec, data, &config)
+    let mut result = crate::progress::stage(progress, crate::progress::MME_TASK, || {
+        let steps = crate::progress::MmeProgress::new(progress, crate::progress::MME_TASK);
+        crate::estimate::estimate_spec_observed(&spec, data, &config, &steps)
     })?;
     check(MmeStage::Training, &result, data)?;
     let mut update_report = None;

@@ -20,14 +20,17 @@
 //! (the first MME run, four per round up to `--max-rounds`, three after the rounds;
 //! `discovery::workflow::Observer::steps`), shrinking when the rounds stop early, with
 //! the round and step that begins as the [`Progress::stage`] (named by the workflow,
-//! `discovery::workflow::Observer::stage`).
+//! `discovery::workflow::Observer::stage`); the MME runs of a step add their phase and
+//! latest step as the note of that step's report ([`MmeProgress::within`]).
 //!
 //! # Stages
 //!
 //! A task that runs through named stages (discover's steps) says which one is running in
 //! [`Progress::stage`], named by the code that runs it; `done` then counts the stages
 //! finished, so the one running is `done + 1` of `total`. A task without stages is its
-//! own stage (a [`stage`] such as "MME estimate"). A display shows the stage in every
+//! own stage (a [`stage`] such as "network sizing sweep"). An MME estimate ([`MME_TASK`])
+//! runs through the estimator's phases ("noise-variance search", "W search", "final
+//! solve"; [`MmeProgress`]), `total` unknown, its latest step the note. A display shows the stage in every
 //! line, also in the "still running" line of a step that reports nothing for a while
 //! ([`Progress::running_line`]).
 //!
@@ -169,6 +172,191 @@ impl<F: Fn(&Progress) + Sync> ProgressSink for F {
     }
 }
 
+/// The task name of an MME estimate's reports ([`stage`] and [`MmeProgress`]).
+pub const MME_TASK: &str = "MME estimate";
+
+/// An MME estimate's steps (`mme_core::observe`) as reports of one task: the phase
+/// running ("noise-variance search", "W search", "final solve", after a robust pass
+/// "robust pass 2 of at most 30: W search") as the [`Progress::stage`], `done` counting
+/// the phases finished, and the latest step as the note: "trial 7 of at most 80: ratio
+/// 1.34 (target 1)", "Gauss–Newton iteration 3 of at most 50: J 412.7, relative change
+/// 2.1e-4 (converged below 1e-10)", "likelihood evaluation 17, −2 log L 1.234e3 (the
+/// search has no fixed count)". A fraction where the estimator has a bound, words where
+/// it has none. Observing changes nothing the estimate computes.
+///
+/// Pass it to `mmenn::estimate::estimate_spec_observed` inside a [`stage`] of the same
+/// task, which reports the start and the end. An estimate that is one step of a larger
+/// task (discover's MME runs) reports [`MmeProgress::within`] that task's latest report
+/// instead, the phase and step as its note ("MME W search: W trial 3 of at most 80: …").
+pub struct MmeProgress<'a> {
+    sink: &'a dyn ProgressSink,
+    task: &'a str,
+    /// The report of the enclosing task that the estimate's notes go into, if any.
+    frame: Option<&'a (dyn Fn() -> Progress + Sync)>,
+    state: std::sync::Mutex<MmeSeen>,
+}
+
+/// What [`MmeProgress`] has seen of the estimate so far.
+#[derive(Default)]
+struct MmeSeen {
+    /// The phase running, if one was announced.
+    phase: Option<mme_core::MmePhase>,
+    /// Phases announced.
+    phases: usize,
+    /// `W` trials finished in the phase running.
+    trials: usize,
+    /// Robust passes finished, and the most there may be.
+    passes: Option<(usize, usize)>,
+}
+
+impl<'a> MmeProgress<'a> {
+    /// Reports of `task` (usually [`MME_TASK`]) to `sink`.
+    pub fn new(sink: &'a dyn ProgressSink, task: &'a str) -> Self {
+        Self {
+            sink,
+            task,
+            frame: None,
+            state: std::sync::Mutex::new(MmeSeen::default()),
+        }
+    }
+
+    /// Reports of an estimate that is a step of another task: each is `frame()` (that
+    /// task's latest report) with the estimate's phase and step as the note.
+    pub fn within(sink: &'a dyn ProgressSink, frame: &'a (dyn Fn() -> Progress + Sync)) -> Self {
+        Self {
+            sink,
+            task: "",
+            frame: Some(frame),
+            state: std::sync::Mutex::new(MmeSeen::default()),
+        }
+    }
+}
+
+/// A number for a progress note: three decimals between 1e-3 and 1e4, else three
+/// significant digits with an exponent; trailing zeros dropped ("1", "0.42", "1e-10").
+fn short(x: f64) -> String {
+    let trim = |s: &str| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s.to_string()
+        }
+    };
+    if x == 0.0 || !x.is_finite() || (1e-3..1e4).contains(&x.abs()) {
+        trim(&format!("{x:.3}"))
+    } else {
+        let s = format!("{x:.2e}");
+        match s.split_once('e') {
+            Some((mantissa, exponent)) => format!("{}e{exponent}", trim(mantissa)),
+            None => s,
+        }
+    }
+}
+
+impl mme_core::MmeObserver for MmeProgress<'_> {
+    fn event(&self, event: &mme_core::MmeEvent) {
+        use mme_core::{MmeEvent, MmePhase};
+        let Ok(mut seen) = self.state.lock() else {
+            return;
+        };
+        let note = match *event {
+            MmeEvent::Phase(phase) => {
+                seen.phase = Some(phase);
+                seen.phases += 1;
+                seen.trials = 0;
+                String::new()
+            }
+            MmeEvent::WTrial {
+                trial,
+                max_trials,
+                ratio,
+                target,
+                ..
+            } => {
+                seen.trials = trial;
+                let what = match seen.phase {
+                    Some(MmePhase::NoiseVariance) => "covariance-constraint start, W trial",
+                    _ => "W trial",
+                };
+                format!(
+                    "{what} {trial} of at most {max_trials}: ratio {} (target {})",
+                    short(ratio),
+                    short(target)
+                )
+            }
+            MmeEvent::NoiseStep {
+                evaluation,
+                neg2_log_likelihood,
+            } => format!(
+                "likelihood evaluation {evaluation}, −2 log L {} (the search has no fixed count)",
+                short(neg2_log_likelihood)
+            ),
+            MmeEvent::Iteration {
+                iteration,
+                max_iterations,
+                cost,
+                relative_change,
+                tolerance,
+            } => {
+                let of = match seen.phase {
+                    Some(MmePhase::WeightSearch) => format!("W trial {}, ", seen.trials + 1),
+                    _ => String::new(),
+                };
+                format!(
+                    "{of}Gauss–Newton iteration {iteration} of at most {max_iterations}: J {}, \
+                     relative change {} (converged below {})",
+                    short(cost),
+                    short(relative_change),
+                    short(tolerance)
+                )
+            }
+            MmeEvent::RobustPass {
+                pass,
+                max_passes,
+                moved,
+                tolerance,
+            } => {
+                seen.passes = Some((pass, max_passes));
+                seen.phase = None;
+                format!(
+                    "robust pass {pass} of at most {max_passes} done: pseudo-observations \
+                     moved up to {} σ (settled below {} σ)",
+                    short(moved),
+                    short(tolerance)
+                )
+            }
+            _ => return,
+        };
+        let phase = match seen.phase {
+            Some(MmePhase::NoiseVariance) => "noise-variance search",
+            Some(MmePhase::WeightSearch) => "W search",
+            Some(MmePhase::FinalSolve) => "final solve",
+            _ => "",
+        };
+        let stage = match (seen.passes, phase) {
+            (Some((done, max)), "") => format!("robust pass {done} of at most {max}"),
+            (Some((done, max)), p) => format!("robust pass {} of at most {max}: {p}", done + 1),
+            (None, p) => p.to_string(),
+        };
+        let done = seen.phases.saturating_sub(1);
+        drop(seen);
+        let report = match self.frame {
+            Some(frame) => {
+                let note = match (stage.is_empty(), note.is_empty()) {
+                    (true, _) => note,
+                    (false, true) => format!("MME {stage}"),
+                    (false, false) => format!("MME {stage}: {note}"),
+                };
+                frame().with_note(note)
+            }
+            None => Progress::new(self.task, done, None)
+                .with_stage(stage)
+                .with_note(note),
+        };
+        self.sink.report(&report);
+    }
+}
+
 /// Report a task's start, run it, and report its end whether it succeeded or not.
 pub fn stage<T>(sink: &dyn ProgressSink, task: &str, job: impl FnOnce() -> T) -> T {
     sink.report(&Progress::new(task, 0, None));
@@ -238,6 +426,24 @@ mod tests {
             "network sizing sweep: 3 of 12 done  4 hidden"
         );
         assert_eq!(counted.message(), "4 hidden");
+    }
+
+    #[test]
+    fn notes_write_numbers_short() {
+        let cases = [
+            (1.0, "1"),
+            (0.42, "0.42"),
+            (1.0134, "1.013"),
+            (2499.855, "2499.855"),
+            (1e-10, "1e-10"),
+            (3.164e-6, "3.16e-6"),
+            (123_456.0, "1.23e5"),
+            (f64::INFINITY, "inf"),
+            (0.0, "0"),
+        ];
+        for (x, text) in cases {
+            assert_eq!(short(x), text, "{x}");
+        }
     }
 
     #[test]

@@ -259,9 +259,9 @@ fn band_limited_input_needs_the_first_order_hold() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// One recorded event: task, done, total, stage, and the "still running" line a display
-/// would print after this report.
-type Event = (String, usize, Option<usize>, String, String);
+/// One recorded event: task, done, total, stage, the "still running" line a display
+/// would print after this report, and the note.
+type Event = (String, usize, Option<usize>, String, String, String);
 
 /// Records progress reports and task ends, in order.
 #[derive(Default)]
@@ -275,6 +275,7 @@ impl mmenn::progress::ProgressSink for Recorder {
             p.total,
             p.stage.clone(),
             p.running_line(5.0),
+            p.note.clone(),
         ));
     }
     fn finish(&self, task: &str) {
@@ -282,6 +283,7 @@ impl mmenn::progress::ProgressSink for Recorder {
             format!("finished {task}"),
             0,
             None,
+            String::new(),
             String::new(),
             String::new(),
         ));
@@ -324,8 +326,30 @@ fn discover_reports_its_steps_against_a_known_total() {
     )
     .unwrap();
     let events = rec.0.into_inner().unwrap();
-    let (last, reports) = events.split_last().unwrap();
+    let (last, all) = events.split_last().unwrap();
     assert_eq!(last.0, "finished discover", "{events:?}");
+    // MME's steps within a workflow step come as notes on that step's report: the same
+    // task, count and stage as the step report before them.
+    let mut step: Option<&Event> = None;
+    let mut notes = Vec::new();
+    for e in all {
+        if e.5.is_empty() {
+            step = Some(e);
+            continue;
+        }
+        let at = step.expect("an MME note before any step report");
+        assert_eq!(&e.0[..], &at.0[..]);
+        assert_eq!((e.1, e.2, &e.3), (at.1, at.2, &at.3), "{e:?} after {at:?}");
+        assert!(e.5.starts_with("MME "), "{e:?}");
+        notes.push(e.5.as_str());
+    }
+    assert!(
+        notes
+            .iter()
+            .any(|n| n.starts_with("MME W search: W trial 1 of at most ")),
+        "{notes:?}"
+    );
+    let reports: Vec<Event> = all.iter().filter(|e| e.5.is_empty()).cloned().collect();
     assert!(reports.len() >= 6, "{events:?}");
     let planned = 1
         + opts.workflow.max_rounds * mmenn::discovery::workflow::STEPS_PER_ROUND
@@ -339,7 +363,7 @@ fn discover_reports_its_steps_against_a_known_total() {
         format!("discover: round 1: noise floor of d̂ (step 2 of {planned}), running for 5 s")
     );
     let mut prev = 0;
-    for (task, done, total, stage, line) in reports {
+    for (task, done, total, stage, line, _) in &reports {
         assert!(line.contains(stage.as_str()), "{events:?}");
         assert_eq!(task, mmenn::discover::DISCOVER_TASK);
         let total = total.expect("a known total");

@@ -34,13 +34,13 @@ term = "sin(theta)"
 coefficient = -19.62
 "#;
 
-fn spec() -> ModelSpec {
+pub(crate) fn spec() -> ModelSpec {
     mmenn::model_file::parse_model(Path::new("pendulum.toml"), PENDULUM).unwrap()
 }
 
 /// 400 samples at 0.02 s of the pendulum with quadratic drag (RK4, 16 sub-steps), from
 /// θ = 1 rad, the angle with a deterministic ±0.01 rad pseudo-noise.
-fn record() -> Dataset {
+pub(crate) fn record() -> Dataset {
     const DT: f64 = 0.02;
     const LEN: usize = 400;
     const SUB: usize = 16;

@@ -13,6 +13,7 @@ mod fit_mme_convergence;
 mod greyest;
 mod greyest_starts;
 mod hidden_effects;
+mod mme_progress;
 mod mme_ratio_band;
 mod model;
 mod monitor;

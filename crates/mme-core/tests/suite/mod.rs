@@ -10,6 +10,7 @@ mod limits;
 mod msd;
 mod noise;
 mod nonlinear;
+mod observer;
 mod prior;
 mod robust;
 mod start;

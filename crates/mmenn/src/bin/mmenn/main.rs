@@ -266,14 +266,15 @@ fn estimate(args: EstimateArgs, force: bool, progress: &Reporter) -> Result<()> 
     let staged = stage(&args.out, "estimate", force, &inputs)?;
     let data = prepared(&args.data, &args.prep, staged.path())?;
     let robust = args.robust.then(mmenn::mme_core::RobustConfig::default);
-    // One spinner for the whole job (the W search inside mme-core reports no steps yet).
-    let s = mmenn::progress::stage(progress, "MME estimate", || {
-        mmenn::estimate::run_estimate_with(
+    // One task for the whole job; MME's phases and steps show as its stage and note.
+    let s = mmenn::progress::stage(progress, mmenn::progress::MME_TASK, || {
+        mmenn::estimate::run_estimate_with_progress(
             &data,
             &args.model,
             &opts,
             robust.as_ref(),
             staged.path(),
+            progress,
         )
         .map_err(anyhow::Error::from)
     })?;

@@ -20,8 +20,8 @@ enum Shown {
 /// Progress on stderr: an `indicatif` bar with ETA on a terminal; otherwise a plain line
 /// every few seconds of a task's progress reports (a task shorter than that prints
 /// nothing, so a failing command's stderr stays its one error line), and for a step
-/// that reports nothing while it runs (a `stage`, such as MME's `W` search, or a long
-/// step of discover) a line from a watcher thread every few seconds saying which stage it
+/// that reports nothing while it runs (a `stage`, a long step of discover, or a long
+/// Gauss–Newton iteration of MME) a line from a watcher thread every few seconds saying which stage it
 /// is in and how long it has been running ([`mmenn::progress::Progress::running_line`]);
 /// nothing with `--quiet`.
 pub(crate) struct Reporter {
