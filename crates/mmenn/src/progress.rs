@@ -136,13 +136,22 @@ impl Progress {
     /// The line for a task whose last report was this one and that has been running for
     /// `seconds` without another: it names the stage ("discover: round 1: free-run search
     /// over the catalogue (step 4 of 15), running for 35 s"); a task without stages is
-    /// its own ("MME estimate: running for 35 s", with "3 of 12 done" when counted).
+    /// its own ("MME estimate: running for 35 s", with "3 of 12 done" when counted); the
+    /// latest note follows in brackets ("MME estimate: W search (W trial 7 of at most 80:
+    /// ratio 1.013 (target 1)), running for 35 s").
     pub fn running_line(&self, seconds: f64) -> String {
         let position = self.position();
+        let note = if self.note.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", self.note)
+        };
         let at = if !position.is_empty() {
-            format!("{position}, ")
+            format!("{position}{note}, ")
         } else if let Some(n) = self.total.filter(|_| self.done > 0) {
-            format!("{} of {n} done, ", self.done)
+            format!("{} of {n} done{note}, ", self.done)
+        } else if !self.note.is_empty() {
+            format!("{}, ", self.note)
         } else {
             String::new()
         };
@@ -419,8 +428,18 @@ mod tests {
         let counted = Progress::new("network sizing sweep", 3, Some(12)).with_note("4 hidden");
         assert_eq!(
             counted.running_line(61.0),
-            "network sizing sweep: 3 of 12 done, running for 61 s"
+            "network sizing sweep: 3 of 12 done (4 hidden), running for 61 s"
         );
+        // The latest note in brackets after the stage, or alone.
+        let staged = Progress::new("MME estimate", 0, None)
+            .with_stage("W search")
+            .with_note("W trial 7 of at most 80: ratio 1.013 (target 1)");
+        assert_eq!(
+            staged.running_line(35.0),
+            "MME estimate: W search (W trial 7 of at most 80: ratio 1.013 (target 1)), running for 35 s"
+        );
+        let noted = Progress::new("job", 0, None).with_note("warming up");
+        assert_eq!(noted.running_line(5.0), "job: warming up, running for 5 s");
         assert_eq!(
             counted.line(),
             "network sizing sweep: 3 of 12 done  4 hidden"
