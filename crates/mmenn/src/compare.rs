@@ -152,6 +152,10 @@ pub struct LinearSsStructure {
     pub samples: usize,
     /// State-initialisation window of the fit (samples): the error is summed after it.
     pub fit_window: usize,
+    /// Whether an input bias was fitted on top of the record mean (first try); `false`
+    /// when that fit failed and the fit without it did not ([`LinearSsStructure::choice`]
+    /// then says why).
+    pub input_bias: bool,
     /// Chosen order (`None`: not fitted).
     pub order: Option<usize>,
     /// Every order tried, with its held-out free-run RMSE.
@@ -695,27 +699,51 @@ fn fit_linear_ss_row(
         max_order: config.max_order,
         samples,
         fit_window: config.window,
+        input_bias: config.fit_input_offset,
         order: None,
         candidates: Vec::new(),
         singular_values: Vec::new(),
         poles: Vec::new(),
         choice: String::new(),
     };
+    // With the input bias the free-run refinement can find it (or a numerator) not
+    // identifiable on a short record; the fit without it is then tried, and the choice
+    // says so.
+    let mut without_bias = None;
+    // Err: the reason of the failure (the row's).
     let fitted = stage(progress, "linear SS fit", || {
-        let first = data.window(0, 0, samples).map_err(|source| MmennError::Core {
-            context: "the first estimation record of the linear state-space fit",
-            source,
-        })?;
-        Ok::<_, MmennError>(fit_linear_ss(&first, &config)?)
+        let first = data
+            .window(0, 0, samples)
+            .map_err(|e| format!("the first estimation record: {}", with_causes(&e)))?;
+        fit_linear_ss(&first, &config).or_else(|e| {
+            let why = with_causes(&e);
+            without_bias = Some(why.clone());
+            let plain = LinearSsConfig {
+                fit_input_offset: false,
+                ..config.clone()
+            };
+            fit_linear_ss(&first, &plain).map_err(|e2| {
+                format!(
+                    "with an input bias: {why}; without one: {}",
+                    with_causes(&e2)
+                )
+            })
+        })
     });
     match fitted {
         Ok(f) => {
+            if let Some(why) = &without_bias {
+                structure.input_bias = false;
+                structure.choice = format!(
+                    "without an input bias (the fit with one failed: {why}); "
+                );
+            }
             let held = |c: &OrderCandidate| match (c.refined_rmse, &c.failure) {
                 (Some(r), _) => format!("n = {}: {r:.4e}", c.order),
                 (None, Some(why)) => format!("n = {}: failed ({why})", c.order),
                 (None, None) => format!("n = {}: diverged", c.order),
             };
-            structure.choice = format!(
+            structure.choice += &format!(
                 "n = {}: the smallest order whose free-run RMSE on the held-out last {:.0} % of \
                  the first estimation record (after a fit on the rest, state from its first {} \
                  samples) is within {:.0} % of the best order's ({}); then refined on the whole \
@@ -733,8 +761,7 @@ fn fit_linear_ss_row(
             structure.poles = f.model.poles();
             (structure, Some(f.model))
         }
-        Err(e) => {
-            let reason = with_causes(&e);
+        Err(reason) => {
             structure.choice = format!("not fitted: {reason}");
             failures.push(Failure {
                 model: structure.label.clone(),
