@@ -1,5 +1,9 @@
-//! `mmenn compare`: the assumed model, a linear output-error model, a NARX network, a
-//! polynomial NARX model ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
+//! `mmenn compare`: the assumed model, a linear output-error model (the model file's own
+//! `A`, `B` refitted), a black-box linear state-space model ([`LINEAR_SS_ROW`]: PO-MOESP
+//! subspace start, free-run output-error refinement, order up to
+//! [`CompareOptions::ss_max_order`] chosen on the held-out end of the first estimation
+//! record, [`sysid_baselines::fit_linear_ss`]; MATLAB's `n4sid` then `pem`), a NARX
+//! network, a polynomial NARX model ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
 //! [`PolyNarxChoice::degree`] of the newest lags, one-step least squares, refined by
 //! free-run error with [`Focus::Simulation`]; off with
 //! `poly_narx: None`) and the MME/NN hybrid model judged the same way on the same data
@@ -17,11 +21,15 @@
 //! Every state-space row (assumed model, given model, linear OE, MME/NN) is judged by the
 //! one free-run judge of `sysid-core` on the first record of each dataset: initial state
 //! fitted to the first `x0_window` samples, every sample scored; each table's title states
-//! the record length and the window. NARX and polynomial NARX start from their first
-//! measured delay window, which they do not score. A NARX or polynomial NARX model whose
-//! free run leaves its divergence limits on a dataset has no row in that dataset's table
-//! (a [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on. [`compute_compare`]
-//! returns everything as values; [`write_compare`] writes the files.
+//! the record length and the window. The linear SS row is discrete-time and judged by the
+//! same rule (its state by least squares on the first `x0_window` outputs, every sample
+//! scored by the judge's scoring). It is SISO and fitted on the first estimation record; a
+//! terms-only model file (zero `A`, `B`), which has no linear OE row, still gets it.
+//! NARX and polynomial NARX start from their first measured delay window, which they do
+//! not score. A linear SS, NARX or polynomial NARX model whose free run fails on a dataset
+//! (leaves its divergence limits, or has no measured initial window) has no row in that
+//! dataset's table (a [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on.
+//! [`compute_compare`] returns everything as values; [`write_compare`] writes the files.
 
 use std::path::{Path, PathBuf};
 
@@ -321,12 +329,13 @@ fn judge_linear_ss(
     };
     let run = judged.simulate(exp)?;
     let names = data.output_names();
-    let scored = sysid_core::score_rows(&names, exp.outputs(), &run.outputs, 0).map_err(
-        |source| MmennError::Core {
-            context: "scoring the linear state-space model's free run",
-            source,
-        },
-    )?;
+    let scored =
+        sysid_core::score_rows(&names, exp.outputs(), &run.outputs, 0).map_err(|source| {
+            MmennError::Core {
+                context: "scoring the linear state-space model's free run",
+                source,
+            }
+        })?;
     let channels = names
         .into_iter()
         .filter_map(|name| {
@@ -567,11 +576,7 @@ fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<
             )],
             bands: vec![("99 % band".into(), c.bound99)],
         };
-        let file = format!(
-            "residual_acf_{}_{}.svg",
-            file_tag(label),
-            ch.output
-        );
+        let file = format!("residual_acf_{}_{}.svg", file_tag(label), ch.output);
         fig.write(&out.join(&file))?;
         files.push(file);
         for x in &ch.cross {
@@ -734,9 +739,8 @@ fn fit_linear_ss_row(
         Ok(f) => {
             if let Some(why) = &without_bias {
                 structure.input_bias = false;
-                structure.choice = format!(
-                    "without an input bias (the fit with one failed: {why}); "
-                );
+                structure.choice =
+                    format!("without an input bias (the fit with one failed: {why}); ");
             }
             let held = |c: &OrderCandidate| match (c.refined_rmse, &c.failure) {
                 (Some(r), _) => format!("n = {}: {r:.4e}", c.order),
@@ -776,8 +780,9 @@ fn fit_linear_ss_row(
 /// `mmenn compare` without files: fit every model on `data` and judge each free-run on
 /// the first record of `data` and of `val`. State-space models (the assumed model, the
 /// given model, the output-error fit, MME/NN) are judged by the one judge (initial state
-/// fitted to the first `x0_window` samples, every sample scored); NARX starts from its
-/// first measured delay window, which it does not score.
+/// fitted to the first `x0_window` samples, every sample scored), the linear SS model by
+/// the same rule; NARX starts from its first measured delay window, which it does not
+/// score.
 pub fn compute_compare(
     data: &Dataset,
     loaded: &LoadedModel,
@@ -935,9 +940,7 @@ pub fn compute_compare_with_progress(
     let models = Models {
         assumed: &lin,
         oe: oe_model.as_ref(),
-        ss: ss_model
-            .as_ref()
-            .map(|m| (m, ss_structure.label.as_str())),
+        ss: ss_model.as_ref().map(|m| (m, ss_structure.label.as_str())),
         narx: narx.as_ref(),
         poly: poly.as_ref(),
         given,
@@ -1005,10 +1008,7 @@ pub fn compute_compare_with_progress(
             residual_analysis(oe, res_data, 0, Horizon::FreeRun, &rc),
         );
     }
-    if let Some(ss) = ss_model
-        .as_ref()
-        .filter(|_| ran(&ss_structure.label))
-    {
+    if let Some(ss) = ss_model.as_ref().filter(|_| ran(&ss_structure.label)) {
         // The judge's window on the analysed record; the residuals skip it.
         let len = res_data.experiments()[0].len();
         let judged = LinearSsModel {

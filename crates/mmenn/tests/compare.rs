@@ -288,7 +288,9 @@ const SS_SIGMA: f64 = 0.02;
 /// samples, `e` white Gaussian noise of σ = [`SS_SIGMA`], sample time 0.1 s. A small
 /// linear congruential generator and Box–Muller draw both (`seed` picks the stream).
 fn second_order_csv(samples: usize, seed: u64) -> String {
-    let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    let mut state = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     let mut uniform = move || {
         state = state
             .wrapping_mul(6364136223846793005)
@@ -392,7 +394,11 @@ noise_variance = [0.0004]
         "validation RMSE {} vs σ {SS_SIGMA}",
         val_m.rmse
     );
-    assert!(est_m.rmse < 1.15 * SS_SIGMA, "estimation RMSE {}", est_m.rmse);
+    assert!(
+        est_m.rmse < 1.15 * SS_SIGMA,
+        "estimation RMSE {}",
+        est_m.rmse
+    );
     assert!(val_m.fit_percent > 95.0, "fit {} %", val_m.fit_percent);
     // The order choice: order 1 is far off on the held-out part, order 2 at the noise.
     let held = |n: usize| {
@@ -403,21 +409,37 @@ noise_variance = [0.0004]
             .unwrap()
     };
     assert!(held(1) > 3.0 * held(2), "{}", ss.choice);
-    assert!(ss.choice.starts_with("n = 2: the smallest order"), "{}", ss.choice);
+    assert!(
+        ss.choice.starts_with("n = 2: the smallest order"),
+        "{}",
+        ss.choice
+    );
     // Threaded through like the other rows.
     assert!(s.residuals.iter().any(|(l, _)| l == &ss.label));
-    assert!(s.initialisation.iter().any(|(l, how)| l == &ss.label
-        && how.contains("first 200 measured outputs")));
+    assert!(
+        s.initialisation
+            .iter()
+            .any(|(l, how)| l == &ss.label && how.contains("first 200 measured outputs"))
+    );
     let out = dir.join("cmp");
-    assert!(out.join("residual_acf_linear_SS_subspace_OE_n_2_y.svg").exists());
+    assert!(
+        out.join("residual_acf_linear_SS_subspace_OE_n_2_y.svg")
+            .exists()
+    );
     let figure = std::fs::read_to_string(out.join("compare_validation_y.svg")).unwrap();
-    assert!(figure.contains("linear SS (subspace + OE, n = 2) (fit"), "no legend entry");
+    assert!(
+        figure.contains("linear SS (subspace + OE, n = 2) (fit"),
+        "no legend entry"
+    );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("compare.json")).unwrap()).unwrap();
     assert_eq!(json["linear_ss"]["order"], 2);
     assert_eq!(json["linear_ss"]["max_order"], 6);
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
-    assert!(report.contains("| linear SS (subspace + OE, n = 2) | y | "), "{report}");
+    assert!(
+        report.contains("| linear SS (subspace + OE, n = 2) | y | "),
+        "{report}"
+    );
     assert!(report.contains("Linear SS (black box"), "{report}");
 
     // The same options on the same records: the same bits.
@@ -429,7 +451,9 @@ noise_variance = [0.0004]
             .0
     };
     let (est_d, val_d) = (read("est.csv"), read("val.csv"));
-    let again = compute_compare(&est_d, &loaded, Some(&val_d), &opts).unwrap().summary;
+    let again = compute_compare(&est_d, &loaded, Some(&val_d), &opts)
+        .unwrap()
+        .summary;
     let again_val = metrics(again.validation.as_ref().unwrap(), &ss.label);
     assert_eq!(again.linear_ss, s.linear_ss);
     assert_eq!(

@@ -674,7 +674,8 @@ fn compare_says_why_a_terms_only_model_has_no_linear_oe_and_gives_linear_ss() {
     // says so; it has a finite fit on the record (the only failure is the OE's).
     // Measured: order 2, estimation fit 93.29 % (NARX 94.25 %).
     assert!(
-        oe.reason.contains("'linear SS (subspace + OE, n = …)' row is the linear baseline"),
+        oe.reason
+            .contains("'linear SS (subspace + OE, n = …)' row is the linear baseline"),
         "{}",
         oe.reason
     );

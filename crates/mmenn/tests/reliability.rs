@@ -1167,7 +1167,12 @@ fn cli_ss_max_order_reaches_compare_and_zero_is_refused() {
     std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
     std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
     for max in [1_u64, 3] {
-        let json = compare_json_with(&dir, &format!("o-{max}"), "--ss-max-order", &max.to_string());
+        let json = compare_json_with(
+            &dir,
+            &format!("o-{max}"),
+            "--ss-max-order",
+            &max.to_string(),
+        );
         let ss = &json["linear_ss"];
         assert_eq!(ss["max_order"].as_u64(), Some(max), "{ss}");
         let orders: Vec<u64> = ss["candidates"]
