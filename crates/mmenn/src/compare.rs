@@ -1,5 +1,9 @@
-//! `mmenn compare`: the assumed model, a linear output-error model, a NARX network, a
-//! polynomial NARX model ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
+//! `mmenn compare`: the assumed model, a linear output-error model (the model file's own
+//! `A`, `B` refitted), a black-box linear state-space model ([`LINEAR_SS_ROW`]: PO-MOESP
+//! subspace start, free-run output-error refinement, order up to
+//! [`CompareOptions::ss_max_order`] chosen on the held-out end of the first estimation
+//! record, [`sysid_baselines::fit_linear_ss`]; MATLAB's `n4sid` then `pem`), a NARX
+//! network, a polynomial NARX model ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
 //! [`PolyNarxChoice::degree`] of the newest lags, one-step least squares, refined by
 //! free-run error with [`Focus::Simulation`]; off with
 //! `poly_narx: None`) and the MME/NN hybrid model judged the same way on the same data
@@ -17,11 +21,15 @@
 //! Every state-space row (assumed model, given model, linear OE, MME/NN) is judged by the
 //! one free-run judge of `sysid-core` on the first record of each dataset: initial state
 //! fitted to the first `x0_window` samples, every sample scored; each table's title states
-//! the record length and the window. NARX and polynomial NARX start from their first
-//! measured delay window, which they do not score. A NARX or polynomial NARX model whose
-//! free run leaves its divergence limits on a dataset has no row in that dataset's table
-//! (a [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on. [`compute_compare`]
-//! returns everything as values; [`write_compare`] writes the files.
+//! the record length and the window. The linear SS row is discrete-time and judged by the
+//! same rule (its state by least squares on the first `x0_window` outputs, every sample
+//! scored by the judge's scoring). It is SISO and fitted on the first estimation record; a
+//! terms-only model file (zero `A`, `B`), which has no linear OE row, still gets it.
+//! NARX and polynomial NARX start from their first measured delay window, which they do
+//! not score. A linear SS, NARX or polynomial NARX model whose free run fails on a dataset
+//! (leaves its divergence limits, or has no measured initial window) has no row in that
+//! dataset's table (a [`Failure`] at [`FailedAt::FreeRun`]) and the comparison goes on.
+//! [`compute_compare`] returns everything as values; [`write_compare`] writes the files.
 
 use std::path::{Path, PathBuf};
 
@@ -29,9 +37,10 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 pub use sysid_baselines::poly_narx::Focus;
 use sysid_baselines::{
-    EvaluationTable, NarxConfig, NarxModel, NarxOrders, OeConfig, OeModel, PolyNarxConfig,
-    PolyNarxModel, ResidualAnalysis, ResidualConfig, SuggestionConfig, evaluate, fit_narx, fit_oe,
-    fit_poly_narx, predictions, residual_analysis, suggest_lags,
+    EvaluationTable, LinearSsConfig, LinearSsModel, NarxConfig, NarxModel, NarxOrders, OeConfig,
+    OeModel, OrderCandidate, PolyNarxConfig, PolyNarxModel, ResidualAnalysis, ResidualConfig,
+    SuggestionConfig, evaluate, fit_linear_ss, fit_narx, fit_oe, fit_poly_narx, predictions,
+    residual_analysis, suggest_lags,
 };
 use sysid_core::{
     Dataset, Experiment, Horizon, InitialRule, JudgeOptions, Judgement, LinearModel, Model,
@@ -56,6 +65,10 @@ pub const GIVEN_MODEL_ROW: &str = "given model";
 
 /// Row label of the polynomial NARX model.
 pub const POLY_NARX_ROW: &str = "polynomial NARX";
+
+/// Start of the linear state-space row's label; the full label names the chosen order,
+/// e.g. `linear SS (subspace + OE, n = 2)` ([`LinearSsStructure::label`]).
+pub const LINEAR_SS_ROW: &str = "linear SS (subspace + OE";
 
 /// Where a model fell out of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -135,6 +148,36 @@ pub struct PolyNarxStructure {
     pub rank: Option<usize>,
 }
 
+/// The linear state-space row of `compare` (MATLAB's `n4sid` then `pem`): PO-MOESP
+/// subspace initialisation, free-run output-error refinement, the order chosen on a
+/// held-out part of the first estimation record ([`sysid_baselines::fit_linear_ss`]).
+/// In `compare.json` and the report.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LinearSsStructure {
+    /// Row label (with the chosen order; without it when the fit failed).
+    pub label: String,
+    /// Largest order tried.
+    pub max_order: usize,
+    /// Samples of the record it was fitted on (the first estimation record).
+    pub samples: usize,
+    /// State-initialisation window of the fit (samples): the error is summed after it.
+    pub fit_window: usize,
+    /// Whether an input bias was fitted on top of the record mean (first try); `false`
+    /// when that fit failed and the fit without it did not ([`LinearSsStructure::choice`]
+    /// then says why).
+    pub input_bias: bool,
+    /// Chosen order (`None`: not fitted).
+    pub order: Option<usize>,
+    /// Every order tried, with its held-out free-run RMSE.
+    pub candidates: Vec<OrderCandidate>,
+    /// MOESP singular values on the fitting part, relative to the largest.
+    pub singular_values: Vec<f64>,
+    /// Poles of the fitted model, `(re, im)` (discrete time).
+    pub poles: Vec<(f64, f64)>,
+    /// Why this order: the rule and each candidate's held-out RMSE, in words.
+    pub choice: String,
+}
+
 /// Options of [`run_compare`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct CompareOptions {
@@ -150,6 +193,10 @@ pub struct CompareOptions {
     pub oe_free: Option<Vec<String>>,
     /// The polynomial NARX row (same delays as NARX); `None` = no such row.
     pub poly_narx: Option<PolyNarxChoice>,
+    /// Largest order the linear state-space row tries (orders 1 to this, the smallest
+    /// within 2 % of the best held-out free-run RMSE is kept). Default 6
+    /// ([`LinearSsConfig`]'s).
+    pub ss_max_order: usize,
 }
 
 impl Default for CompareOptions {
@@ -160,6 +207,7 @@ impl Default for CompareOptions {
             max_narx_lag: 10,
             oe_free: None,
             poly_narx: Some(PolyNarxChoice::default()),
+            ss_max_order: LinearSsConfig::default().max_order,
         }
     }
 }
@@ -176,6 +224,8 @@ pub struct CompareSummary {
     pub narx_orders: NarxOrders,
     /// The polynomial NARX model (same delays), when asked for.
     pub poly_narx: Option<PolyNarxStructure>,
+    /// The linear state-space model (order and how it was chosen).
+    pub linear_ss: LinearSsStructure,
     /// Output-error parameters with ±1σ.
     pub oe_parameters: Vec<sysid_baselines::ParameterEstimate>,
     /// Why the output-error fit failed, when it did (it then has no row).
@@ -268,6 +318,45 @@ fn judge_delay_line<M: Model>(
     Ok((ev, p.swap_remove(0).outputs))
 }
 
+/// The linear state-space model judged as the state-space rows are, on the first record of
+/// `data`: its state fitted by least squares to the first `window` measured outputs (fewer
+/// on a shorter record), a free run over the whole record, every sample scored. Returns
+/// the evaluation and its outputs on that record.
+fn judge_linear_ss(
+    model: &LinearSsModel,
+    data: &Dataset,
+    window: usize,
+) -> Result<(sysid_baselines::Evaluation, DMatrix<f64>)> {
+    let exp = &data.experiments()[0];
+    let judged = LinearSsModel {
+        window: window.min(exp.len()).max(1),
+        ..model.clone()
+    };
+    let run = judged.simulate(exp)?;
+    let names = data.output_names();
+    let scored =
+        sysid_core::score_rows(&names, exp.outputs(), &run.outputs, 0).map_err(|source| {
+            MmennError::Core {
+                context: "scoring the linear state-space model's free run",
+                source,
+            }
+        })?;
+    let channels = names
+        .into_iter()
+        .filter_map(|name| {
+            scored
+                .get(&name)
+                .map(|m| sysid_baselines::ChannelEvaluation { metrics: *m, name })
+        })
+        .collect();
+    let ev = sysid_baselines::Evaluation {
+        horizon: Horizon::FreeRun,
+        channels,
+        initial_samples: 0,
+    };
+    Ok((ev, run.outputs))
+}
+
 /// An error and each cause its message does not already hold, joined by ": " (e.g. a
 /// model's failure on a record and the divergence that caused it).
 fn with_causes(e: &dyn std::error::Error) -> String {
@@ -288,6 +377,8 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 struct Models<'a> {
     assumed: &'a LinearModel,
     oe: Option<&'a OeModel>,
+    /// The linear state-space model and its row label.
+    ss: Option<(&'a LinearSsModel, &'a str)>,
     narx: Option<&'a NarxModel>,
     poly: Option<&'a PolyNarxModel>,
     given: Option<&'a LoadedModel>,
@@ -321,8 +412,8 @@ fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> R
         let j = judge_linear(&oe.model, data, models.window)?;
         push("linear OE", &j, &mut runs)?;
     }
-    // A delay-line model's free run can leave its limits on data its fit did not see:
-    // that model has no row here, and the comparison goes on.
+    // A black-box model's free run can leave its limits (or find no initial window) on
+    // data its fit did not see: that model has no row here, and the comparison goes on.
     let mut delay_line =
         |label: &str, judged: Result<(sysid_baselines::Evaluation, DMatrix<f64>)>| {
             match judged {
@@ -338,6 +429,9 @@ fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> R
             }
             Ok::<(), MmennError>(())
         };
+    if let Some((ss, label)) = models.ss {
+        delay_line(label, judge_linear_ss(ss, data, models.window))?;
+    }
     if let Some(narx) = models.narx {
         delay_line("NARX", judge_delay_line(narx, data))?;
     }
@@ -442,8 +536,23 @@ fn compare_figure_file(which: &str, name: &str) -> String {
     format!("compare_{which}_{name}.svg")
 }
 
+/// A row label in file names: every run of characters other than letters and digits
+/// becomes one `_`, none at the ends (`MME/NN` → `MME_NN`, `linear SS (subspace + OE,
+/// n = 2)` → `linear_SS_subspace_OE_n_2`).
+fn file_tag(label: &str) -> String {
+    let mut tag = String::new();
+    for c in label.chars() {
+        if c.is_alphanumeric() {
+            tag.push(c);
+        } else if !tag.is_empty() && !tag.ends_with('_') {
+            tag.push('_');
+        }
+    }
+    tag.trim_end_matches('_').to_string()
+}
+
 fn residual_files(label: &str, r: &ResidualAnalysis) -> Vec<String> {
-    let tag = label.replace(['/', ' '], "_");
+    let tag = file_tag(label);
     let mut files = Vec::new();
     for ch in &r.channels {
         files.push(format!("residual_acf_{tag}_{}.svg", ch.output));
@@ -472,11 +581,7 @@ fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<
             )],
             bands: vec![("99 % band".into(), c.bound99)],
         };
-        let file = format!(
-            "residual_acf_{}_{}.svg",
-            label.replace(['/', ' '], "_"),
-            ch.output
-        );
+        let file = format!("residual_acf_{}_{}.svg", file_tag(label), ch.output);
         fig.write(&out.join(&file))?;
         files.push(file);
         for x in &ch.cross {
@@ -497,7 +602,7 @@ fn residual_figure(label: &str, r: &ResidualAnalysis, out: &Path) -> Result<Vec<
             };
             let file = format!(
                 "residual_xcf_{}_{}_{}.svg",
-                label.replace(['/', ' '], "_"),
+                file_tag(label),
                 ch.output,
                 x.input
             );
@@ -580,11 +685,109 @@ pub struct CompareOutcome {
     pub units: std::collections::BTreeMap<String, String>,
 }
 
+/// The linear state-space row's fit on the first record of `data`
+/// ([`sysid_baselines::fit_linear_ss`], orders 1 to `opts.ss_max_order`); a fit that fails
+/// is a [`Failure`] at [`FailedAt::Fit`] (no row). Its state-initialisation window is
+/// `LinearSsConfig`'s (50 samples), at most the judge's `window` and an eighth of the
+/// record (the held-out quarter must be longer than it).
+fn fit_linear_ss_row(
+    data: &Dataset,
+    opts: &CompareOptions,
+    window: usize,
+    progress: &dyn ProgressSink,
+    failures: &mut Vec<Failure>,
+) -> (LinearSsStructure, Option<LinearSsModel>) {
+    let samples = data.experiments().first().map_or(0, Experiment::len);
+    let defaults = LinearSsConfig::default();
+    let config = LinearSsConfig {
+        max_order: opts.ss_max_order,
+        window: defaults.window.min(window).min(samples / 8).max(1),
+        ..defaults
+    };
+    let mut structure = LinearSsStructure {
+        label: format!("{LINEAR_SS_ROW})"),
+        max_order: config.max_order,
+        samples,
+        fit_window: config.window,
+        input_bias: config.fit_input_offset,
+        order: None,
+        candidates: Vec::new(),
+        singular_values: Vec::new(),
+        poles: Vec::new(),
+        choice: String::new(),
+    };
+    // With the input bias the free-run refinement can find it (or a numerator) not
+    // identifiable on a short record; the fit without it is then tried, and the choice
+    // says so.
+    let mut without_bias = None;
+    // Err: the reason of the failure (the row's).
+    let fitted = stage(progress, "linear SS fit", || {
+        let first = data
+            .window(0, 0, samples)
+            .map_err(|e| format!("the first estimation record: {}", with_causes(&e)))?;
+        fit_linear_ss(&first, &config).or_else(|e| {
+            let why = with_causes(&e);
+            without_bias = Some(why.clone());
+            let plain = LinearSsConfig {
+                fit_input_offset: false,
+                ..config.clone()
+            };
+            fit_linear_ss(&first, &plain).map_err(|e2| {
+                format!(
+                    "with an input bias: {why}; without one: {}",
+                    with_causes(&e2)
+                )
+            })
+        })
+    });
+    match fitted {
+        Ok(f) => {
+            if let Some(why) = &without_bias {
+                structure.input_bias = false;
+                structure.choice =
+                    format!("without an input bias (the fit with one failed: {why}); ");
+            }
+            let held = |c: &OrderCandidate| match (c.refined_rmse, &c.failure) {
+                (Some(r), _) => format!("n = {}: {r:.4e}", c.order),
+                (None, Some(why)) => format!("n = {}: failed ({why})", c.order),
+                (None, None) => format!("n = {}: diverged", c.order),
+            };
+            structure.choice += &format!(
+                "n = {}: the smallest order whose free-run RMSE on the held-out last {:.0} % of \
+                 the first estimation record (after a fit on the rest, state from its first {} \
+                 samples) is within {:.0} % of the best order's ({}); then refined on the whole \
+                 record",
+                f.order,
+                100.0 * config.validation_fraction,
+                config.window,
+                100.0 * config.order_tolerance,
+                f.candidates.iter().map(held).collect::<Vec<_>>().join(", ")
+            );
+            structure.label = format!("{LINEAR_SS_ROW}, n = {})", f.order);
+            structure.order = Some(f.order);
+            structure.candidates = f.candidates;
+            structure.singular_values = f.singular_values;
+            structure.poles = f.model.poles();
+            (structure, Some(f.model))
+        }
+        Err(reason) => {
+            structure.choice = format!("not fitted: {reason}");
+            failures.push(Failure {
+                model: structure.label.clone(),
+                reason,
+                at: FailedAt::Fit,
+            });
+            (structure, None)
+        }
+    }
+}
+
 /// `mmenn compare` without files: fit every model on `data` and judge each free-run on
 /// the first record of `data` and of `val`. State-space models (the assumed model, the
 /// given model, the output-error fit, MME/NN) are judged by the one judge (initial state
-/// fitted to the first `x0_window` samples, every sample scored); NARX starts from its
-/// first measured delay window, which it does not score.
+/// fitted to the first `x0_window` samples, every sample scored), the linear SS model by
+/// the same rule; NARX starts from its first measured delay window, which it does not
+/// score.
 pub fn compute_compare(
     data: &Dataset,
     loaded: &LoadedModel,
@@ -634,7 +837,9 @@ pub fn compute_compare_with_progress(
                         "the model file's A and B are zero in the rows the linear OE fits (its \
                          dynamics are all in [[terms]]), so an output-error fit of its linear \
                          part starts where no coefficient moves the output; give A and B (e.g. \
-                         the terms linearised at an operating point) to get this row ({})",
+                         the terms linearised at an operating point) to get this row; the \
+                         '{LINEAR_SS_ROW}, n = …)' row is the linear baseline here (a black-box \
+                         state-space model fitted to the data alone) ({})",
                         with_causes(&e)
                     )
                 } else {
@@ -648,6 +853,7 @@ pub fn compute_compare_with_progress(
                 (None, Vec::new(), Some(reason))
             }
         };
+    let (ss_structure, ss_model) = fit_linear_ss_row(data, opts, window, progress, &mut failures);
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
             na: l,
@@ -739,6 +945,7 @@ pub fn compute_compare_with_progress(
     let models = Models {
         assumed: &lin,
         oe: oe_model.as_ref(),
+        ss: ss_model.as_ref().map(|m| (m, ss_structure.label.as_str())),
         narx: narx.as_ref(),
         poly: poly.as_ref(),
         given,
@@ -804,6 +1011,18 @@ pub fn compute_compare_with_progress(
         analyse(
             "linear OE",
             residual_analysis(oe, res_data, 0, Horizon::FreeRun, &rc),
+        );
+    }
+    if let Some(ss) = ss_model.as_ref().filter(|_| ran(&ss_structure.label)) {
+        // The judge's window on the analysed record; the residuals skip it.
+        let len = res_data.experiments()[0].len();
+        let judged = LinearSsModel {
+            window: window.min(len).max(1),
+            ..ss.clone()
+        };
+        analyse(
+            &ss_structure.label,
+            residual_analysis(&judged, res_data, 0, Horizon::FreeRun, &rc),
         );
     }
     if let Some(narx) = narx.as_ref().filter(|_| ran("NARX")) {
@@ -880,6 +1099,13 @@ pub fn compute_compare_with_progress(
         ));
     }
     initialisation.push(("linear OE".to_string(), judge_rule.clone()));
+    initialisation.push((
+        ss_structure.label.clone(),
+        format!(
+            "as the state-space rows: its state (discrete time) fitted by least squares to the first {window} measured outputs (fewer on a shorter record; minimum-norm when they do not determine it), then a free run, every sample scored; its fit used the same rule with a {}-sample window",
+            ss_structure.fit_window
+        ),
+    ));
     let delay_window = orders.na.max(orders.nb + orders.nk - 1);
     initialisation.push((
         "NARX".to_string(),
@@ -902,7 +1128,7 @@ pub fn compute_compare_with_progress(
     initialisation.push((
         "residual analysis".to_string(),
         format!(
-            "the assumed model and linear OE start from a least-squares state over the first {} samples, which the residuals skip; NARX and polynomial NARX as above; MME/NN from its judged initial state",
+            "the assumed model and linear OE start from a least-squares state over the first {} samples, which the residuals skip; linear SS from its judged state over the first {window} samples (fewer on a shorter record), which the residuals skip; NARX and polynomial NARX as above; MME/NN from its judged initial state",
             window.max(10 * lin.n_states())
         ),
     ));
@@ -928,6 +1154,7 @@ pub fn compute_compare_with_progress(
         validation,
         narx_orders: orders,
         poly_narx: poly_structure,
+        linear_ss: ss_structure,
         oe_parameters,
         oe_error,
         failures,
@@ -1072,6 +1299,30 @@ fn compare_report(s: &CompareSummary) -> String {
             }
         }
         None => r.push_str("Polynomial NARX: off.\n\n"),
+    }
+    let ss = &s.linear_ss;
+    match ss.order {
+        Some(_) => {
+            let poles: Vec<String> = ss
+                .poles
+                .iter()
+                .map(|(re, im)| {
+                    if *im == 0.0 {
+                        format!("{re:.4}")
+                    } else {
+                        format!("{re:.4}{im:+.4}i")
+                    }
+                })
+                .collect();
+            r.push_str(&format!(
+                "Linear SS (black box, as `n4sid` then `pem`): PO-MOESP on the first estimation record ({} samples), then free-run output error, orders 1 to {}; chosen {}. Poles (discrete time): {}.\n\n",
+                ss.samples,
+                ss.max_order,
+                ss.choice,
+                poles.join(", ")
+            ));
+        }
+        None => r.push_str(&format!("Linear SS: {}.\n\n", ss.choice)),
     }
     r.push_str("Output-error parameters (±1σ):\n\n");
     if s.oe_parameters.is_empty() {

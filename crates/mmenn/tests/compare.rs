@@ -278,3 +278,203 @@ fn a_diverging_polynomial_free_run_costs_only_its_row() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Noise σ of [`second_order_csv`].
+const SS_SIGMA: f64 = 0.02;
+
+/// A record of a discrete second-order system written here, independent of every mmenn
+/// simulator: `y_k = x_k + e_k` with `X(z) = (0.3 z + 0.2)/(z² − 1.6 z + 0.8) U(z)` (poles
+/// 0.8 ± 0.4i, steady-state gain 2.5), the input a random ±1 sequence held 3 to 18
+/// samples, `e` white Gaussian noise of σ = [`SS_SIGMA`], sample time 0.1 s. A small
+/// linear congruential generator and Box–Muller draw both (`seed` picks the stream).
+fn second_order_csv(samples: usize, seed: u64) -> String {
+    let mut state = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    let mut uniform = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    let (a1, a2, b1, b2) = (-1.6, 0.8, 0.3, 0.2);
+    // Observer form: x⁺ = [[−a1, 1], [−a2, 0]] x + [b1, b2]ᵀ u, output x₁.
+    let (mut x1, mut x2) = (0.0_f64, 0.0_f64);
+    let (mut u, mut hold) = (1.0_f64, 0usize);
+    let mut csv = String::from("t,u,y\n");
+    for k in 0..samples {
+        if hold == 0 {
+            u = if uniform() < 0.5 { -1.0 } else { 1.0 };
+            hold = 3 + (uniform() * 16.0) as usize;
+        }
+        hold -= 1;
+        let e = SS_SIGMA
+            * (-2.0 * uniform().ln()).sqrt()
+            * (2.0 * std::f64::consts::PI * uniform()).cos();
+        csv.push_str(&format!("{},{u},{}\n", k as f64 * 0.1, x1 + e));
+        let n1 = -a1 * x1 + x2 + b1 * u;
+        let n2 = -a2 * x1 + b2 * u;
+        x1 = n1;
+        x2 = n2;
+    }
+    csv
+}
+
+/// The linear state-space row (subspace + free-run OE) on [`second_order_csv`]'s records:
+/// it keeps the true order 2, and its validation free-run RMSE is the noise level (the
+/// model class holds the truth; every sample scored, state fitted to the first 200). The
+/// row is threaded through like the other rows (figure legend, residual analysis,
+/// initial condition, `compare.json`, the report); the same options give the same bits;
+/// and the bound bites: the order held to 1 leaves the RMSE far above the noise.
+/// The assumed model is a continuous oscillator near the truth (the MME/NN row needs one).
+/// Measured: order 2 (held-out RMSE n = 1: 1.29, n = 2: 0.02027, best n = 6: 0.02025),
+/// poles 0.80005 ± 0.40009i; validation RMSE 0.02022 (fit 99.31 %), estimation 0.01972;
+/// order held to 1: validation RMSE 1.237. Bounds: σ within ±15 % (600 samples give about
+/// ±3 % for the noise alone), order 1 at least 3σ.
+#[test]
+fn linear_ss_row_finds_the_order_and_noise_level_of_an_independent_record() {
+    use mmenn::compare::{LINEAR_SS_ROW, compute_compare};
+    use mmenn::fit::{HiddenChoice, TrajectoryChoice};
+    use mmenn::model::LoadedModel;
+
+    let dir = std::env::temp_dir().join(format!("mmenn-compare-ss-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("est.csv"), second_order_csv(1000, 1)).unwrap();
+    std::fs::write(dir.join("val.csv"), second_order_csv(600, 2)).unwrap();
+    std::fs::write(
+        dir.join("model.toml"),
+        r#"
+states = ["y", "v"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-20.0, -2.2]]
+B = [[0.0], [50.0]]
+measured = ["y"]
+corrected = ["v"]
+noise_variance = [0.0004]
+"#,
+    )
+    .unwrap();
+    let opts = CompareOptions {
+        fit: FitOptions {
+            hidden: HiddenChoice::Fixed(1),
+            inits: 1,
+            train_on_trajectories: TrajectoryChoice::None,
+            ..FitOptions::default()
+        },
+        narx_lags: Some(2),
+        poly_narx: None,
+        ..CompareOptions::default()
+    };
+    assert_eq!(opts.ss_max_order, 6);
+    let s = run_compare(
+        &[dir.join("est.csv")],
+        &dir.join("model.toml"),
+        &[dir.join("val.csv")],
+        &opts,
+        &dir.join("cmp"),
+    )
+    .unwrap();
+    assert!(s.failures.is_empty(), "{:?}", s.failures);
+    let ss = &s.linear_ss;
+    assert_eq!(ss.order, Some(2), "{}", ss.choice);
+    assert_eq!(ss.label, format!("{LINEAR_SS_ROW}, n = 2)"));
+    assert_eq!(ss.label, "linear SS (subspace + OE, n = 2)");
+    let metrics = |t: &mmenn::sysid_baselines::EvaluationTable, label: &str| {
+        *t.rows()
+            .iter()
+            .find(|r| r.label == label)
+            .and_then(|r| r.evaluation.channel("y"))
+            .unwrap_or_else(|| panic!("no {label} row in {}", t.title()))
+    };
+    let val = s.validation.as_ref().unwrap();
+    let (est_m, val_m) = (metrics(&s.estimation, &ss.label), metrics(val, &ss.label));
+    assert!(
+        val_m.rmse < 1.15 * SS_SIGMA && val_m.rmse > 0.85 * SS_SIGMA,
+        "validation RMSE {} vs σ {SS_SIGMA}",
+        val_m.rmse
+    );
+    assert!(
+        est_m.rmse < 1.15 * SS_SIGMA,
+        "estimation RMSE {}",
+        est_m.rmse
+    );
+    assert!(val_m.fit_percent > 95.0, "fit {} %", val_m.fit_percent);
+    // The order choice: order 1 is far off on the held-out part, order 2 at the noise.
+    let held = |n: usize| {
+        ss.candidates
+            .iter()
+            .find(|c| c.order == n)
+            .and_then(|c| c.refined_rmse)
+            .unwrap()
+    };
+    assert!(held(1) > 3.0 * held(2), "{}", ss.choice);
+    assert!(
+        ss.choice.starts_with("n = 2: the smallest order"),
+        "{}",
+        ss.choice
+    );
+    // Threaded through like the other rows.
+    assert!(s.residuals.iter().any(|(l, _)| l == &ss.label));
+    assert!(
+        s.initialisation
+            .iter()
+            .any(|(l, how)| l == &ss.label && how.contains("first 200 measured outputs"))
+    );
+    let out = dir.join("cmp");
+    assert!(
+        out.join("residual_acf_linear_SS_subspace_OE_n_2_y.svg")
+            .exists()
+    );
+    let figure = std::fs::read_to_string(out.join("compare_validation_y.svg")).unwrap();
+    assert!(
+        figure.contains("linear SS (subspace + OE, n = 2) (fit"),
+        "no legend entry"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("compare.json")).unwrap()).unwrap();
+    assert_eq!(json["linear_ss"]["order"], 2);
+    assert_eq!(json["linear_ss"]["max_order"], 6);
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        report.contains("| linear SS (subspace + OE, n = 2) | y | "),
+        "{report}"
+    );
+    assert!(report.contains("Linear SS (black box"), "{report}");
+
+    // The same options on the same records: the same bits.
+    let loaded = LoadedModel::read(&dir.join("model.toml")).unwrap();
+    let read = |f: &str| {
+        let spec = &loaded.spec;
+        mmenn::data_file::read_with_validation(&[dir.join(f)], &[], spec)
+            .unwrap()
+            .0
+    };
+    let (est_d, val_d) = (read("est.csv"), read("val.csv"));
+    let again = compute_compare(&est_d, &loaded, Some(&val_d), &opts)
+        .unwrap()
+        .summary;
+    let again_val = metrics(again.validation.as_ref().unwrap(), &ss.label);
+    assert_eq!(again.linear_ss, s.linear_ss);
+    assert_eq!(
+        (again_val.rmse.to_bits(), again_val.fit_percent.to_bits()),
+        (val_m.rmse.to_bits(), val_m.fit_percent.to_bits())
+    );
+
+    // Held to order 1, the same row is far from the noise level: the bound above bites.
+    let first = compute_compare(
+        &est_d,
+        &loaded,
+        Some(&val_d),
+        &CompareOptions {
+            ss_max_order: 1,
+            ..opts.clone()
+        },
+    )
+    .unwrap()
+    .summary;
+    assert_eq!(first.linear_ss.order, Some(1));
+    let low = metrics(first.validation.as_ref().unwrap(), &first.linear_ss.label);
+    assert!(low.rmse > 3.0 * SS_SIGMA, "order-1 RMSE {}", low.rmse);
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1158,6 +1158,38 @@ fn cli_poly_nonlinear_lags_reach_compare_and_zero_is_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `compare --ss-max-order N` reaches the linear SS row (`compare.json` records the
+/// largest order, and no candidate is above it); 0 or a non-number is refused naming the
+/// flag.
+#[test]
+fn cli_ss_max_order_reaches_compare_and_zero_is_refused() {
+    let dir = scratch("ss-max-order");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    for max in [1_u64, 3] {
+        let json = compare_json_with(
+            &dir,
+            &format!("o-{max}"),
+            "--ss-max-order",
+            &max.to_string(),
+        );
+        let ss = &json["linear_ss"];
+        assert_eq!(ss["max_order"].as_u64(), Some(max), "{ss}");
+        let orders: Vec<u64> = ss["candidates"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|c| c["order"].as_u64())
+            .collect();
+        assert_eq!(orders, (1..=max).collect::<Vec<_>>(), "{ss}");
+    }
+    for bad in ["0", "two"] {
+        let err = compare_refuses(&dir, "--ss-max-order", bad);
+        assert!(err.contains("--ss-max-order"), "{bad}: {err}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `--poly-focus simulation` refines the polynomial NARX by free-run error and
 /// `compare.json` records it, with an estimation free-run fit no worse than the one-step
 /// solution's; anything but `prediction` or `simulation` is refused naming the flag.

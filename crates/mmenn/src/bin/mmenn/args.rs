@@ -149,8 +149,8 @@ pub(crate) enum Command {
     /// Grey-box estimation: the free [parameters] of a physical model file and each
     /// record's start state by free-run output error, with ±σ and correlations.
     Greyest(GreyestArgs),
-    /// Compare the assumed model, linear OE, NARX, polynomial NARX and MME/NN on the same
-    /// data (free-run).
+    /// Compare the assumed model, linear OE, linear SS (subspace + OE), NARX, polynomial
+    /// NARX and MME/NN on the same data (free-run).
     Compare(CompareArgs),
     /// Find where model and data disagree, name the missing effect, add it, show the gap shrink.
     Discover(DiscoverArgs),
@@ -201,6 +201,10 @@ pub(crate) struct CompareArgs {
     /// at most 30 Levenberg–Marquardt iterations).
     #[arg(long, value_name = "FOCUS", default_value = "prediction", value_parser = poly_focus)]
     pub(crate) poly_focus: mmenn::compare::Focus,
+    /// Largest order of the linear state-space row (subspace, then free-run output error;
+    /// the smallest order within 2 % of the best held-out free-run error is kept).
+    #[arg(long, value_name = "N", default_value_t = 6, value_parser = at_least_one)]
+    pub(crate) ss_max_order: usize,
     /// Largest network of the MME/NN sizing sweep.
     #[arg(long, default_value_t = 10, value_parser = at_least_one)]
     pub(crate) max_hidden: usize,

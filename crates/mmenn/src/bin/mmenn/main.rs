@@ -640,6 +640,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             nonlinear_lags: a.poly_nonlinear_lags,
             focus: a.poly_focus,
         }),
+        ss_max_order: a.ss_max_order,
         ..Default::default()
     };
     let inputs: Vec<&PathBuf> = a.data.iter().chain(&a.val).chain([&a.model]).collect();
@@ -682,6 +683,9 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     }
     for f in &s.residual_failures {
         outln!("residual analysis of {} failed {}", f.model, f.reason);
+    }
+    if s.linear_ss.order.is_some() {
+        outln!("linear SS order {}", s.linear_ss.choice);
     }
     // The MME/NN's choices, in `fit`'s words; its rows above are the kept model's.
     let f = &outcome.fit.summary;
