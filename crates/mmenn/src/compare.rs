@@ -375,7 +375,9 @@ fn with_causes(e: &dyn std::error::Error) -> String {
 
 /// The models of one comparison (a baseline that could not be fitted is `None`).
 struct Models<'a> {
-    assumed: &'a LinearModel,
+    /// The model file's linear part; `None` when it is zero (the dynamics are all in
+    /// `[[terms]]` or `[mechanics]`, judged in the given model's row).
+    assumed: Option<&'a LinearModel>,
     oe: Option<&'a OeModel>,
     /// The linear state-space model and its row label.
     ss: Option<(&'a LinearSsModel, &'a str)>,
@@ -395,8 +397,10 @@ fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> R
         runs.push((label.to_string(), j.outputs.clone()));
         table.push(label, evaluation(j, &names))
     };
-    let j = judge_linear(models.assumed, data, models.window)?;
-    push("assumed model", &j, &mut runs)?;
+    if let Some(assumed) = models.assumed {
+        let j = judge_linear(assumed, data, models.window)?;
+        push("assumed model", &j, &mut runs)?;
+    }
     if let Some(g) = models.given {
         let j = judge_free_run(
             g,
@@ -824,35 +828,36 @@ pub fn compute_compare_with_progress(
     let mut failures = Vec::new();
     // A baseline that cannot be fitted (e.g. a free parameter the data cannot identify)
     // does not stop the comparison: it has no row, and the summary says why.
-    let (oe_model, oe_parameters, oe_error) =
-        match stage(progress, "linear OE fit", || fit_oe(&lin, data, &oe_config)) {
-            Ok(f) => {
-                let mut m = f.model;
-                m.observer_window = window.max(10 * lin.n_states());
-                (Some(m), f.parameters, None)
-            }
-            Err(e) => {
-                let reason = if opts.oe_free.is_none() && linear_part_is_zero(&lin) {
-                    format!(
-                        "the model file's A and B are zero in the rows the linear OE fits (its \
-                         dynamics are all in [[terms]]), so an output-error fit of its linear \
+    let (oe_model, oe_parameters, oe_error) = match stage(progress, "linear OE fit", || {
+        fit_oe(&lin, data, &oe_config)
+    }) {
+        Ok(f) => {
+            let mut m = f.model;
+            m.observer_window = window.max(10 * lin.n_states());
+            (Some(m), f.parameters, None)
+        }
+        Err(e) => {
+            let reason = if opts.oe_free.is_none() && linear_part_is_zero(&lin) {
+                format!(
+                    "the model file's A and B are zero in the rows the linear OE fits (its \
+                         dynamics are all in [[terms]] or [mechanics]), so an output-error fit of its linear \
                          part starts where no coefficient moves the output; give A and B (e.g. \
                          the terms linearised at an operating point) to get this row; the \
                          '{LINEAR_SS_ROW}, n = …)' row is the linear baseline here (a black-box \
                          state-space model fitted to the data alone) ({})",
-                        with_causes(&e)
-                    )
-                } else {
                     with_causes(&e)
-                };
-                failures.push(Failure {
-                    model: "linear OE".into(),
-                    reason: reason.clone(),
-                    at: FailedAt::Fit,
-                });
-                (None, Vec::new(), Some(reason))
-            }
-        };
+                )
+            } else {
+                with_causes(&e)
+            };
+            failures.push(Failure {
+                model: "linear OE".into(),
+                reason: reason.clone(),
+                at: FailedAt::Fit,
+            });
+            (None, Vec::new(), Some(reason))
+        }
+    };
     let (ss_structure, ss_model) = fit_linear_ss_row(data, opts, window, progress, &mut failures);
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
@@ -942,8 +947,13 @@ pub fn compute_compare_with_progress(
     };
     let fit = compute_fit(data, &spec, val.as_ref(), &opts.fit, progress)?;
     let hybrid = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), fit.model.clone())?;
+    // A zero linear part is no model of anything: no row for it when the model file's
+    // own dynamics have theirs.
+    let no_linear_part = given.is_some()
+        && (spec.mechanics.is_some()
+            || (lin.a().iter().all(|v| *v == 0.0) && lin.b().iter().all(|v| *v == 0.0)));
     let models = Models {
-        assumed: &lin,
+        assumed: (!no_linear_part).then_some(&lin),
         oe: oe_model.as_ref(),
         ss: ss_model.as_ref().map(|m| (m, ss_structure.label.as_str())),
         narx: narx.as_ref(),
@@ -1003,10 +1013,12 @@ pub fn compute_compare_with_progress(
             at: FailedAt::Residuals,
         }),
     };
-    analyse(
-        "assumed model",
-        residual_analysis(&assumed_oe, res_data, 0, Horizon::FreeRun, &rc),
-    );
+    if !no_linear_part {
+        analyse(
+            "assumed model",
+            residual_analysis(&assumed_oe, res_data, 0, Horizon::FreeRun, &rc),
+        );
+    }
     if let Some(oe) = &oe_model {
         analyse(
             "linear OE",
@@ -1063,7 +1075,17 @@ pub fn compute_compare_with_progress(
         "assumed model".to_string(),
         format!(
             "{}{judge_rule}",
-            if loaded.kind == ModelKind::Assumed && spec.acquisition.is_none() {
+            if no_linear_part {
+                format!(
+                    "no row: the model file's linear part (A, B) is zero, its dynamics are all \
+                     in {} (the '{GIVEN_MODEL_ROW}' row); the rule would be ",
+                    if spec.mechanics.is_some() {
+                        "[mechanics]"
+                    } else {
+                        "[[terms]]"
+                    }
+                )
+            } else if loaded.kind == ModelKind::Assumed && spec.acquisition.is_none() {
                 String::new()
             } else if loaded.kind == ModelKind::Assumed {
                 format!(

@@ -512,3 +512,52 @@ fn fit_builds_a_hybrid_on_a_mass_matrix_model() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// `mmenn compare` on the `[mechanics]` rigid body: no "assumed model" row (its linear part
+/// is zero: the dynamics are the given model's row), the given model and MME/NN rows
+/// judged, and MME/NN's validation numbers those `fit` gives with the same options.
+#[test]
+fn compare_takes_a_mass_matrix_model() {
+    use mmenn::compare::{CompareOptions, GIVEN_MODEL_ROW, run_compare};
+    use mmenn::fit::{FitOptions, run_fit};
+    let dir = scratch("compare");
+    let model = fixture().join("rigid_body.toml");
+    let (est, val) = (fixture().join("est.csv"), fixture().join("val.csv"));
+    let fit_opts = FitOptions {
+        max_hidden: 2,
+        inits: 2,
+        ..FitOptions::default()
+    };
+    let opts = CompareOptions {
+        fit: fit_opts.clone(),
+        ..CompareOptions::default()
+    };
+    let c = run_compare(
+        std::slice::from_ref(&est),
+        &model,
+        std::slice::from_ref(&val),
+        &opts,
+        &dir.join("compare"),
+    )
+    .unwrap();
+    let table = c.validation.expect("validation table");
+    let labels: Vec<&str> = table.rows().iter().map(|r| r.label.as_str()).collect();
+    assert!(!labels.contains(&"assumed model"), "{labels:?}");
+    assert!(labels.contains(&GIVEN_MODEL_ROW), "{labels:?}");
+    let f = run_fit(&[est], &model, &[val], &fit_opts, &dir.join("fit")).unwrap();
+    let v = f.validation.expect("validation judged");
+    let row = table
+        .rows()
+        .iter()
+        .find(|r| r.label == "MME/NN")
+        .expect("MME/NN row");
+    for joint in ["theta1", "theta2"] {
+        let cmp = row.evaluation.channel(joint).unwrap().fit_percent;
+        assert_eq!(
+            cmp.to_bits(),
+            v.channels[joint].fit_percent.to_bits(),
+            "{joint}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
