@@ -254,6 +254,8 @@ pub struct GreyestOutcome {
     pub spec: ModelSpec,
     /// The estimator's result.
     pub fit: GreyboxFit<PhysicalModel>,
+    /// The records it was estimated on, in order (for the figures).
+    pub records: Vec<Experiment>,
 }
 
 impl GreyestOutcome {
@@ -563,7 +565,12 @@ pub fn compute_greyest(
         files: Vec::new(),
         multi_start,
     };
-    Ok(GreyestOutcome { summary, spec, fit })
+    Ok(GreyestOutcome {
+        summary,
+        spec,
+        fit,
+        records: records.to_vec(),
+    })
 }
 
 /// The calibrated-start RMSE per output (empty if predict's code cannot run that free
@@ -629,11 +636,94 @@ fn judged_as_predict(
     (calibrated, judged)
 }
 
-/// Write `model.toml`, `greyest.json` and `report.md` into `out` (atomically, each).
+/// The figure of record `k` (1-based in its name): each output measured and simulated
+/// free-run from the calibrated start (the estimator's final free run), over the
+/// residual.
+fn record_figure(outcome: &GreyestOutcome, k: usize) -> Option<crate::plot::Panels> {
+    use crate::plot::Series;
+    let exp = outcome.records.get(k)?;
+    let states = outcome.fit.states.get(k)?;
+    let lin = &outcome.spec.linear;
+    if states.ncols() != exp.len() {
+        return None;
+    }
+    let y = lin.c() * states;
+    let t = exp.times();
+    let names = lin.output_names();
+    let with_unit = |n: &str| match outcome.spec.units.get(n) {
+        Some(u) => format!("{n} ({u})"),
+        None => n.to_string(),
+    };
+    let y_label = match names {
+        [one] => with_unit(one),
+        _ => "output (units in the legend)".to_string(),
+    };
+    let (mut series, mut residuals) = (Vec::new(), Vec::new());
+    for (i, name) in names.iter().enumerate() {
+        let measured: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
+        let simulated: Vec<f64> = y.row(i).iter().copied().collect();
+        let fit = outcome
+            .fit
+            .fit_percent
+            .get(k)
+            .and_then(|f| f.get(i))
+            .copied()
+            .unwrap_or(f64::NAN);
+        series.push(Series::points(
+            format!("{} measured", with_unit(name)),
+            t.clone(),
+            measured.clone(),
+        ));
+        series.push(Series::line(
+            format!("{name} free run from the calibrated start (fit {fit:.2} %)"),
+            t.clone(),
+            simulated.clone(),
+        ));
+        residuals.push(
+            Series::line(
+                format!("{name} measured − simulated"),
+                t.clone(),
+                measured
+                    .iter()
+                    .zip(&simulated)
+                    .map(|(m, s)| m - s)
+                    .collect::<Vec<f64>>(),
+            )
+            .coloured(2 * i + 1),
+        );
+    }
+    let file = outcome
+        .summary
+        .records
+        .get(k)
+        .map_or_else(String::new, |r| format!(" ({})", r.file));
+    Some(crate::plot::Panels::time_with_residuals(
+        format!("grey-box estimate, record {}{file}", k + 1),
+        y_label,
+        series,
+        residuals,
+    ))
+}
+
+/// Write `model.toml`, `greyest.json`, `report.md`, `report.html` and a figure per record
+/// (`greyest_record_K.svg`: measured and simulated outputs over the residual) into `out`
+/// (atomically, each).
 pub fn write_greyest(outcome: &mut GreyestOutcome, out: &Path) -> Result<()> {
     ensure_dir(out)?;
-    let files = ["model.toml", "greyest.json", "report.md"];
-    outcome.summary.files = files.iter().map(|f| (*f).to_owned()).collect();
+    let mut figures = Vec::new();
+    for k in 0..outcome.records.len() {
+        if let Some(panels) = record_figure(outcome, k) {
+            let name = format!("greyest_record_{}.svg", k + 1);
+            panels.write(&out.join(&name))?;
+            figures.push(name);
+        }
+    }
+    let mut files: Vec<String> = ["model.toml", "greyest.json", "report.md", "report.html"]
+        .iter()
+        .map(|f| (*f).to_owned())
+        .collect();
+    files.extend(figures.iter().cloned());
+    outcome.summary.files = files;
     write_atomic(
         &out.join("model.toml"),
         format!(
@@ -648,7 +738,8 @@ pub fn write_greyest(outcome: &mut GreyestOutcome, out: &Path) -> Result<()> {
         source: std::io::Error::other(e),
     })?;
     write_atomic(&out.join("greyest.json"), json.as_bytes())?;
-    write_atomic(&out.join("report.md"), report(outcome).as_bytes())?;
+    let markdown = report(outcome) + &crate::html::figures_section(&figures);
+    crate::html::write_report(out, &markdown)?;
     Ok(())
 }
 

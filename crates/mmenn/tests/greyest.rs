@@ -423,6 +423,24 @@ fn cli_calibrates_two_records_by_multiple_shooting_then_free_run() {
     assert_eq!(stages.len(), 2, "{json}");
     assert!(stages.iter().all(|s| s["converged"] == true), "{json}");
     assert_eq!(json["records"].as_array().map(Vec::len), Some(2));
+    // A figure per record, listed, embedded in report.html, its legend carrying the fit %
+    // greyest.json gives for that record (the estimator's final free run).
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap_or_default();
+    let files = json["files"].as_array().cloned().unwrap_or_default();
+    for (k, record) in json["records"].as_array().into_iter().flatten().enumerate() {
+        let name = format!("greyest_record_{}.svg", k + 1);
+        assert!(files.iter().any(|f| f == &name), "{name} not in {files:?}");
+        let svg = std::fs::read_to_string(out.join(&name)).unwrap_or_default();
+        let title = format!("<title>greyest record {}</title>", k + 1);
+        assert!(html.contains(&title), "{name} not embedded in report.html");
+        for joint in ["theta1", "theta2"] {
+            let fit = record["fit_percent"][joint].as_f64().unwrap_or(f64::NAN);
+            let legend = format!("{joint} free run from the calibrated start (fit {fit:.2} %)");
+            assert!(svg.contains(&legend), "{name}: no '{legend}'");
+            assert!(html.contains(&legend), "report.html: no '{legend}'");
+        }
+    }
+    assert!(stdout.contains("report.html"), "{stdout}");
     for (k, (name, truth)) in TRUTH.iter().enumerate() {
         let p = json["parameters"]
             .as_array()

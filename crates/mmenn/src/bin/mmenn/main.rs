@@ -448,10 +448,7 @@ fn greyest(args: GreyestArgs, force: bool, progress: &Reporter) -> Result<()> {
             outln!("{line}");
         }
     }
-    outln!(
-        "wrote model.toml, greyest.json, report.md into {}",
-        args.out.display()
-    );
+    outln!("wrote {} into {}", s.files.join(", "), args.out.display());
     let last = &s.stages[s.stages.len() - 1];
     if !last.converged {
         return Err(NotConverged(format!(
