@@ -610,8 +610,8 @@ pub fn compute_fit(
     };
     let (x_train, d_train) = pairs(est, data);
 
-    // The sweep's test set: MME on the validation data at the training W and noise, or the
-    // last 20 % of the training pairs when there is no validation data.
+    // The sweep's test set: MME on the validation data at the training W and noise when
+    // they choose, else the last 20 % of the training pairs.
     let (fit_pairs, test_pairs, test_source, val_est) = match select_val {
         Some(v) => {
             let mut vconf = config.clone();
@@ -676,8 +676,8 @@ pub fn compute_fit(
     if refinement.is_some() {
         candidates.push((guard::GuardCandidate::Refined, network.clone()));
     }
-    // The held-out data (the validation record, else the last fifth of the first training
-    // record): the last-fifth guard judges on them, and under `DomainPolicy::Checked` the
+    // The held-out data (the validation record when it chooses, else the last fifth of the
+    // first training record): the last-fifth guard judges on them, and under `DomainPolicy::Checked` the
     // stress check scales their input (the K-fold guard's too).
     let held = guard::held_out(data, select_val, est, &x0, opts)?;
     let (candidates, domain_check) = guard::check_domains(
