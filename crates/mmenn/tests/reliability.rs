@@ -1067,11 +1067,14 @@ fn cli_poly_degree_out_of_range_or_misspelt_is_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// A model whose physics lives in its terms (linear part `A = 0`, `B = 0`) has an
-/// assumed-model row whose state the output cannot observe over the observer window:
-/// its residual analysis fails, and `compare` still writes every table (before, the whole
-/// comparison stopped with "baseline model: … not observable"), listing the failure in
-/// `compare.json`, the report and on the terminal.
+/// A model whose physics lives mostly in its terms, with a linear part whose `omega` the
+/// measured `theta` cannot see (`A = [[0, 0], [0, −0.1]]`, `B = 0`), has an assumed-model
+/// row whose state the output cannot observe over the observer window: its residual
+/// analysis fails, and `compare` still writes every table (before, the whole comparison
+/// stopped with "baseline model: … not observable"), listing the failure in
+/// `compare.json`, the report and on the terminal. (With `A = 0` and `B = 0` there is no
+/// assumed-model row at all: `compare_takes_a_mass_matrix_model` and the terms-only tanks
+/// test.)
 #[test]
 fn compare_goes_on_when_a_residual_analysis_fails() {
     let dir = scratch("residual-failure");
@@ -1079,7 +1082,7 @@ fn compare_goes_on_when_a_residual_analysis_fails() {
     let model = r#"
 states = ["theta", "omega"]
 inputs = ["u"]
-A = [[0.0, 0.0], [0.0, 0.0]]
+A = [[0.0, 0.0], [0.0, -0.1]]
 B = [[0.0], [0.0]]
 measured = ["theta"]
 corrected = ["omega"]
