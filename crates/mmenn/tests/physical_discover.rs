@@ -561,3 +561,40 @@ fn compare_takes_a_mass_matrix_model() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Force-space discovery reports MME's own steps while its first estimate runs: notes on
+/// the "MME with the assumed model" step of the discover task, W trials among them.
+#[test]
+fn force_space_discover_reports_mme_steps() {
+    use mmenn::progress::Progress;
+    let dir = scratch("progress");
+    let seen = std::sync::Mutex::new(Vec::<Progress>::new());
+    let sink = |p: &Progress| {
+        if let Ok(mut s) = seen.lock() {
+            s.push(p.clone());
+        }
+    };
+    mmenn::discover::run_discover_with_progress(
+        &[fixture().join("est.csv")],
+        &fixture().join("model.toml"),
+        &[],
+        &DiscoverOptions::default(),
+        &dir.join("out"),
+        &sink,
+    )
+    .unwrap();
+    let seen = seen.into_inner().unwrap();
+    let mme: Vec<&Progress> = seen.iter().filter(|p| p.note.starts_with("MME ")).collect();
+    assert!(!mme.is_empty(), "no MME notes among {} reports", seen.len());
+    assert!(
+        mme.iter()
+            .all(|p| p.task == "discover" && p.stage == "MME with the assumed model"),
+        "{mme:?}"
+    );
+    assert!(
+        mme.iter().any(|p| p.note.contains("W trial 1 of at most")),
+        "{:?}",
+        mme.iter().map(|p| &p.note).collect::<Vec<_>>()
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -17,7 +17,7 @@ use super::{
     write_outputs,
 };
 use crate::error::{MmennError, Result};
-use crate::estimate::{estimate_spec, mme_config};
+use crate::estimate::mme_config;
 use crate::model_file::{ModelSpec, NoiseVariance, ParameterEntry, TermEntry, write_model};
 use crate::progress::{Progress, ProgressSink};
 
@@ -141,7 +141,7 @@ pub(super) fn run_force_discover(
         progress.report(&Progress::new(DISCOVER_TASK, done, Some(STEPS)).with_stage(stage));
     };
     step(0, "MME with the assumed model");
-    let outcome = search(original, data, val, opts, &step);
+    let outcome = search(original, data, val, opts, &step, progress);
     progress.finish(DISCOVER_TASK);
     let (outcome, first, first_mme) = outcome?;
 
@@ -266,13 +266,23 @@ fn search(
     val: Option<&Dataset>,
     opts: &DiscoverOptions,
     step: &dyn Fn(usize, &str),
+    progress: &dyn ProgressSink,
 ) -> Result<(
     ForceOutcome,
     sysid_core::MmeEstimate,
     crate::fit::MmeConvergence,
 )> {
     let model = physical(original)?;
-    let first_out = estimate_spec(original, data, &mme_config(original, &opts.estimate))?;
+    // MME's own steps (W trials, iterations) as the note of step 1's report.
+    let frame =
+        || Progress::new(DISCOVER_TASK, 0, Some(STEPS)).with_stage("MME with the assumed model");
+    let steps = crate::progress::MmeProgress::within(progress, &frame);
+    let first_out = crate::estimate::estimate_spec_observed(
+        original,
+        data,
+        &mme_config(original, &opts.estimate),
+        &steps,
+    )?;
     let first_mme =
         crate::fit::MmeConvergence::of(crate::fit::MmeStage::Training, &first_out, data);
     let first = first_out.estimate;
