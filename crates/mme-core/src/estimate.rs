@@ -165,6 +165,7 @@ pub(crate) fn resolve_noise<S: Solve>(
             method: NoiseMethod::Given,
             variance: v.clone(),
             difference_based: Vec::new(),
+            spectral_floor: Vec::new(),
             likelihood_alpha: None,
             neg2_log_likelihood: None,
             evaluations: 0,

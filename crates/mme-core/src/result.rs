@@ -41,8 +41,13 @@ pub enum NoiseMethod {
     /// state-space model, computed exactly from the sweep (see [`crate::noise`]).
     MarginalLikelihood,
     /// The difference-based estimate, used when the likelihood is degenerate (its
-    /// maximum runs to `R → 0`; see [`crate::noise`]).
+    /// maximum runs to `R → 0`; see [`crate::noise`]) and it was the lower of the two
+    /// model-free references.
     DifferenceBased,
+    /// The spectral floor (the lowest band of the Welch periodogram), used when the
+    /// likelihood is degenerate and it was below the difference-based estimate in some
+    /// channel (signals with content near the Nyquist frequency; see [`crate::noise`]).
+    SpectralFloor,
 }
 
 /// The noise variances used and how they were found.
@@ -55,6 +60,12 @@ pub struct NoiseReport {
     /// Difference-based estimate per channel (normalised second differences; the start
     /// point of the likelihood search and a cross-check). Empty when the noise was given.
     pub difference_based: Vec<f64>,
+    /// Spectral floor per channel: the lowest band mean of the Welch periodogram, an upper
+    /// bound on the white noise that signal content near the Nyquist frequency does not
+    /// inflate (`None` when the records are too short for it). Empty when the noise was
+    /// given.
+    #[serde(default)]
+    pub spectral_floor: Vec<Option<f64>>,
     /// The `α` maximising the likelihood (`W = α·shape`); `None` when the noise was given.
     pub likelihood_alpha: Option<f64>,
     /// `−2 log L` at the maximum (up to a constant); `None` when the noise was given.

@@ -324,8 +324,10 @@ pub const NOISE_MISFIT_RATIO: f64 = 10.0;
 /// the noise when the signal itself curves between samples). There the likelihood has
 /// explained a deterministic misfit of the model as measurement noise, `W` is small and
 /// `d̂` says little; giving the sensor's noise variance is the remedy. When the likelihood
-/// was degenerate and the difference-based value was used, one warning says that it is
-/// too large on signals that curve between samples. Nothing for a given noise variance.
+/// was degenerate and a model-free reference was used, one warning says what it misses:
+/// second differences are too large on signals that curve between samples, the spectral
+/// floor too small behind a sensor's anti-aliasing filter. Nothing for a given noise
+/// variance.
 pub fn noise_warnings(names: &[String], noise: &mme_core::NoiseReport) -> Vec<String> {
     if noise.difference_based.len() != noise.variance.len() {
         return Vec::new();
@@ -338,6 +340,16 @@ pub fn noise_warnings(names: &[String], noise: &mme_core::NoiseReport) -> Vec<St
              itself curves between samples (oscillations with few samples per period), \
              and W and d̂ inherit the error. Give the sensor's noise variance \
              (noise_variance = [...]) when you know it.",
+            names.join(", ")
+        )];
+    }
+    if noise.method == mme_core::NoiseMethod::SpectralFloor {
+        return vec![format!(
+            "{}: the noise variance is the spectral floor of the measurements (the lowest \
+             band of their periodogram; the likelihood was degenerate). It bounds the white \
+             part of the noise from above and is below it when the sensor filters its \
+             noise near the Nyquist frequency; W and d̂ inherit the error. Give the \
+             sensor's noise variance (noise_variance = [...]) when you know it.",
             names.join(", ")
         )];
     }
@@ -409,8 +421,8 @@ pub fn estimate_spec_robust_observed(
 }
 
 /// Samples standing out from the cubic through their neighbours by more than this many
-/// noise standard deviations (of that difference) are reported by a plain (not robust)
-/// estimate (`mme_core::screen_outliers`).
+/// noise standard deviations (of that difference; the record's robust spread of it when
+/// larger) are reported by a plain (not robust) estimate (`mme_core::screen_outliers`).
 pub const OUTLIER_SCREEN_SIGMA: f64 = 8.0;
 
 /// Read data and model files, run MME, write every output into `out`.
@@ -703,6 +715,7 @@ mod tests {
             method: mme_core::NoiseMethod::MarginalLikelihood,
             variance,
             difference_based,
+            spectral_floor: Vec::new(),
             likelihood_alpha: Some(1.0),
             neg2_log_likelihood: Some(0.0),
             evaluations: 1,

@@ -40,6 +40,9 @@ pub fn noise_method(m: NoiseMethod) -> &'static str {
         NoiseMethod::DifferenceBased => {
             "estimated from sample differences (the likelihood was degenerate)"
         }
+        NoiseMethod::SpectralFloor => {
+            "the spectral floor of the measurements (the likelihood was degenerate)"
+        }
         _ => "estimated",
     }
 }

@@ -4,7 +4,7 @@
 
 use mme_core::{MmeConfig, NoiseMethod, NoiseSpec, WeightSpec, estimate_with_report};
 use nalgebra::DMatrix;
-use sysid_core::Experiment;
+use sysid_core::{Dataset, Experiment};
 
 use super::common::{dataset, gaussian, linear, msd_assumed, msd_data};
 
@@ -83,4 +83,84 @@ fn noise_variances_of_two_channels_with_process_noise() {
     // the spread a 40 s record allows (a factor of 2 either way).
     let alpha = out.noise.likelihood_alpha.unwrap();
     assert!((0.125..0.5).contains(&alpha), "alpha {alpha}");
+}
+
+/// The record of `fixtures/noise_floor` (written by its Python + scipy script, not by
+/// mmenn): a linear oscillator resonating at 0.4 of the Nyquist frequency, driven through
+/// a hold by a multisine up to 0.6 of it, measured with white noise of known variance.
+fn noise_floor_record() -> (Dataset, f64, f64, f64) {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/noise_floor");
+    let read = |name: &str| {
+        std::fs::read_to_string(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"))
+    };
+    let truth = read("truth.json");
+    let field = |key: &str| -> f64 {
+        let at = truth
+            .find(&format!("\"{key}\":"))
+            .unwrap_or_else(|| panic!("{key} in truth.json"));
+        let rest = &truth[at + key.len() + 3..];
+        let end = rest.find([',', '\n']).unwrap_or(rest.len());
+        rest[..end]
+            .trim()
+            .parse()
+            .unwrap_or_else(|e| panic!("{key}: {e}"))
+    };
+    let (fs, f_n, zeta, var) = (
+        field("fs_hz"),
+        field("natural_frequency_hz"),
+        field("damping_ratio"),
+        field("noise_variance"),
+    );
+    let (mut u, mut y) = (Vec::new(), Vec::new());
+    for line in read("record.csv").lines().skip(1) {
+        let v: Vec<f64> = line.split(',').map(|s| s.parse().unwrap()).collect();
+        u.push(v[1]);
+        y.push(v[2]);
+    }
+    let n = u.len();
+    let exp = Experiment::new(
+        0.0,
+        1.0 / fs,
+        DMatrix::from_row_slice(1, n, &u),
+        DMatrix::from_row_slice(1, n, &y),
+    )
+    .unwrap();
+    let w = 2.0 * std::f64::consts::PI * f_n;
+    (dataset(&["u"], &["y"], vec![exp]), w, zeta, var)
+}
+
+/// Second differences measure the curvature of a signal with content near the Nyquist
+/// frequency, not its noise. On the independent record above (second differences 2.7e6 ×
+/// the noise variance) the spectral floor is within its documented bias of the noise
+/// variance, and the likelihood with the generator's own model finds the noise variance.
+/// Until the degeneracy rule used the lower of the two references, that likelihood
+/// estimate, far below 1 % of the second differences, was rejected as degenerate and the
+/// second differences were reported as the noise.
+#[test]
+fn noise_variance_of_an_oscillation_near_nyquist_from_an_independent_record() {
+    let (data, w, zeta, var) = noise_floor_record();
+    let model = linear(
+        &[0.0, 1.0, -w * w, -2.0 * zeta * w],
+        &[0.0, w * w],
+        &[1.0, 0.0],
+        &[0.0, 1.0],
+        2,
+        (&["y", "v"], &["u"], &["y"], &["d"]),
+    );
+    let config = MmeConfig {
+        noise_variance: NoiseSpec::Auto,
+        ..MmeConfig::default()
+    };
+    let out = estimate_with_report(&model, &data, &config).unwrap();
+    let report = &out.noise;
+    let diff = report.difference_based[0];
+    assert!(diff > 100.0 * var, "second differences {diff} vs {var}");
+    let floor = report.spectral_floor[0].expect("a spectral floor");
+    assert!(
+        (0.6..1.25).contains(&(floor / var)),
+        "spectral floor {floor} vs {var}"
+    );
+    assert_eq!(report.method, NoiseMethod::MarginalLikelihood, "{report:?}");
+    let ml = report.variance[0];
+    assert!((ml / var - 1.0).abs() < 0.3, "ML {ml} vs {var}");
 }

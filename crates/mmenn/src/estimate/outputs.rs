@@ -365,8 +365,9 @@ pub(super) fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
             )
         } else {
             format!(
-                "{OUTLIER_SCREEN_SIGMA} noise standard deviations (σ) from the cubic through \
-                 their neighbours"
+                "{OUTLIER_SCREEN_SIGMA} σ from the cubic through their neighbours (σ: the \
+                 noise standard deviation, or the record's robust spread about those cubics \
+                 when larger, as on signals with content near the Nyquist frequency)"
             )
         };
         r.push_str(&format!("\nOutliers: samples more than {screen}.\n\n"));
