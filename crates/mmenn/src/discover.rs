@@ -222,8 +222,8 @@ pub struct DiscoverSummary {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mme_estimate: Option<crate::fit::MmeConvergence>,
     /// Whether the effects were named as generalized forces of a mass-matrix model
-    /// (`discovery::force`: intervals and the validation cost decide; no bootstrap judge
-    /// and no stand-in).
+    /// (`discovery::force`: intervals, the validation cost and the fixed noise-level bound
+    /// decide; no bootstrap judge and no stand-in).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub generalized_forces: bool,
 }

@@ -89,8 +89,8 @@ pub fn named_values(values: &BTreeMap<String, f64>) -> String {
 }
 
 /// A discover run's verdict with what it means for the way it was decided: a
-/// force-space run (mass-matrix model) is not judged against the noise level, so its
-/// words say what did decide it.
+/// force-space run (mass-matrix model) is judged against the fixed noise-level bound, not
+/// by the bootstrap judge, so its words say what did decide it.
 pub fn discover_verdict(s: &crate::discover::DiscoverSummary) -> &'static str {
     if !s.generalized_forces {
         return verdict(s.verdict);
@@ -98,8 +98,9 @@ pub fn discover_verdict(s: &crate::discover::DiscoverSummary) -> &'static str {
     match s.verdict {
         discovery::Verdict::Found => {
             "found (named joint forces, each with a 95 % interval that excludes zero, which \
-             lowered the validation free-run cost when validation records were given; not \
-             judged against the noise level)"
+             lowered the validation free-run cost when validation records were given and \
+             bring the model to the noise level on the estimation records; judged by the \
+             fixed bound, not by a bootstrap)"
         }
         discovery::Verdict::None => {
             "none (no catalogue force of a joint's own rate was kept, and the assumed model \

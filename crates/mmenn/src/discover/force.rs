@@ -207,8 +207,12 @@ pub(super) fn run_force_discover(
         verdict: outcome.verdict,
         effects,
         unconfirmed,
-        // The noise-level bound a `none`/`unexplained` with nothing kept was judged by.
-        claim_bound: outcome.assumed_cost.map_or(f64::NAN, |c| c[1]),
+        // The noise-level bound the verdict was judged by: the assumed model's when
+        // nothing was kept, the final model's when forces were kept.
+        claim_bound: outcome
+            .assumed_cost
+            .or(outcome.found_cost)
+            .map_or(f64::NAN, |c| c[1]),
         judgement: None,
         passengers: outcome
             .eliminated
@@ -227,7 +231,8 @@ pub(super) fn run_force_discover(
         judge_note: Some(
             "force-space discovery (mass-matrix model): a force is kept when its 95 % interval \
              excludes zero and, with validation records, the kept forces lower the validation \
-             free-run cost; no bootstrap judge"
+             free-run cost; they are claimed when they bring the free-run cost on the \
+             estimation records to the fixed noise-level bound (no bootstrap judge)"
                 .into(),
         ),
         gap: GapPair { before, after },
