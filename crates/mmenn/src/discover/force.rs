@@ -228,13 +228,22 @@ pub(super) fn run_force_discover(
                 )
             })
             .collect(),
-        judge_note: Some(
+        judge_note: Some(format!(
             "force-space discovery (mass-matrix model): a force is kept when its 95 % interval \
              excludes zero and, with validation records, the kept forces lower the validation \
              free-run cost; they are claimed when they bring the free-run cost on the \
-             estimation records to the fixed noise-level bound (no bootstrap judge)"
-                .into(),
-        ),
+             estimation records to the fixed noise-level bound (no bootstrap judge){}",
+            match (outcome.found_cost, outcome.assumed_cost) {
+                (Some([c, _]), _) => format!(
+                    ". With the kept forces that cost (the calibration's s², noise-weighted) \
+                     is {c:.4} × the noise level"
+                ),
+                (None, Some([c, _])) => format!(
+                    ". With no force kept, the assumed model's cost is {c:.4} × the noise level"
+                ),
+                (None, None) => String::new(),
+            }
+        )),
         gap: GapPair { before, after },
         validation_gap: validation_runs.as_ref().map(|(g, _, _)| g.clone()),
         ambiguity: None,
@@ -372,7 +381,11 @@ fn report(s: &DiscoverSummary, o: &ForceOutcome) -> String {
         }
         r.push('\n');
     }
-    table("Not confirmed on validation:", &s.unconfirmed, &mut r);
+    table(
+        "Not claimed (not confirmed on validation, or short of the noise level):",
+        &s.unconfirmed,
+        &mut r,
+    );
     if !s.passengers.is_empty() {
         r.push_str("Eliminated:\n\n");
         for p in &s.passengers {
@@ -382,6 +395,14 @@ fn report(s: &DiscoverSummary, o: &ForceOutcome) -> String {
     }
     if s.verdict == Verdict::None {
         r.push_str("No force was named.\n\n");
+    }
+    if let Some(note) = &s.judge_note
+        && s.claim_bound.is_finite()
+    {
+        r.push_str(&format!(
+            "## How the verdict was judged\n\n{note}; the bound is {:.4}.\n",
+            s.claim_bound
+        ));
     }
     r
 }
