@@ -119,8 +119,10 @@ pub struct PolyNarxChoice {
     pub nonlinear_lags: usize,
     /// One-step least squares alone ([`Focus::Prediction`], the default, as MATLAB's
     /// `nlarx`), or refined by free-run error over the estimation data
-    /// ([`Focus::Simulation`]).
+    /// ([`Focus::Simulation`]). Only for [`PolyNarxMonomials::All`].
     pub focus: Focus,
+    /// Which monomials the model keeps. Default [`PolyNarxMonomials::All`].
+    pub monomials: PolyNarxMonomials,
 }
 
 impl Default for PolyNarxChoice {
@@ -129,9 +131,35 @@ impl Default for PolyNarxChoice {
             degree: 3,
             nonlinear_lags: 2,
             focus: Focus::Prediction,
+            monomials: PolyNarxMonomials::All,
         }
     }
 }
+
+/// Which monomials a polynomial NARX row keeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PolyNarxMonomials {
+    /// Every monomial of the dictionary (MATLAB's `nlarx` with a polynomial regressor
+    /// set).
+    #[default]
+    All,
+    /// A sparse model (the reproduce's rule, docs/decisions/frols-count-kfold.md): FROLS
+    /// (forward regression with orthogonal least squares, Billings) ranks at most
+    /// [`FROLS_MAX_TERMS`] monomials on the first estimation record; every prefix count is
+    /// scored by free run pooled over [`sysid_baselines::KFOLD_FOLDS`] contiguous folds of
+    /// that record, each refitted without its fold ([`sysid_baselines::FrolsFit::kfold_scores`]);
+    /// the smallest count within [`FROLS_COUNT_TOLERANCE`] of the best is kept, and FROLS
+    /// runs again on every estimation record keeping that many terms. A count whose free
+    /// run diverges on a fold is never kept, so the model is one that simulates.
+    FrolsKfold,
+}
+
+/// Most monomials FROLS ranks for [`PolyNarxMonomials::FrolsKfold`] (the reproduce's cap).
+pub const FROLS_MAX_TERMS: usize = 40;
+/// Relative tolerance of the K-fold count rule: the smallest count whose pooled free-run
+/// RMSE is within it of the best count's (docs/decisions/frols-count-kfold.md).
+pub const FROLS_COUNT_TOLERANCE: f64 = 0.02;
 
 /// The polynomial NARX model of a comparison, in `compare.json` and the report.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -146,6 +174,10 @@ pub struct PolyNarxStructure {
     /// Numerical rank of its regressor matrix (equal to `terms` when the data determine
     /// every term).
     pub rank: Option<usize>,
+    /// With [`PolyNarxMonomials::FrolsKfold`]: how the count was chosen (every prefix count's
+    /// pooled K-fold free-run RMSE, `×` where its free run failed on a fold).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub selection: Option<String>,
 }
 
 /// The linear state-space row of `compare` (MATLAB's `n4sid` then `pem`): PO-MOESP
@@ -689,6 +721,42 @@ pub struct CompareOutcome {
     pub units: std::collections::BTreeMap<String, String>,
 }
 
+/// [`PolyNarxMonomials::FrolsKfold`] ([`sysid_baselines::fit_frols_kfold`]). Returns the
+/// model, its terms (constant included) and the selection's line.
+fn fit_frols_kfold(
+    data: &Dataset,
+    orders: NarxOrders,
+    choice: &PolyNarxChoice,
+) -> std::result::Result<(PolyNarxModel, usize, String), sysid_baselines::BaselineError> {
+    let config = sysid_baselines::FrolsConfig {
+        orders,
+        degree: choice.degree,
+        nonlinear_lags: choice.nonlinear_lags,
+        max_terms: FROLS_MAX_TERMS,
+        ..sysid_baselines::FrolsConfig::default()
+    };
+    let k = sysid_baselines::fit_frols_kfold(data, &config, FROLS_COUNT_TOLERANCE)?;
+    let by_count: Vec<String> = k
+        .scores
+        .iter()
+        .map(|s| s.value().map_or("×".into(), |v| format!("{v:.4e}")))
+        .collect();
+    let line = format!(
+        "{} of {} ranked terms of {} candidates: the smallest count within {:.0} % of the \
+         best pooled {}-fold free-run RMSE on the first estimation record ({:.4e}; counts \
+         1–{}: {})",
+        k.count,
+        k.scores.len(),
+        k.fit.candidates,
+        100.0 * FROLS_COUNT_TOLERANCE,
+        sysid_baselines::KFOLD_FOLDS,
+        k.score,
+        k.scores.len(),
+        by_count.join(" ")
+    );
+    Ok((k.fit.model, k.fit.n_terms, line))
+}
+
 /// The linear state-space row's fit on the first record of `data`
 /// ([`sysid_baselines::fit_linear_ss`], orders 1 to `opts.ss_max_order`); a fit that fails
 /// is a [`Failure`] at [`FailedAt::Fit`] (no row). Its state-initialisation window is
@@ -901,8 +969,8 @@ pub fn compute_compare_with_progress(
         }
     };
     let poly_narx = opts.poly_narx.map(|choice| {
-        let fitted = stage(progress, "polynomial NARX fit", || {
-            fit_poly_narx(
+        let fitted = stage(progress, "polynomial NARX fit", || match choice.monomials {
+            PolyNarxMonomials::All => fit_poly_narx(
                 data,
                 &PolyNarxConfig {
                     orders,
@@ -912,16 +980,29 @@ pub fn compute_compare_with_progress(
                     ..PolyNarxConfig::default()
                 },
             )
+            .map(|f| (f.model.n_terms(), f.rank, None, f.model)),
+            PolyNarxMonomials::FrolsKfold if choice.focus != Focus::Prediction => {
+                Err(sysid_baselines::BaselineError::InvalidConfig {
+                    field: "polynomial NARX focus",
+                    value: 1.0,
+                    reason: "the FROLS K-fold model is fitted by one-step least squares with \
+                             its term count chosen by free run; the simulation focus \
+                             applies to the model with every monomial",
+                })
+            }
+            PolyNarxMonomials::FrolsKfold => fit_frols_kfold(data, orders, &choice)
+                .map(|(model, n, line)| (n, n, Some(line), model)),
         });
         match fitted {
-            Ok(f) => (
+            Ok((terms, rank, selection, model)) => (
                 PolyNarxStructure {
                     choice,
                     orders,
-                    terms: Some(f.model.n_terms()),
-                    rank: Some(f.rank),
+                    terms: Some(terms),
+                    rank: Some(rank),
+                    selection,
                 },
-                Some(f.model),
+                Some(model),
             ),
             Err(e) => {
                 failures.push(Failure {
@@ -935,6 +1016,7 @@ pub fn compute_compare_with_progress(
                         orders,
                         terms: None,
                         rank: None,
+                        selection: None,
                     },
                     None,
                 )
@@ -1315,8 +1397,12 @@ fn compare_report(s: &CompareSummary) -> String {
                     ),
                 }
             ));
-            match (p.terms, p.rank) {
-                (Some(t), Some(k)) => r.push_str(&format!("; {t} terms, rank {k}.\n\n")),
+            match (p.terms, p.rank, &p.selection) {
+                (Some(t), _, Some(line)) => r.push_str(&format!(
+                    "; sparse, the terms ranked by FROLS and their count by K-fold free run: \
+                     {t} terms ({line}).\n\n"
+                )),
+                (Some(t), Some(k), None) => r.push_str(&format!("; {t} terms, rank {k}.\n\n")),
                 _ => r.push_str(" (not fitted).\n\n"),
             }
         }

@@ -133,6 +133,17 @@ pub enum BaselineError {
         /// Window length, samples.
         window: usize,
     },
+    /// No prefix count of a FROLS ranking ran free on every K-fold fold.
+    #[error(
+        "every prefix count of the {ranked} FROLS-ranked terms failed in free run on some of \
+         the {folds} K-fold folds"
+    )]
+    NoStableCount {
+        /// Terms ranked.
+        ranked: usize,
+        /// Folds.
+        folds: usize,
+    },
     /// A free-run simulation left the blow-up bound or became non-finite.
     #[error("simulation diverged at sample {sample}: {channel} = {value}")]
     Diverged {

@@ -557,6 +557,81 @@ pub fn count_by_free_run(scores: &[(usize, Option<f64>)], tolerance: f64) -> Opt
         .min_by_key(|&(n, _)| n)
 }
 
+/// [`fit_frols_kfold`]'s result.
+#[derive(Debug)]
+pub struct FrolsKfoldFit {
+    /// FROLS on every record of the data, keeping [`FrolsKfoldFit::count`] terms.
+    pub fit: FrolsFit,
+    /// Terms kept (a prefix of the first record's ranking, refitted on every record).
+    pub count: usize,
+    /// Its pooled K-fold free-run RMSE on the first record.
+    pub score: f64,
+    /// Every prefix count's pooled K-fold free-run score on the first record.
+    pub scores: Vec<PrefixScore>,
+}
+
+/// A sparse polynomial NARX model whose term count is chosen by free run
+/// (docs/decisions/frols-count-kfold.md): FROLS ranks up to `config.max_terms` terms on
+/// the first record of `data`; every prefix count is scored by [`FrolsFit::kfold_scores`]
+/// over [`KFOLD_FOLDS`] contiguous folds of that record (each fold's first `max_lag`
+/// samples its delay window); the smallest count within `tolerance` (relative) of the
+/// best pooled score is kept ([`count_by_free_run`]), and FROLS runs again on every record
+/// of `data` keeping that many terms (`config.count` is ignored). A count whose free run
+/// fails on any fold is never kept.
+///
+/// Errors: those of [`fit_frols`] and [`FrolsFit::kfold_scores`];
+/// [`BaselineError::NoStableCount`] when every prefix count fails on some fold.
+pub fn fit_frols_kfold(
+    data: &Dataset,
+    config: &FrolsConfig,
+    tolerance: f64,
+) -> Result<FrolsKfoldFit> {
+    check_config(
+        "tolerance",
+        tolerance,
+        "must be finite and ≥ 0",
+        tolerance.is_finite() && tolerance >= 0.0,
+    )?;
+    let Some(first_record) = data.experiments().first() else {
+        return Err(BaselineError::TooFewRows {
+            what: "records for a K-fold term count",
+            found: 0,
+            needed: 1,
+        });
+    };
+    let first = Dataset::new(
+        data.input_channels().to_vec(),
+        data.output_channels().to_vec(),
+        vec![first_record.clone()],
+    )?;
+    let ranking_config = FrolsConfig {
+        count: TermCount::Aic,
+        ..config.clone()
+    };
+    let ranked = fit_frols(&first, &ranking_config)?;
+    let scores = ranked.kfold_scores(&first, KFOLD_FOLDS, config.orders.max_lag())?;
+    let pairs: Vec<(usize, Option<f64>)> = scores.iter().map(|s| (s.n, s.value())).collect();
+    let Some((count, score)) = count_by_free_run(&pairs, tolerance) else {
+        return Err(BaselineError::NoStableCount {
+            ranked: ranked.ranking.len(),
+            folds: KFOLD_FOLDS,
+        });
+    };
+    let fit = fit_frols(
+        data,
+        &FrolsConfig {
+            count: TermCount::Fixed(count),
+            ..config.clone()
+        },
+    )?;
+    Ok(FrolsKfoldFit {
+        fit,
+        count,
+        score,
+        scores,
+    })
+}
+
 fn choose_count(ranking: &[RankedTerm], count: TermCount) -> usize {
     let pick = |f: fn(&RankedTerm) -> f64| {
         let mut best = 0;

@@ -31,8 +31,8 @@ pub use evaluate::{
 };
 pub use free_params::{FreeParameter, StateMatrix, parse_free_parameters};
 pub use frols::{
-    FrolsConfig, FrolsFit, KFOLD_FOLDS, PrefixFailure, PrefixScore, RankedTerm, TermCount,
-    count_by_free_run, fit_frols,
+    FrolsConfig, FrolsFit, FrolsKfoldFit, KFOLD_FOLDS, PrefixFailure, PrefixScore, RankedTerm,
+    TermCount, count_by_free_run, fit_frols, fit_frols_kfold,
 };
 pub use lags::{
     InputOutputXcf, LagCandidate, LagGrid, LagOutcome, LagSearch, LagSearchConfig, LagSuggestion,

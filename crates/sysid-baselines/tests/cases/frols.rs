@@ -730,3 +730,46 @@ fn a_count_whose_free_run_diverges_on_one_fold_is_not_eligible() {
     truth.sort_unstable();
     assert_eq!(kept, truth, "{pairs:?}");
 }
+
+/// `fit_frols_kfold` on the three-term system with output noise (σ = 0.05; 1500
+/// samples): the count is the one `count_by_free_run` takes from its own K-fold scores,
+/// the model keeps exactly the three true terms (the rule of
+/// docs/decisions/frols-count-kfold.md on data whose right count is known), and a bad
+/// tolerance is a typed error.
+#[test]
+fn the_kfold_count_keeps_the_three_true_terms() {
+    let u = input(1500, 5);
+    let e = input(1500, 29);
+    let y: Vec<f64> = three_term_truth(&u)
+        .iter()
+        .zip(&e)
+        .map(|(c, e)| c + 0.05 * 3f64.sqrt() * e)
+        .collect();
+    let data = dataset(&u, &y, 1.0);
+    let k = sysid_baselines::fit_frols_kfold(&data, &cubic_config(TermCount::Aic), 0.02).unwrap();
+    let pairs: Vec<(usize, Option<f64>)> = k.scores.iter().map(|s| (s.n, s.value())).collect();
+    let (n, best) = sysid_baselines::count_by_free_run(&pairs, 0.02).unwrap();
+    assert_eq!((k.count, k.score), (n, best));
+    assert_eq!(k.fit.n_terms, k.count);
+    let names: Vec<String> = k.fit.ranking[..k.count]
+        .iter()
+        .map(|r| r.name.clone())
+        .collect();
+    let mut sorted = names.clone();
+    sorted.sort();
+    let mut truth: Vec<String> = THREE_TERMS.iter().map(|s| s.to_string()).collect();
+    truth.sort();
+    assert_eq!(sorted, truth, "{names:?}");
+    let err =
+        sysid_baselines::fit_frols_kfold(&data, &cubic_config(TermCount::Aic), -0.1).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            BaselineError::InvalidConfig {
+                field: "tolerance",
+                ..
+            }
+        ),
+        "{err}"
+    );
+}

@@ -636,6 +636,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             degree: a.poly_degree,
             nonlinear_lags: a.poly_nonlinear_lags,
             focus: a.poly_focus,
+            monomials: a.poly_monomials,
         }),
         ss_max_order: a.ss_max_order,
         ..Default::default()
@@ -683,6 +684,9 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     }
     if s.linear_ss.order.is_some() {
         outln!("linear SS order {}", s.linear_ss.choice);
+    }
+    if let Some(line) = s.poly_narx.as_ref().and_then(|p| p.selection.as_ref()) {
+        outln!("polynomial NARX terms: {line}");
     }
     // The MME/NN's choices, in `fit`'s words; its rows above are the kept model's.
     let f = &outcome.fit.summary;
