@@ -6,6 +6,10 @@
 //! - a damped oscillator with free stiffness and damping, which these records pin: every
 //!   converged start ends at one minimum and nothing is reported.
 //!
+//! - a first-order tank with an overflow term `c·max(h − 10, 0)` that the record (|h| < 2)
+//!   never reaches: the starts end with different `c`, which must be reported as not
+//!   exercised by the records, not as a parameter the data do not pin.
+//!
 //! Plus: `--starts 0` is the single-start estimation with `greyest.json` unchanged, and the
 //! result does not depend on the number of threads.
 
@@ -196,6 +200,41 @@ fn a_parameter_entering_squared_is_reported_not_pinned() {
     let own = ms.starts.iter().find(|s| s.index == 0).unwrap();
     assert_eq!(p_of(&own.values).to_bits(), 0f64.to_bits(), "{own:?}");
     assert!(own.relative_to_best.is_some_and(|r| r > 0.5), "{own:?}");
+    // p = 0 is a stationary point of the cost but not a minimum: the output depends on p²,
+    // so p has no first-order effect there (the nudges ±δ give the same free run: a
+    // sensitivity of exactly 0), yet either nudge lowers the cost. The probe marks the
+    // start a saddle along p and leaves it out of the minima; p is not "not exercised".
+    assert!(own.converged, "{own:?}");
+    assert!(own.saddle, "{own:?}");
+    assert_eq!(own.minimum, None, "{own:?}");
+    assert_eq!(own.sensitivity[at], Some(0.0), "{own:?}");
+    assert!(own.not_exercised.is_empty(), "{own:?}");
+    assert!(
+        !own.cost_falls.is_empty()
+            && own.cost_falls.iter().all(
+                |f| f.name == "p" && f.relative_change < -mmenn::greyest::multistart::COST_FALL
+            ),
+        "{own:?}"
+    );
+    assert_eq!(own.note(), "saddle (cost falls along p)");
+    assert_eq!(ms.saddles, vec![0], "{ms:#?}");
+    assert!(ms.minima.iter().all(|m| !m.starts.contains(&0)), "{ms:#?}");
+    // The minima at p ≈ ±1 are minima: no nudge lowers their cost, every parameter
+    // exercised.
+    for s in converged.iter().filter(|s| s.index != 0) {
+        assert!(!s.saddle && s.not_exercised.is_empty(), "{s:?}");
+        assert!(
+            s.sensitivity.iter().all(|v| v.is_some_and(|v| v > 1e-2)),
+            "{s:?}"
+        );
+    }
+    assert!(
+        ms.terminal_lines()
+            .iter()
+            .any(|l| l.contains("1 of them a saddle") && l.contains("multi-start:")),
+        "{:#?}",
+        ms.terminal_lines()
+    );
     // The table is sorted by cost, the kept start first.
     assert_eq!(ms.starts[0].index, ms.kept);
     assert!(
@@ -237,6 +276,14 @@ fn a_parameter_entering_squared_is_reported_not_pinned() {
         json["multi_start"]["not_pinned"][0]["parameters"][0]["name"],
         "p"
     );
+    let own_json = json["multi_start"]["starts"]
+        .as_array()
+        .and_then(|a| a.iter().find(|s| s["index"] == 0))
+        .unwrap_or_else(|| panic!("{json}"));
+    assert_eq!(own_json["saddle"], true);
+    assert_eq!(own_json["minimum"], serde_json::Value::Null);
+    assert_eq!(own_json["cost_falls"][0]["name"], "p");
+    assert_eq!(json["multi_start"]["saddles"][0], 0);
 }
 
 /// The same through the binary: `--starts 6 --seed 1` prints the table, which start was
@@ -278,6 +325,26 @@ fn a_well_identified_model_has_one_minimum_and_no_warning() {
     assert_eq!(ms.minima.len(), 1, "{ms:#?}");
     assert!(ms.minima[0].kept);
     assert!(ms.not_pinned.is_empty(), "{ms:#?}");
+    // The probe finds every start a minimum with both parameters exercised.
+    assert!(
+        ms.saddles.is_empty() && ms.not_exercised.is_empty(),
+        "{ms:#?}"
+    );
+    for s in &ms.starts {
+        assert!(!s.saddle && s.not_exercised.is_empty(), "{s:?}");
+        assert_eq!(s.sensitivity.len(), 2, "{s:?}");
+        assert!(
+            s.sensitivity.iter().all(|v| v.is_some_and(|v| v > 1e-2)),
+            "{s:?}"
+        );
+        assert!(
+            s.probe
+                .iter()
+                .all(|q| q.cost_down.is_some_and(|c| c >= 0.0)
+                    && q.cost_up.is_some_and(|c| c >= 0.0)),
+            "{s:?}"
+        );
+    }
     for name in ["k", "c"] {
         let a = single.parameter(name).unwrap().value;
         let b = multi.parameter(name).unwrap().value;
@@ -488,3 +555,120 @@ fn a_zero_start_parameter_is_drawn_at_its_estimates_scale() {
     assert!(rms > d0 / 3.0 && rms < 3.0 * d0, "RMS {rms} against d̂ {d0}");
     assert_eq!(ms.minima.len(), 1, "{ms:#?}");
 }
+
+/// `x' = −a·x + b·u − c·max(x − 10, 0)`: a tank (level `x`) whose overflow above 10 drains at
+/// rate `c`. `c` starts at 1 within [0, 100], so every seeded start draws it
+/// (`1·exp(0.7·z)`).
+const OVERFLOW: &str = r#"
+states = ["x"]
+inputs = ["u"]
+measured = ["x"]
+corrected = ["x"]
+noise_variance = [1.0e-4]
+
+[parameters]
+a = { value = 0.5, bounds = [0.01, 10.0] }
+b = { value = 0.8, bounds = [0.0, 10.0] }
+c = { value = 1.0, bounds = [0.0, 100.0] }
+
+[[terms]]
+state = "x"
+effect = "leak_overflow"
+term = "-a*x + b*u - c*max(x - 10, 0)"
+"#;
+
+/// The record of `x' = −x + u` (|x| stays under 2) never reaches the overflow level 10: the
+/// overflow term is 0 along every free run, `c` has no effect on it and its gradient is 0,
+/// so every start ends with the `c` it drew while `a` and `b` reach the same values.
+/// Before, those starts were distinct minima of the same cost and the warning said "these
+/// data do not pin c". Now: `c` is not exercised (sensitivity 0) at every converged start,
+/// it is left out of the comparison (one minimum, no warning), and a note says plainly that
+/// the records never exercise it. `a` and `b` are exercised, and no start is a saddle.
+#[test]
+fn a_term_the_records_never_reach_is_not_exercised_rather_than_not_pinned() {
+    let dir = scratch("overflow");
+    let model = write(&dir, "model.toml", OVERFLOW);
+    let data = first_order_record(&dir, "overflow.csv", 11, 0.3, 0.0);
+    let out = dir.join("out");
+    let outcome = greyest(&model, &data, &starts(6, 1), &out);
+    let ms = outcome.summary.multi_start.as_ref().unwrap();
+    let c = ms.parameter_names.iter().position(|n| n == "c").unwrap();
+    let converged: Vec<_> = ms.starts.iter().filter(|s| s.converged).collect();
+    assert!(converged.len() >= 4, "{ms:#?}");
+    // The starts really end with different c (it never moves): over 10 % apart, which the
+    // comparison of all parameters would call different minima.
+    let cs: Vec<f64> = converged.iter().map(|s| s.values[c]).collect();
+    let (lo, hi) = cs
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(l, h), v| (l.min(*v), h.max(*v)));
+    assert!(hi > 1.1 * lo, "{cs:?}");
+    for s in &converged {
+        // (To rounding: the solver's change of variable for two bounds.)
+        assert!(
+            (s.values[c] - s.start[c]).abs() <= 1e-12 * s.start[c],
+            "{s:?}"
+        );
+        assert_eq!(s.not_exercised, vec!["c".to_string()], "{s:?}");
+        assert_eq!(s.sensitivity[c], Some(0.0), "{s:?}");
+        assert!(!s.saddle, "{s:?}");
+        for (j, v) in s.sensitivity.iter().enumerate() {
+            if j != c {
+                assert!(v.is_some_and(|v| v > 1e-2), "{s:?}");
+            }
+        }
+    }
+    // One minimum (c left out), no warning naming c.
+    assert_eq!(ms.minima.len(), 1, "{ms:#?}");
+    assert_eq!(ms.minima[0].not_exercised, vec!["c".to_string()]);
+    assert_eq!(ms.minima[0].starts.len(), converged.len(), "{ms:#?}");
+    assert!(
+        ms.not_pinned
+            .iter()
+            .all(|w| w.parameters.iter().all(|p| p.name != "c")),
+        "{ms:#?}"
+    );
+    assert!(ms.not_pinned.is_empty(), "{ms:#?}");
+    assert_eq!(ms.valleys.len(), 1, "{ms:#?}");
+    assert!(ms.valleys[0].spread < DIFFERENT, "{ms:#?}");
+    // The note.
+    assert_eq!(ms.not_exercised.len(), 1, "{ms:#?}");
+    let note = &ms.not_exercised[0];
+    assert_eq!(note.name, "c");
+    assert_eq!(note.starts.len(), converged.len());
+    assert!((note.lowest - lo).abs() < 1e-12 && (note.highest - hi).abs() < 1e-12);
+    let lines = ms.terminal_lines();
+    assert!(
+        lines.iter().any(|l| l.starts_with(
+            "note: parameter c has no effect on the free run at the kept estimate: the \
+             records never exercise it"
+        )),
+        "{lines:#?}"
+    );
+    assert!(
+        !lines.iter().any(|l| l.starts_with("warning:")),
+        "{lines:#?}"
+    );
+    assert!(
+        lines
+            .iter()
+            .any(|l| l.contains("not exercised by these records: c")),
+        "{lines:#?}"
+    );
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap_or_default();
+    assert!(!report.contains("do not pin"), "{report}");
+    assert!(
+        report.contains("**Note**: parameter c has no effect"),
+        "{report}"
+    );
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("greyest.json")).unwrap_or_default(),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(json["multi_start"]["minima"][0]["not_exercised"][0], "c");
+    assert_eq!(json["multi_start"]["starts"][0]["not_exercised"][0], "c");
+    assert_eq!(json["multi_start"]["not_exercised"][0]["name"], "c");
+    assert_eq!(json["multi_start"]["probe"]["not_exercised"], 1e-6);
+}
+
+/// [`mmenn::greyest::multistart::DIFFERENT_PARAMETER`].
+const DIFFERENT: f64 = mmenn::greyest::multistart::DIFFERENT_PARAMETER;

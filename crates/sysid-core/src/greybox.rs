@@ -485,6 +485,72 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
     })
 }
 
+/// The weighted free-run residuals `(ỹ − C x)/σ` of `model` at its current parameter
+/// values on `data`'s records, each simulated from its start state in `x0` (one per
+/// record) with `substeps[record]` RK4 steps per sample interval — the residuals whose
+/// squared norm [`estimate_parameters`] minimises in its free-run solve, computed by the
+/// same code (given a fit's `model`, `x0` and `substeps`, `‖r‖²` is its final cost up to
+/// rounding). `data.x0` is not read. `Ok(None)` when a simulation leaves the blow-up
+/// bound; errors: shapes that do not match (as [`estimate_parameters`]).
+pub fn free_run_residuals<D: ParametricDynamics>(
+    model: &D,
+    data: &GreyboxData<'_>,
+    x0: &[Vec<f64>],
+    substeps: &[usize],
+    blow_up: f64,
+) -> Result<Option<Vec<f64>>> {
+    let n = model.n_states();
+    validate_shapes(model, data)?;
+    CoreError::check_len(
+        "start states (one per record)",
+        x0.len(),
+        data.records.len(),
+    )?;
+    CoreError::check_len(
+        "sub-step counts (one per record)",
+        substeps.len(),
+        data.records.len(),
+    )?;
+    if substeps.contains(&0) {
+        return Err(CoreError::InvalidArgument {
+            name: "substeps",
+            value: 0.0,
+            reason: "at least one RK4 step per sample interval",
+        });
+    }
+    let mut theta = Vec::with_capacity(n * x0.len());
+    for x in x0 {
+        CoreError::check_len("start state", x.len(), n)?;
+        theta.extend_from_slice(x);
+    }
+    let weight: Vec<f64> = data.noise_variance.iter().map(|v| 1.0 / v.sqrt()).collect();
+    let segments: Vec<Segment> = data
+        .records
+        .iter()
+        .enumerate()
+        .map(|(record, e)| Segment {
+            record,
+            start: 0,
+            end: e.len(),
+            linked: false,
+        })
+        .collect();
+    let mut problem = Calibration::new(
+        model,
+        data.c,
+        weight,
+        data.records,
+        Vec::new(),
+        Vec::new(),
+        segments,
+        0.0,
+        substeps.to_vec(),
+        blow_up,
+    );
+    let mut r = vec![0.0; problem.rows];
+    Ok(problem.residuals_checked(&theta, &mut r)?.then_some(r))
+}
+
 /// Each record's RK4 sub-steps for `model` from `starts` (`opts.substeps`, [`crate::stiff`]).
 fn record_substeps<D: ParametricDynamics>(
     model: &D,
@@ -553,11 +619,9 @@ fn free_parameters<D: ParametricDynamics>(model: &D) -> Result<Free> {
     })
 }
 
-fn validate<D: ParametricDynamics>(
-    model: &D,
-    data: &GreyboxData<'_>,
-    opts: &GreyboxOptions,
-) -> Result<()> {
+/// `C` against the model's states, the noise variances (one positive per output) and
+/// every record's channels against the model's inputs and `C`'s rows.
+fn validate_shapes<D: ParametricDynamics>(model: &D, data: &GreyboxData<'_>) -> Result<()> {
     let n = model.n_states();
     let p = data.c.nrows();
     if data.c.ncols() != n {
@@ -583,6 +647,28 @@ fn validate<D: ParametricDynamics>(
             });
         }
     }
+    for exp in data.records {
+        CoreError::check_len(
+            "input channels of a record vs the model",
+            exp.n_inputs(),
+            model.n_inputs(),
+        )?;
+        CoreError::check_len(
+            "output channels of a record vs the rows of C",
+            exp.n_outputs(),
+            p,
+        )?;
+    }
+    Ok(())
+}
+
+fn validate<D: ParametricDynamics>(
+    model: &D,
+    data: &GreyboxData<'_>,
+    opts: &GreyboxOptions,
+) -> Result<()> {
+    let n = model.n_states();
+    validate_shapes(model, data)?;
     if data.records.is_empty() {
         return Err(CoreError::TooFewSamples {
             what: "grey-box estimation (records)",
@@ -612,16 +698,6 @@ fn validate<D: ParametricDynamics>(
     }
     let mut measured = 0;
     for (e, exp) in data.records.iter().enumerate() {
-        CoreError::check_len(
-            "input channels of a record vs the model",
-            exp.n_inputs(),
-            model.n_inputs(),
-        )?;
-        CoreError::check_len(
-            "output channels of a record vs the rows of C",
-            exp.n_outputs(),
-            p,
-        )?;
         let count = exp.outputs().iter().filter(|v| !v.is_nan()).count();
         if count == 0 {
             return Err(CoreError::TooFewSamples {

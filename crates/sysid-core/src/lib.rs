@@ -31,7 +31,7 @@ pub use estimate::{ExperimentEstimate, IterationRecord, MmeEstimate, SolveReport
 pub use expr::{Expr, ExprError, Func};
 pub use greybox::{
     ActiveBound, GreyboxData, GreyboxFit, GreyboxOptions, ParameterEstimate, Shooting, StageReport,
-    estimate_parameters, estimate_parameters_with,
+    estimate_parameters, estimate_parameters_with, free_run_residuals,
 };
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};

@@ -1,7 +1,10 @@
 //! Multi-start of `mmenn greyest` (`--starts N --seed S`): the same estimation from the
 //! model file's own start (start 0) and from `N` seeded starts, the lowest final free-run
 //! cost kept, and a plain statement when another start reaches nearly the same cost with
-//! materially different parameters (the data do not pin them).
+//! materially different parameters (the data do not pin them). Every converged start is
+//! probed: which free parameters the records do not exercise there (no effect on the free
+//! run: reported as such, and never what makes two minima differ), and whether the point
+//! is a minimum at all (a saddle is listed as a start, not as a minimum).
 //!
 //! **The draw.** Start `k` (1 ≤ k ≤ N) takes a `ChaCha8Rng` seeded with `S + k` (wrapping)
 //! and goes through the free parameters in the model's order (fixed parameters, and free
@@ -29,24 +32,79 @@
 //! its error; only when every start fails is the file's own start's error returned. A
 //! spent budget ends the whole job ([`sysid_core::CoreError::BudgetExhausted`]).
 //!
-//! **Distinct minima.** Among the starts whose free-run solve converged, two starts end at
-//! the same minimum when their costs agree within [`SAME_COST`] and every free parameter
-//! within [`SAME_PARAMETER`] (relative to the larger magnitude of the two); the starts are
-//! grouped in order of cost, each joining the first group whose lowest-cost member it
-//! matches.
+//! **Probe.** A solve that "converged" stopped where the cost no longer falls along the
+//! directions its Jacobian sees — not necessarily at a minimum. It may stop at a point
+//! where a free parameter has no first-order effect on the free run: a coefficient of a
+//! term that is zero along the whole simulated trajectory (a dead zone or an overflow never
+//! reached, a switch never crossed), whose value is wherever its start left it; or at a
+//! saddle, where the gradient vanishes but the cost still falls along some direction
+//! (`x' = −p²·x + …` at `p = 0`). So every converged start is probed, in its own task
+//! after its estimation: each free parameter `θ` (not one held by equal bounds) is nudged
+//! down and up by `δ = max(min(PROBE_STEP·s, PROBE_SIGMAS·σ), PROBE_MIN_STEP·s)` — 1 % of
+//! its scale `s`, at most 10 σ when it has a σ (so a nudge stays inside the basin the
+//! records resolve), never under 10⁻⁶·s — clipped to its bounds (one side only on a
+//! bound), the other parameters and the records' start states held at the estimate, and
+//! the free run simulated again by the estimator's own code
+//! ([`sysid_core::free_run_residuals`], the same sub-steps). `s = |θ|`; for `θ = 0` the
+//! first positive of `|start|`, half the width of finite bounds (the uniform draw's),
+//! the draw's scale (start 0's estimate or σ), σ, the larger finite bound, 1. That is
+//! `2P + 1` free runs per converged start (`P` free parameters; one at the estimate),
+//! charged to the job's budget as their RK4 steps — about two solver iterations' worth,
+//! since an iteration also carries `P` + `n` tangent columns. From the nudges:
+//! - the **sensitivity** `S = s·‖∂r/∂θ‖/‖r‖` (central difference of the weighted
+//!   residuals `r`, one-sided on a bound): the relative change of the residuals for a
+//!   relative change of `θ`, unit-free (a change of `θ` by the fraction `ε` moves the
+//!   residuals by `ε·S·‖r‖`, the cost at second order by `ε²S²` of itself). At an exact
+//!   fit `‖r‖` is replaced by `√M` (residuals of one noise σ each).
+//! - the cost `J±` of each nudge relative to the cost `J` at the estimate (recomputed by
+//!   the same code).
+//!
+//! A parameter is **not exercised** by the records at that point when `S <` [`NOT_EXERCISED`]
+//! (10⁻⁶) and every nudge leaves the cost within [`COST_FALL`] (10⁻⁶) of `J`. A term that
+//! is zero along the trajectory gives `S = 0` exactly; rounding in the simulation stays
+//! orders of magnitude under 10⁻⁶ at a 1 % step; and a parameter with `S = 10⁻⁶` could be
+//! doubled for a change of the cost of 10⁻¹² of itself, which no record of fewer than
+//! 10¹² residuals resolves (`s² = J/(M − P)`). The second condition keeps a parameter with
+//! only a second-order effect (`p` in `p²` at 0) exercised. A not-exercised parameter is
+//! reported per start and per minimum, and left out wherever two points are compared
+//! (distinct minima, valleys, not pinned) when either of them leaves it unexercised: at
+//! such a point any value of it gives the same free run, so it cannot make two minima
+//! different explanations of the data. A note says so for each one at the kept estimate
+//! ([`NotExercised`]).
+//!
+//! A converged start where a nudge lowers the cost by more than [`COST_FALL`] (relative)
+//! is a **saddle** ("saddle (cost falls along p)"): listed among the starts with its
+//! nudges ([`CostFall`]), not among the minima. The tolerance is the same-cost tolerance,
+//! not [`near_cost`]: at a true minimum a coordinate nudge cannot lower the cost by more
+//! than what the solve left undone (relative `ftol` = 10⁻¹⁰ when converged, about 10⁻⁸
+//! when it ended with no descending step at gradient cosine 10⁻⁴), while at a stationary
+//! point that is not a minimum a 1 % nudge lowers it by a second-order amount that is
+//! small in absolute terms (7.7·10⁻⁴ at `p = 0` of the test's `p²` model) but far beyond
+//! that. σ is not the test (`σ = None` also on a bound and along a null direction shared
+//! by several parameters). Only coordinate directions are probed: a saddle whose descent
+//! direction mixes parameters, with no coordinate descending, is not seen. When the kept
+//! start (lowest cost) is a saddle it stays kept, with a warning.
+//!
+//! **Distinct minima.** Among the starts whose free-run solve converged, saddles left
+//! out, two starts end at the same minimum when their costs agree within [`SAME_COST`]
+//! and every free parameter exercised at both within [`SAME_PARAMETER`] (relative to the
+//! larger magnitude of the two); the starts are grouped in order of cost, each joining the
+//! first group whose lowest-cost member it matches. A minimum's sensitivities and
+//! not-exercised parameters are its lowest-cost start's.
 //!
 //! **Valleys.** Descents into one flat basin end at slightly different points, which the
 //! strict rule above lists as different minima. Minima are grouped, in order of cost, each
 //! joining the first valley whose *lowest* minimum it matches: its cost within
-//! [`near_cost`] of that minimum's and every free parameter within
+//! [`near_cost`] of that minimum's and every free parameter exercised at both within
 //! [`DIFFERENT_PARAMETER`] of it (relative to the larger magnitude). Matching is against
 //! the lowest member only, so a chain A ~ B ~ C with A ≁ C puts C in a valley of its own.
-//! Each valley lists its starts, its cost range and the largest parameter spread in it.
+//! Each valley lists its starts, its cost range and the largest spread of a parameter
+//! exercised at both ends in it.
 //!
 //! **Not pinned.** A minimum other than the kept start's whose cost is within
-//! [`near_cost`] of the kept cost but where some free parameter differs from the kept
-//! estimate by more than [`DIFFERENT_PARAMETER`] (relative to the larger magnitude) is
-//! reported as parameters these data do not pin. [`near_cost`] is the larger of
+//! [`near_cost`] of the kept cost but where some free parameter exercised at both differs
+//! from the kept estimate by more than [`DIFFERENT_PARAMETER`] (relative to the larger
+//! magnitude) is reported as parameters these data do not pin. [`near_cost`] is the larger of
 //! [`NEAR_COST`] and the likelihood-ratio bound `χ²_P(0.95)/(M − P)` (`M` residuals, `P`
 //! estimated quantities of the kept free-run solve): with the noise variance scaled by
 //! the residual variance `s² = J/(M − P)`, as the reported σ are, a minimum whose cost
@@ -62,8 +120,8 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::Serialize;
 use sysid_core::{
-    CoreError, Estimation, GreyboxData, GreyboxFit, GreyboxOptions, Parameter, ParametricDynamics,
-    PhysicalModel, estimate_parameters,
+    ActiveBound, CoreError, Estimation, GreyboxData, GreyboxFit, GreyboxOptions, Parameter,
+    ParameterEstimate, ParametricDynamics, PhysicalModel, estimate_parameters, free_run_residuals,
 };
 
 use crate::progress::{Progress, ProgressSink};
@@ -101,6 +159,142 @@ pub fn near_cost(residuals: usize, estimated: usize) -> f64 {
 /// pinned by the data.
 pub const DIFFERENT_PARAMETER: f64 = 0.1;
 
+/// The probe's step, relative to the parameter's scale `s` (module doc, "Probe").
+pub const PROBE_STEP: f64 = 1e-2;
+/// … but at most this many of the parameter's σ, when it has one …
+pub const PROBE_SIGMAS: f64 = 10.0;
+/// … and never under this, relative to `s` (a σ at rounding level would leave the
+/// finite difference to rounding).
+pub const PROBE_MIN_STEP: f64 = 1e-6;
+/// Sensitivity (unit-free, module doc) under which a parameter has no first-order effect
+/// on the free run.
+pub const NOT_EXERCISED: f64 = 1e-6;
+/// Relative change of the free-run cost that a nudge must exceed to count: a fall by
+/// more makes the start not a minimum; a parameter of sensitivity under
+/// [`NOT_EXERCISED`] whose nudges change the cost by at most this is not exercised. The
+/// same tolerance as [`SAME_COST`] (two costs closer than it are the same cost).
+pub const COST_FALL: f64 = SAME_COST;
+
+/// The probe's settings, as written into `greyest.json`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ProbeSettings {
+    /// [`PROBE_STEP`].
+    pub step: f64,
+    /// [`PROBE_SIGMAS`].
+    pub sigmas: f64,
+    /// [`PROBE_MIN_STEP`].
+    pub min_step: f64,
+    /// [`NOT_EXERCISED`].
+    pub not_exercised: f64,
+    /// [`COST_FALL`].
+    pub cost_fall: f64,
+}
+
+impl Default for ProbeSettings {
+    fn default() -> Self {
+        Self {
+            step: PROBE_STEP,
+            sigmas: PROBE_SIGMAS,
+            min_step: PROBE_MIN_STEP,
+            not_exercised: NOT_EXERCISED,
+            cost_fall: COST_FALL,
+        }
+    }
+}
+
+/// What the probe of a converged start found for one free parameter (module doc,
+/// "Probe").
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ParameterProbe {
+    /// Name.
+    pub name: String,
+    /// The scale `s` of its step and of its sensitivity: `|θ|`, or for `θ = 0` the
+    /// first of `|start|`, half the width of finite bounds, the draw's scale, σ, the
+    /// larger finite bound's magnitude, 1.
+    pub scale: f64,
+    /// The value it was nudged down to (`null`: not that way — on its lower bound, or
+    /// held by equal bounds).
+    pub down: Option<f64>,
+    /// The value it was nudged up to (`null` likewise).
+    pub up: Option<f64>,
+    /// Free-run cost there relative to the cost at the estimate (`J₋/J − 1`; `null` when
+    /// not nudged down, or when the simulation diverged there).
+    pub cost_down: Option<f64>,
+    /// `J₊/J − 1` likewise.
+    pub cost_up: Option<f64>,
+    /// `s·‖∂r/∂θ‖/‖r‖` from the nudges (`null` when neither could be simulated or it is
+    /// held).
+    pub sensitivity: Option<f64>,
+    /// Whether the records exercise it at this point: false when its sensitivity is under
+    /// [`NOT_EXERCISED`] and every nudge changed the cost by at most [`COST_FALL`].
+    pub exercised: bool,
+}
+
+/// A nudge along which the free-run cost fell: the start is not a minimum.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CostFall {
+    /// The parameter nudged.
+    pub name: String,
+    /// Its value at the estimate.
+    pub from: f64,
+    /// The value nudged to.
+    pub to: f64,
+    /// The cost there relative to the cost at the estimate (negative, below
+    /// `−COST_FALL`).
+    pub relative_change: f64,
+}
+
+/// A note: a free parameter the records never exercise at the kept estimate.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NotExercised {
+    /// Name.
+    pub name: String,
+    /// Its value at the kept estimate (where its start left it, not an estimate).
+    pub kept: f64,
+    /// Its sensitivity there.
+    pub sensitivity: Option<f64>,
+    /// The converged starts that leave it unexercised too, in start order.
+    pub starts: Vec<usize>,
+    /// Its lowest and highest value at those starts (and the kept one).
+    pub lowest: f64,
+    /// See `lowest`.
+    pub highest: f64,
+}
+
+impl NotExercised {
+    /// The note in plain words.
+    pub fn sentence(&self) -> String {
+        let number = crate::show::number;
+        let sens = match self.sensitivity {
+            Some(0.0) => format!("sensitivity 0, under {NOT_EXERCISED:.0e}"),
+            Some(v) => format!("sensitivity {v:.1e}, under {NOT_EXERCISED:.0e}"),
+            None => "no sensitivity".to_string(),
+        };
+        let others = if self.starts.len() > 1 && self.highest > self.lowest {
+            format!(
+                " The {} converged starts that leave it unexercised end with it anywhere \
+                 from {} to {}; that makes none of their minima a different explanation of \
+                 the data, and it is left out when minima are compared.",
+                self.starts.len(),
+                number(self.lowest),
+                number(self.highest)
+            )
+        } else {
+            " It is left out when minima are compared.".to_string()
+        };
+        format!(
+            "parameter {} has no effect on the free run at the kept estimate: the records \
+             never exercise it ({sens}; a nudge of it leaves the cost within {:.0e}). Its \
+             value there, {}, is where its start left it, not an estimate.{others} To \
+             estimate it, add records that exercise it; otherwise fix it from other \
+             knowledge.",
+            self.name,
+            COST_FALL,
+            number(self.kept)
+        )
+    }
+}
+
 /// One start in `greyest.json`'s `multi_start.starts`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StartSummary {
@@ -116,10 +310,53 @@ pub struct StartSummary {
     pub converged: bool,
     /// Estimate of each free parameter (empty when the estimation failed).
     pub values: Vec<f64>,
-    /// Its distinct minimum (index into `minima`; `null` when it did not converge).
+    /// Its distinct minimum (index into `minima`; `null` when it did not converge or is a
+    /// saddle).
     pub minimum: Option<usize>,
     /// Why the estimation failed.
     pub error: Option<String>,
+    /// Whether the probe found the free-run cost falling along a parameter (`cost_falls`):
+    /// converged, but not a minimum ("saddle (cost falls along p)"), and left out of
+    /// `minima`.
+    pub saddle: bool,
+    /// Unit-free sensitivity of each free parameter (`parameter_names` order; module doc,
+    /// "Probe"); empty when the start was not probed (not converged, failed).
+    pub sensitivity: Vec<Option<f64>>,
+    /// Whether the records exercise each free parameter here (empty when not probed).
+    pub exercised: Vec<bool>,
+    /// The free parameters the records do not exercise here.
+    pub not_exercised: Vec<String>,
+    /// The nudges along which the cost fell (empty at a minimum).
+    pub cost_falls: Vec<CostFall>,
+    /// The probe, parameter by parameter (empty when not probed).
+    pub probe: Vec<ParameterProbe>,
+}
+
+impl StartSummary {
+    /// "saddle (cost falls along p, q)", "not exercised: c", or empty.
+    pub fn note(&self) -> String {
+        let mut parts = Vec::new();
+        if self.saddle {
+            let mut names: Vec<&str> = Vec::new();
+            for f in &self.cost_falls {
+                if !names.contains(&f.name.as_str()) {
+                    names.push(&f.name);
+                }
+            }
+            parts.push(format!("saddle (cost falls along {})", names.join(", ")));
+        }
+        if !self.not_exercised.is_empty() {
+            parts.push(format!("not exercised: {}", self.not_exercised.join(", ")));
+        }
+        parts.join("; ")
+    }
+
+    /// The steepest fall of its cost under a nudge, if any.
+    fn steepest_fall(&self) -> Option<&CostFall> {
+        self.cost_falls
+            .iter()
+            .min_by(|a, b| a.relative_change.total_cmp(&b.relative_change))
+    }
 }
 
 /// One distinct minimum.
@@ -135,6 +372,13 @@ pub struct MinimumSummary {
     pub values: Vec<f64>,
     /// Whether the kept start is one of them.
     pub kept: bool,
+    /// Sensitivity of each free parameter at its lowest-cost start (empty: not probed).
+    pub sensitivity: Vec<Option<f64>>,
+    /// Whether the records exercise each free parameter there (empty: not probed).
+    pub exercised: Vec<bool>,
+    /// The free parameters they do not exercise there (left out when minima are
+    /// compared).
+    pub not_exercised: Vec<String>,
 }
 
 /// A free parameter whose value differs between two nearly equally good minima.
@@ -278,6 +522,12 @@ pub struct MultiStart {
     /// Identifiability warnings (empty when no other minimum is nearly as good with
     /// different parameters).
     pub not_pinned: Vec<NotPinned>,
+    /// The probe's step and thresholds.
+    pub probe: ProbeSettings,
+    /// The converged starts the probe found not to be minima, in start order.
+    pub saddles: Vec<usize>,
+    /// Notes: the free parameters the records never exercise at the kept estimate.
+    pub not_exercised: Vec<NotExercised>,
 }
 
 impl MultiStart {
@@ -291,11 +541,53 @@ impl MultiStart {
         self.starts.iter().filter(|s| s.converged).count()
     }
 
+    /// The kept start's row.
+    pub fn kept_start(&self) -> Option<&StartSummary> {
+        self.starts.iter().find(|s| s.index == self.kept)
+    }
+
+    /// A warning when the kept start is a saddle: its cost still falls along a parameter.
+    pub fn kept_saddle_warning(&self) -> Option<String> {
+        let row = self.kept_start().filter(|r| r.saddle)?;
+        let fall = row.steepest_fall()?;
+        Some(format!(
+            "the kept start {} is not a minimum: its free-run cost falls by {:.2e} (relative) \
+             when {} is nudged from {} to {}, and no other start reached a lower cost. The \
+             kept values are a saddle of the cost, not an estimate; run more starts, or \
+             start {} elsewhere.",
+            row.index,
+            -fall.relative_change,
+            fall.name,
+            crate::show::number(fall.from),
+            crate::show::number(fall.to),
+            fall.name
+        ))
+    }
+
+    /// One line per minimum with a parameter the records do not exercise there.
+    fn minimum_lines(&self) -> Vec<String> {
+        self.minima
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| !m.not_exercised.is_empty())
+            .map(|(i, m)| {
+                let starts: Vec<String> = m.starts.iter().map(usize::to_string).collect();
+                format!(
+                    "minimum {i}{} (start{} {}): not exercised by these records: {}",
+                    if m.kept { " (kept)" } else { "" },
+                    if m.starts.len() == 1 { "" } else { "s" },
+                    starts.join(", "),
+                    m.not_exercised.join(", ")
+                )
+            })
+            .collect()
+    }
+
     /// The summary in lines for the terminal.
     pub fn terminal_lines(&self) -> Vec<String> {
         let mut lines = vec![format!(
             "multi-start: {} starts (the model file's and {} seeded, seed {}); kept start {} \
-             (lowest cost); {} distinct minim{} in {} valley{} among {} converged starts{}",
+             (lowest cost); {} distinct minim{} in {} valley{} among {} converged starts{}{}",
             self.starts.len(),
             self.starts.len() - 1,
             self.seed,
@@ -305,6 +597,11 @@ impl MultiStart {
             self.valleys.len(),
             if self.valleys.len() == 1 { "" } else { "s" },
             self.converged(),
+            match self.saddles.len() {
+                0 => String::new(),
+                1 => " (1 of them a saddle, not a minimum)".to_string(),
+                n => format!(" ({n} of them saddles, not minima)"),
+            },
             match self.failed() {
                 0 => String::new(),
                 n => format!("; {n} failed"),
@@ -324,7 +621,7 @@ impl MultiStart {
         for s in &self.starts {
             lines.push(match (&s.error, s.final_cost) {
                 (None, Some(cost)) => format!(
-                    "  {:>5}  {:>12.6e}  {:>9}  {:<9}{}",
+                    "  {:>5}  {:>12.6e}  {:>9}  {:<9}{}{}",
                     s.index,
                     cost,
                     relative_words(s.relative_to_best),
@@ -332,7 +629,11 @@ impl MultiStart {
                     s.values
                         .iter()
                         .map(|v| format!("  {v:>12.6e}"))
-                        .collect::<String>()
+                        .collect::<String>(),
+                    match s.note() {
+                        n if n.is_empty() => n,
+                        n => format!("  {n}"),
+                    }
                 ),
                 (e, _) => format!(
                     "  {:>5}  failed: {}",
@@ -341,8 +642,17 @@ impl MultiStart {
                 ),
             });
         }
+        for m in self.minimum_lines() {
+            lines.push(format!("  {m}"));
+        }
         for v in &self.valleys {
             lines.push(format!("  {}", v.sentence()));
+        }
+        for n in &self.not_exercised {
+            lines.push(format!("note: {}", n.sentence()));
+        }
+        if let Some(w) = self.kept_saddle_warning() {
+            lines.push(format!("warning: {w}"));
         }
         for w in &self.not_pinned {
             lines.push(format!("warning: {}", w.sentence()));
@@ -368,8 +678,9 @@ impl MultiStart {
         for n in &self.parameter_names {
             md.push_str(&format!(" {n} |"));
         }
+        md.push_str(" probe |");
         md.push_str("\n|---|---|---|---|");
-        md.push_str(&"---|".repeat(self.parameter_names.len()));
+        md.push_str(&"---|".repeat(self.parameter_names.len() + 1));
         md.push('\n');
         for s in &self.starts {
             match (&s.error, s.final_cost) {
@@ -385,6 +696,7 @@ impl MultiStart {
                     for v in &s.values {
                         md.push_str(&format!(" {} |", number(*v)));
                     }
+                    md.push_str(&format!(" {} |", s.note()));
                 }
                 (e, _) => {
                     md.push_str(&format!(
@@ -392,17 +704,49 @@ impl MultiStart {
                         s.index,
                         e.as_deref().unwrap_or("no estimate").replace('|', "\\|")
                     ));
-                    md.push_str(&" |".repeat(self.parameter_names.len()));
+                    md.push_str(&" |".repeat(self.parameter_names.len() + 1));
                 }
             }
             md.push('\n');
         }
         md.push_str(&format!(
-            "\n{} distinct minim{} among the {} converged starts (the same minimum: costs \
-             within {:.0e} and every free parameter within {:.0e}, relative):\n\n",
+            "\nEvery converged start is probed: each free parameter is nudged down and up by \
+             {} % of its scale (at most {} σ), the free run simulated again from the same \
+             start states. A parameter whose sensitivity (the relative change of the \
+             residuals for a relative change of it) is under {:.0e} and whose nudges leave \
+             the cost within {:.0e} is *not exercised* by these records there: it is left \
+             out when minima are compared. A start where a nudge lowers the cost by more \
+             than {:.0e} is a *saddle*, not a minimum{}.\n",
+            100.0 * PROBE_STEP,
+            PROBE_SIGMAS,
+            NOT_EXERCISED,
+            COST_FALL,
+            COST_FALL,
+            match self.saddles.len() {
+                0 => String::new(),
+                _ => format!(
+                    " (start{} {} here, left out of the minima)",
+                    if self.saddles.len() == 1 { "" } else { "s" },
+                    self.saddles
+                        .iter()
+                        .map(usize::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            }
+        ));
+        md.push_str(&format!(
+            "\n{} distinct minim{} among the {} converged starts{} (the same minimum: \
+             costs within {:.0e} and every exercised free parameter within {:.0e}, \
+             relative):\n\n",
             self.minima.len(),
             if self.minima.len() == 1 { "um" } else { "a" },
             self.converged(),
+            match self.saddles.len() {
+                0 => String::new(),
+                1 => ", the saddle left out".to_string(),
+                _ => ", the saddles left out".to_string(),
+            },
             SAME_COST,
             SAME_PARAMETER
         ));
@@ -415,17 +759,25 @@ impl MultiStart {
                 .collect();
             let starts: Vec<String> = m.starts.iter().map(usize::to_string).collect();
             md.push_str(&format!(
-                "- cost {} ({}), starts {}{}: {}\n",
+                "- cost {} ({}), starts {}{}: {}{}\n",
                 number(m.cost),
                 relative_words(Some(m.relative_to_best)),
                 starts.join(", "),
                 if m.kept { ", the kept estimate" } else { "" },
-                values.join(", ")
+                values.join(", "),
+                if m.not_exercised.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        "; not exercised by these records: {}",
+                        m.not_exercised.join(", ")
+                    )
+                }
             ));
         }
         md.push_str(&format!(
             "\nIn {} valley{} (minima within {:.2} % in cost of a valley's lowest and every \
-             free parameter within {} % of it):\n\n",
+             exercised free parameter within {} % of it):\n\n",
             self.valleys.len(),
             if self.valleys.len() == 1 { "" } else { "s" },
             100.0 * self.near_cost,
@@ -441,6 +793,12 @@ impl MultiStart {
                 100.0 * self.near_cost,
                 100.0 * DIFFERENT_PARAMETER
             ));
+        }
+        for n in &self.not_exercised {
+            md.push_str(&format!("\n**Note**: {}\n", n.sentence()));
+        }
+        if let Some(w) = self.kept_saddle_warning() {
+            md.push_str(&format!("\n**Warning**: {w}\n"));
         }
         for w in &self.not_pinned {
             md.push_str(&format!(
@@ -659,12 +1017,45 @@ pub(crate) fn run(
                 Err(e) => Err((e.to_string(), None)),
             }
         };
+        // The probe of a converged start (module doc, "Probe"), in this start's task so
+        // the result does not depend on the thread count.
+        let probed = match &result {
+            Ok(fit) if fit.report().stationary() => {
+                probe(fit, data, gopts, scales).map_err(|e| (e.to_string(), Some(e)))
+            }
+            _ => Ok(Vec::new()),
+        };
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         progress.report(&Progress::new(task, n, Some(total)));
+        let result = match (result, probed) {
+            (Ok(fit), Ok(probe)) => Ok((fit, probe)),
+            (Err(e), _) | (Ok(_), Err(e)) => Err(e),
+        };
         match result {
-            Ok(fit) => {
+            Ok((fit, probe)) => {
                 let last = &fit.stages[fit.stages.len() - 1].report;
                 let cost = last.final_cost();
+                let cost_falls: Vec<CostFall> = probe
+                    .iter()
+                    .flat_map(|q| {
+                        let from = fit
+                            .parameters
+                            .iter()
+                            .find(|p| p.name == q.name)
+                            .map_or(f64::NAN, |p| p.value);
+                        [(q.down, q.cost_down), (q.up, q.cost_up)]
+                            .into_iter()
+                            .filter_map(move |(to, change)| match (to, change) {
+                                (Some(to), Some(c)) if c < -COST_FALL => Some(CostFall {
+                                    name: q.name.clone(),
+                                    from,
+                                    to,
+                                    relative_change: c,
+                                }),
+                                _ => None,
+                            })
+                    })
+                    .collect();
                 Run {
                     row: StartSummary {
                         index: k,
@@ -675,6 +1066,16 @@ pub(crate) fn run(
                         values: fit.parameters.iter().map(|p| p.value).collect(),
                         minimum: None,
                         error: None,
+                        saddle: !cost_falls.is_empty(),
+                        sensitivity: probe.iter().map(|q| q.sensitivity).collect(),
+                        exercised: probe.iter().map(|q| q.exercised).collect(),
+                        not_exercised: probe
+                            .iter()
+                            .filter(|q| !q.exercised)
+                            .map(|q| q.name.clone())
+                            .collect(),
+                        cost_falls,
+                        probe,
                     },
                     fit: Some(fit),
                     error: None,
@@ -690,6 +1091,12 @@ pub(crate) fn run(
                     values: Vec::new(),
                     minimum: None,
                     error: Some(message),
+                    saddle: false,
+                    sensitivity: Vec::new(),
+                    exercised: Vec::new(),
+                    not_exercised: Vec::new(),
+                    cost_falls: Vec::new(),
+                    probe: Vec::new(),
                 },
                 fit: None,
                 error,
@@ -740,6 +1147,11 @@ pub(crate) fn run(
     });
     let minima = group(&mut rows, kept, best_cost);
     let kept_values = fit.parameters.iter().map(|p| p.value).collect::<Vec<_>>();
+    let kept_exercised = rows
+        .iter()
+        .find(|r| r.index == kept)
+        .map(|r| r.exercised.clone())
+        .unwrap_or_default();
     let near = fit
         .stages
         .last()
@@ -750,9 +1162,14 @@ pub(crate) fn run(
         .enumerate()
         .filter(|(_, m)| !m.kept && relative(m.cost, best_cost) <= near)
         .filter_map(|(i, m)| {
+            // A parameter the records do not exercise at either point cannot make them
+            // different explanations of the data.
             let parameters: Vec<ParameterPair> = names
                 .iter()
                 .zip(kept_values.iter().zip(&m.values))
+                .enumerate()
+                .filter(|(j, _)| compared(&kept_exercised, &m.exercised, *j))
+                .map(|(_, pair)| pair)
                 .filter(|(_, (a, b))| !agree(**a, **b, DIFFERENT_PARAMETER))
                 .map(|(name, (a, b))| ParameterPair {
                     name: name.clone(),
@@ -769,6 +1186,9 @@ pub(crate) fn run(
             })
         })
         .collect();
+    let not_exercised = not_exercised_notes(&rows, kept, &names);
+    let mut saddles: Vec<usize> = rows.iter().filter(|r| r.saddle).map(|r| r.index).collect();
+    saddles.sort_unstable();
     Ok((
         fit,
         MultiStart {
@@ -780,8 +1200,182 @@ pub(crate) fn run(
             valleys,
             near_cost: near,
             not_pinned,
+            probe: ProbeSettings::default(),
+            saddles,
+            not_exercised,
         },
     ))
+}
+
+/// The notes on the free parameters the records do not exercise at the kept start.
+fn not_exercised_notes(rows: &[StartSummary], kept: usize, names: &[String]) -> Vec<NotExercised> {
+    let Some(row) = rows.iter().find(|r| r.index == kept) else {
+        return Vec::new();
+    };
+    let mut notes = Vec::new();
+    for (j, name) in names.iter().enumerate() {
+        if row.exercised.get(j).copied().unwrap_or(true) {
+            continue;
+        }
+        let mut starts: Vec<usize> = rows
+            .iter()
+            .filter(|r| !r.exercised.get(j).copied().unwrap_or(true))
+            .map(|r| r.index)
+            .collect();
+        starts.sort_unstable();
+        let values = rows
+            .iter()
+            .filter(|r| !r.exercised.get(j).copied().unwrap_or(true))
+            .filter_map(|r| r.values.get(j).copied());
+        let (lowest, highest) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+        notes.push(NotExercised {
+            name: name.clone(),
+            kept: row.values[j],
+            sensitivity: row.sensitivity.get(j).copied().flatten(),
+            starts,
+            lowest,
+            highest,
+        });
+    }
+    notes
+}
+
+/// Whether parameter `j` takes part in comparing two points with these `exercised`
+/// flags: not when either point leaves it unexercised (an empty list: all exercised).
+fn compared(a: &[bool], b: &[bool], j: usize) -> bool {
+    a.get(j).copied().unwrap_or(true) && b.get(j).copied().unwrap_or(true)
+}
+
+/// The scale `s` of a parameter's probe step and sensitivity ([`ParameterProbe::scale`]):
+/// `|θ|`; for `θ = 0` the first positive finite of `|start|`, half the width of finite
+/// bounds, the draw's scale `draw`, σ, the larger finite bound's magnitude; else 1.
+fn probe_scale(est: &ParameterEstimate, draw: Option<f64>) -> f64 {
+    let usable = |v: f64| (v.is_finite() && v > 0.0).then_some(v);
+    let finite_bound = [est.lower, est.upper]
+        .into_iter()
+        .filter(|b| b.is_finite())
+        .map(f64::abs)
+        .fold(0.0, f64::max);
+    usable(est.value.abs())
+        .or_else(|| usable(est.start.abs()))
+        .or_else(|| usable(est.upper / 2.0 - est.lower / 2.0))
+        .or_else(|| draw.and_then(usable))
+        .or_else(|| est.sigma.and_then(usable))
+        .or_else(|| usable(finite_bound))
+        .unwrap_or(1.0)
+}
+
+/// The probe of a converged start (module doc, "Probe"): each free parameter nudged down
+/// and up from the estimate, the others and the start states held, the free run simulated
+/// again. At most `2P + 1` free runs (`P` free parameters), charged to the job's budget
+/// as their RK4 steps; an error only when the budget is spent.
+fn probe(
+    fit: &GreyboxFit<PhysicalModel>,
+    data: &GreyboxData<'_>,
+    gopts: &GreyboxOptions,
+    draw_scales: &[Option<f64>],
+) -> Result<Vec<ParameterProbe>, CoreError> {
+    let steps: usize = data
+        .records
+        .iter()
+        .zip(&fit.substeps)
+        .map(|(e, s)| e.len().saturating_sub(1) * s)
+        .sum();
+    let runs = 2 * fit.parameters.len() + 1;
+    gopts
+        .budget
+        .charge((steps * runs) as u64, "grey-box multi-start probe", 0, None)
+        .map_err(CoreError::BudgetExhausted)?;
+    let simulate = |model: &PhysicalModel| {
+        free_run_residuals(model, data, &fit.x0, &fit.substeps, gopts.blow_up)
+            .ok()
+            .flatten()
+    };
+    let Some(r0) = simulate(&fit.model) else {
+        return Ok(Vec::new());
+    };
+    let cost0: f64 = r0.iter().map(|v| v * v).sum();
+    // The residuals' norm; at an exact fit, that of residuals of one noise σ each.
+    let norm0 = if cost0 > 0.0 {
+        cost0.sqrt()
+    } else {
+        (r0.len().max(1) as f64).sqrt()
+    };
+    let values: Vec<f64> = fit.model.parameters().iter().map(|p| p.value).collect();
+    let nudged = |j: usize, v: f64| {
+        let mut vs = values.clone();
+        vs[j] = v;
+        fit.model
+            .with_parameters(&vs)
+            .ok()
+            .and_then(|m| simulate(&m))
+    };
+    let cost_of = |r: &Option<Vec<f64>>| {
+        r.as_ref()
+            .map(|r| relative(r.iter().map(|v| v * v).sum(), cost0))
+    };
+    let distance = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y) * (x - y))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let mut out = Vec::with_capacity(fit.parameters.len());
+    for est in &fit.parameters {
+        let theta = est.value;
+        let scale = probe_scale(est, draw_scales.get(est.index).copied().flatten());
+        if est.active_bound == Some(ActiveBound::Fixed) || est.upper <= est.lower {
+            out.push(ParameterProbe {
+                name: est.name.clone(),
+                scale,
+                down: None,
+                up: None,
+                cost_down: None,
+                cost_up: None,
+                sensitivity: None,
+                exercised: true,
+            });
+            continue;
+        }
+        let mut step = PROBE_STEP * scale;
+        if let Some(sigma) = est.sigma.filter(|s| s.is_finite() && *s > 0.0) {
+            step = step.min(PROBE_SIGMAS * sigma);
+        }
+        step = step.max(PROBE_MIN_STEP * scale);
+        let down = Some((theta - step).max(est.lower)).filter(|v| *v < theta);
+        let up = Some((theta + step).min(est.upper)).filter(|v| *v > theta);
+        let r_down = down.and_then(|v| nudged(est.index, v));
+        let r_up = up.and_then(|v| nudged(est.index, v));
+        let slope = match (&r_down, &r_up, down, up) {
+            (Some(a), Some(b), Some(lo), Some(hi)) => Some(distance(b, a) / (hi - lo)),
+            (Some(a), _, Some(lo), _) => Some(distance(&r0, a) / (theta - lo)),
+            (_, Some(b), _, Some(hi)) => Some(distance(b, &r0) / (hi - theta)),
+            _ => None,
+        };
+        let sensitivity = slope.map(|g| g * scale / norm0);
+        let (cost_down, cost_up) = (cost_of(&r_down), cost_of(&r_up));
+        // A nudge that could not be simulated (it diverged) is an effect.
+        let diverged = (down.is_some() && r_down.is_none()) || (up.is_some() && r_up.is_none());
+        let flat = [cost_down, cost_up]
+            .into_iter()
+            .flatten()
+            .all(|c| c.abs() <= COST_FALL);
+        let exercised = diverged || !flat || sensitivity.is_none_or(|s| s >= NOT_EXERCISED);
+        out.push(ParameterProbe {
+            name: est.name.clone(),
+            scale,
+            down,
+            up,
+            cost_down,
+            cost_up,
+            sensitivity,
+            exercised,
+        });
+    }
+    Ok(out)
 }
 
 /// `minima` (sorted by cost) grouped into valleys (module doc, "Valleys").
@@ -795,7 +1389,9 @@ pub fn valleys(minima: &[MinimumSummary], near: f64) -> Vec<ValleySummary> {
                 && m.values
                     .iter()
                     .zip(&low.values)
-                    .all(|(a, b)| agree(*a, *b, DIFFERENT_PARAMETER))
+                    .enumerate()
+                    .filter(|(j, _)| compared(&m.exercised, &low.exercised, *j))
+                    .all(|(_, (a, b))| agree(*a, *b, DIFFERENT_PARAMETER))
         });
         match joins {
             Some(j) => {
@@ -805,7 +1401,9 @@ pub fn valleys(minima: &[MinimumSummary], near: f64) -> Vec<ValleySummary> {
                     .values
                     .iter()
                     .zip(&low.values)
-                    .map(|(a, b)| difference(*a, *b))
+                    .enumerate()
+                    .filter(|(j, _)| compared(&m.exercised, &low.exercised, *j))
+                    .map(|(_, (a, b))| difference(*a, *b))
                     .fold(v.spread, f64::max);
                 v.minima.push(i);
                 v.starts.extend(&m.starts);
@@ -826,11 +1424,13 @@ pub fn valleys(minima: &[MinimumSummary], near: f64) -> Vec<ValleySummary> {
     out
 }
 
-/// The distinct minima of the converged rows (sorted by cost), each row's `minimum` set.
+/// The distinct minima of the converged rows that are not saddles (sorted by cost), each
+/// such row's `minimum` set. Parameters the records do not exercise at a row or at a
+/// minimum's lowest start are left out when they are compared.
 fn group(rows: &mut [StartSummary], kept: usize, best: f64) -> Vec<MinimumSummary> {
     let mut minima: Vec<MinimumSummary> = Vec::new();
     for row in rows.iter_mut() {
-        let Some(cost) = row.final_cost.filter(|_| row.converged) else {
+        let Some(cost) = row.final_cost.filter(|_| row.converged && !row.saddle) else {
             continue;
         };
         let same = minima.iter().position(|m| {
@@ -839,7 +1439,9 @@ fn group(rows: &mut [StartSummary], kept: usize, best: f64) -> Vec<MinimumSummar
                 && m.values
                     .iter()
                     .zip(&row.values)
-                    .all(|(a, b)| agree(*a, *b, SAME_PARAMETER))
+                    .enumerate()
+                    .filter(|(j, _)| compared(&m.exercised, &row.exercised, *j))
+                    .all(|(_, (a, b))| agree(*a, *b, SAME_PARAMETER))
         });
         let i = match same {
             Some(i) => {
@@ -853,6 +1455,9 @@ fn group(rows: &mut [StartSummary], kept: usize, best: f64) -> Vec<MinimumSummar
                     relative_to_best: relative(cost, best),
                     values: row.values.clone(),
                     kept: false,
+                    sensitivity: row.sensitivity.clone(),
+                    exercised: row.exercised.clone(),
+                    not_exercised: row.not_exercised.clone(),
                 });
                 minima.len() - 1
             }
@@ -965,6 +1570,9 @@ mod tests {
             relative_to_best: cost / best - 1.0,
             values,
             kept: start == 0,
+            sensitivity: Vec::new(),
+            exercised: Vec::new(),
+            not_exercised: Vec::new(),
         }
     }
 
@@ -994,6 +1602,70 @@ mod tests {
             v[2].sentence().contains("1 start (3), 1 minimum"),
             "{}",
             v[2].sentence()
+        );
+    }
+
+    /// A parameter the records do not exercise at either minimum is left out of the
+    /// valley test and the spread: the minima differing only in it (2-fold) are one
+    /// valley of spread 0; exercised at both, the same difference splits them.
+    #[test]
+    fn a_parameter_not_exercised_does_not_split_valleys() {
+        let mut a = minimum(100.0, 100.0, vec![1.0, 1.0], 0);
+        let mut b = minimum(100.0, 100.0, vec![1.0, 2.0], 1);
+        assert_eq!(valleys(&[a.clone(), b.clone()], 0.02).len(), 2);
+        a.exercised = vec![true, true];
+        b.exercised = vec![true, false];
+        let v = valleys(&[a.clone(), b.clone()], 0.02);
+        assert_eq!(v.len(), 1, "{v:#?}");
+        assert_eq!(v[0].spread, 0.0);
+        // The other parameter still counts.
+        b.values[0] = 1.5;
+        assert_eq!(valleys(&[a, b], 0.02).len(), 2);
+        assert!(compared(&[], &[], 3));
+        assert!(!compared(&[true, false], &[], 1));
+        assert!(!compared(&[], &[true, false], 1));
+    }
+
+    fn estimate(value: f64, start: f64, lower: f64, upper: f64) -> ParameterEstimate {
+        ParameterEstimate {
+            name: "p".into(),
+            index: 0,
+            start,
+            value,
+            sigma: None,
+            lower,
+            upper,
+            active_bound: None,
+        }
+    }
+
+    /// The probe's scale: `|θ|`, else `|start|`, half the width of finite bounds, the
+    /// draw's scale, σ, the larger finite bound, 1.
+    #[test]
+    fn the_probe_scale_follows_the_draw() {
+        assert_eq!(
+            probe_scale(&estimate(-3.0, 1.0, -10.0, 10.0), Some(7.0)),
+            3.0
+        );
+        assert_eq!(
+            probe_scale(&estimate(0.0, -0.5, -10.0, 10.0), Some(7.0)),
+            0.5
+        );
+        assert_eq!(probe_scale(&estimate(0.0, 0.0, -2.0, 2.0), Some(7.0)), 2.0);
+        let open = estimate(0.0, 0.0, 0.0, f64::INFINITY);
+        assert_eq!(probe_scale(&open, Some(7.0)), 7.0);
+        let with_sigma = ParameterEstimate {
+            sigma: Some(0.25),
+            ..open.clone()
+        };
+        assert_eq!(probe_scale(&with_sigma, None), 0.25);
+        assert_eq!(
+            probe_scale(&estimate(0.0, 0.0, -4.0, f64::INFINITY), None),
+            4.0
+        );
+        assert_eq!(
+            probe_scale(&estimate(0.0, 0.0, f64::NEG_INFINITY, f64::INFINITY), None),
+            1.0
         );
     }
 

@@ -646,3 +646,46 @@ fn a_start_with_a_zero_sensitivity_that_does_not_move_is_no_progress() {
     assert_eq!(fit.report().termination, crate::Termination::NoDescent);
     assert_eq!(fit.report().rank, None);
 }
+
+/// [`free_run_residuals`] at a fit's model, start states and sub-steps is the fit's final
+/// cost (the same simulation code), and against the closed form: `r_k = (y_k − x0 − b·s_k)/σ`
+/// at a moved `b`. A record whose simulation diverges is `None`; mismatched start states are
+/// a typed error.
+#[test]
+fn free_run_residuals_are_the_estimators() {
+    let records = [record()];
+    let c = DMatrix::from_element(1, 1, 1.0);
+    let nv = [NOISE * NOISE];
+    let model = integrator(f64::NEG_INFINITY, f64::INFINITY, 1.0);
+    let d = data(&c, &records, &nv);
+    let fit = estimate_parameters(&model, &d, &GreyboxOptions::default())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let r = free_run_residuals(&fit.model, &d, &fit.x0, &fit.substeps, 1e6)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .unwrap_or_else(|| panic!("diverged"));
+    let cost: f64 = r.iter().map(|v| v * v).sum();
+    let reported = fit.report().final_cost();
+    assert!(
+        (cost - reported).abs() <= 1e-12 * reported,
+        "{cost} vs {reported}"
+    );
+    let moved = model
+        .with_parameters(&[2.5])
+        .unwrap_or_else(|e| panic!("{e}"));
+    let x0 = 0.1;
+    let r = free_run_residuals(&moved, &d, &[vec![x0]], &[3], 1e6)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .unwrap_or_else(|| panic!("diverged"));
+    let exp = &records[0];
+    let mut s = 0.0;
+    for (k, rk) in r.iter().enumerate() {
+        let expected = (exp.outputs()[(0, k)] - x0 - 2.5 * s) / NOISE;
+        assert!((rk - expected).abs() < 1e-9, "{k}: {rk} vs {expected}");
+        s += DT * exp.input(k)[0];
+    }
+    assert_eq!(
+        free_run_residuals(&moved, &d, &[vec![x0]], &[1], 1e-3).unwrap_or_default(),
+        None
+    );
+    assert!(free_run_residuals(&moved, &d, &[], &[1], 1e6).is_err());
+}
