@@ -249,14 +249,47 @@ pub struct CompareSummary {
     pub validation_use: Option<ValidationUse>,
 }
 
-/// Whether `A` and `B` are zero in every row the default linear OE fits (the corrected
-/// states): such a model file keeps its dynamics in `[[terms]]`, and the output-error fit
-/// of its linear part has nothing to start from.
-fn linear_part_is_zero(lin: &LinearModel) -> bool {
-    let rows = lin.corrected_states().unwrap_or_default();
-    rows.iter().all(|&i| {
-        lin.a().row(i).iter().all(|v| *v == 0.0) && lin.b().row(i).iter().all(|v| *v == 0.0)
-    })
+/// Whether the model file has no linear part: its `A` and `B` are all zero (its dynamics
+/// are all in `[[terms]]`), or it is a `[mechanics]` model (its dynamics are the
+/// mass-matrix equations). The one predicate behind both consequences: no "assumed model"
+/// row (the given model's row judges the file), and a linear OE fit that fails is
+/// explained by it (the fit starts where no coefficient moves the output).
+fn has_no_linear_part(spec: &ModelSpec) -> bool {
+    let lin = &spec.linear;
+    spec.mechanics.is_some()
+        || (lin.a().iter().all(|v| *v == 0.0) && lin.b().iter().all(|v| *v == 0.0))
+}
+
+/// Why a model file has no linear part, in words (see [`has_no_linear_part`]).
+fn no_linear_part_words(spec: &ModelSpec) -> &'static str {
+    if spec.mechanics.is_some() {
+        "it is a [mechanics] model, its dynamics the mass-matrix equations"
+    } else {
+        "its A and B are zero, its dynamics all in [[terms]]"
+    }
+}
+
+/// Why the linear OE fit failed: the error, explained when the default parameters were
+/// free and the model file has no linear part (the fit started where no coefficient
+/// moves the output), with the remedy and the linear baseline that stands.
+fn oe_failure(spec: &ModelSpec, default_free: bool, e: &dyn std::error::Error) -> String {
+    if !default_free || !has_no_linear_part(spec) {
+        return with_causes(e);
+    }
+    // A and B to start from are the remedy unless the dynamics are mechanics.
+    let remedy = if spec.mechanics.is_some() {
+        ""
+    } else {
+        "give A and B (e.g. the terms linearised at an operating point) to get this row; "
+    };
+    format!(
+        "the model file has no linear part ({}), so an output-error fit of its linear part \
+         starts where no coefficient moves the output; {remedy}the '{LINEAR_SS_ROW}, n = …)' \
+         row is the linear baseline here (a black-box state-space model fitted to the data \
+         alone) ({})",
+        no_linear_part_words(spec),
+        with_causes(e)
+    )
 }
 
 fn default_free(spec: &ModelSpec) -> Vec<String> {
@@ -828,36 +861,23 @@ pub fn compute_compare_with_progress(
     let mut failures = Vec::new();
     // A baseline that cannot be fitted (e.g. a free parameter the data cannot identify)
     // does not stop the comparison: it has no row, and the summary says why.
-    let (oe_model, oe_parameters, oe_error) = match stage(progress, "linear OE fit", || {
-        fit_oe(&lin, data, &oe_config)
-    }) {
-        Ok(f) => {
-            let mut m = f.model;
-            m.observer_window = window.max(10 * lin.n_states());
-            (Some(m), f.parameters, None)
-        }
-        Err(e) => {
-            let reason = if opts.oe_free.is_none() && linear_part_is_zero(&lin) {
-                format!(
-                    "the model file's A and B are zero in the rows the linear OE fits (its \
-                         dynamics are all in [[terms]] or [mechanics]), so an output-error fit of its linear \
-                         part starts where no coefficient moves the output; give A and B (e.g. \
-                         the terms linearised at an operating point) to get this row; the \
-                         '{LINEAR_SS_ROW}, n = …)' row is the linear baseline here (a black-box \
-                         state-space model fitted to the data alone) ({})",
-                    with_causes(&e)
-                )
-            } else {
-                with_causes(&e)
-            };
-            failures.push(Failure {
-                model: "linear OE".into(),
-                reason: reason.clone(),
-                at: FailedAt::Fit,
-            });
-            (None, Vec::new(), Some(reason))
-        }
-    };
+    let (oe_model, oe_parameters, oe_error) =
+        match stage(progress, "linear OE fit", || fit_oe(&lin, data, &oe_config)) {
+            Ok(f) => {
+                let mut m = f.model;
+                m.observer_window = window.max(10 * lin.n_states());
+                (Some(m), f.parameters, None)
+            }
+            Err(e) => {
+                let reason = oe_failure(&spec, opts.oe_free.is_none(), &e);
+                failures.push(Failure {
+                    model: "linear OE".into(),
+                    reason: reason.clone(),
+                    at: FailedAt::Fit,
+                });
+                (None, Vec::new(), Some(reason))
+            }
+        };
     let (ss_structure, ss_model) = fit_linear_ss_row(data, opts, window, progress, &mut failures);
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
@@ -948,10 +968,9 @@ pub fn compute_compare_with_progress(
     let fit = compute_fit(data, &spec, val.as_ref(), &opts.fit, progress)?;
     let hybrid = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), fit.model.clone())?;
     // A zero linear part is no model of anything: no row for it when the model file's
-    // own dynamics have theirs.
-    let no_linear_part = given.is_some()
-        && (spec.mechanics.is_some()
-            || (lin.a().iter().all(|v| *v == 0.0) && lin.b().iter().all(|v| *v == 0.0)));
+    // own dynamics have theirs (the given model's row; without one, the assumed row is
+    // the only row of the model file and stays).
+    let no_linear_part = given.is_some() && has_no_linear_part(&spec);
     let models = Models {
         assumed: (!no_linear_part).then_some(&lin),
         oe: oe_model.as_ref(),
@@ -1077,13 +1096,9 @@ pub fn compute_compare_with_progress(
             "{}{judge_rule}",
             if no_linear_part {
                 format!(
-                    "no row: the model file's linear part (A, B) is zero, its dynamics are all \
-                     in {} (the '{GIVEN_MODEL_ROW}' row); the rule would be ",
-                    if spec.mechanics.is_some() {
-                        "[mechanics]"
-                    } else {
-                        "[[terms]]"
-                    }
+                    "no row: the model file has no linear part ({}; judged in the \
+                     '{GIVEN_MODEL_ROW}' row); the rule would be ",
+                    no_linear_part_words(&spec)
                 )
             } else if loaded.kind == ModelKind::Assumed && spec.acquisition.is_none() {
                 String::new()
@@ -1365,4 +1380,62 @@ fn compare_report(s: &CompareSummary) -> String {
     );
     r.push_str(&crate::html::figures_section(&s.files));
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(a: &str, b: &str, terms: bool) -> ModelSpec {
+        let mut text = format!(
+            "states = [\"theta\", \"omega\"]\ninputs = [\"u\"]\nA = {a}\nB = {b}\n\
+             measured = [\"theta\"]\ncorrected = [\"omega\"]\nnoise_variance = [0.01]\n"
+        );
+        if terms {
+            text.push_str(
+                "\n[[terms]]\nstate = \"omega\"\neffect = \"pendulum\"\n\
+                 term = \"-19.62*theta - 0.2*omega - 2*u\"\ncoefficient = 1.0\n",
+            );
+        }
+        crate::model_file::parse_model(Path::new("m.toml"), &text).unwrap()
+    }
+
+    /// One predicate: no linear part when A and B are all zero or the file is a
+    /// `[mechanics]` model; a non-zero entry anywhere (a kinematic row, a damping term in
+    /// the corrected row, an input gain) is a linear part.
+    #[test]
+    fn no_linear_part_is_zero_a_and_b_or_mechanics() {
+        let zero = spec("[[0.0, 0.0], [0.0, 0.0]]", "[[0.0], [0.0]]", true);
+        assert!(has_no_linear_part(&zero));
+        for (a, b) in [
+            ("[[0.0, 1.0], [0.0, 0.0]]", "[[0.0], [0.0]]"),
+            ("[[0.0, 0.0], [0.0, -0.1]]", "[[0.0], [0.0]]"),
+            ("[[0.0, 0.0], [0.0, 0.0]]", "[[0.0], [1.0]]"),
+        ] {
+            assert!(!has_no_linear_part(&spec(a, b, true)), "A = {a}, B = {b}");
+        }
+        let rigid = crate::model_file::read_model(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link/rigid_body.toml"),
+        )
+        .unwrap();
+        assert!(rigid.mechanics.is_some());
+        assert!(has_no_linear_part(&rigid));
+        // The linear OE failure is explained by the same predicate, with the remedy
+        // that fits the file; free parameters given by hand keep the bare error.
+        let e = std::io::Error::other("singular");
+        let why = oe_failure(&zero, true, &e);
+        assert!(
+            why.contains("A and B are zero") && why.contains("give A and B"),
+            "{why}"
+        );
+        assert!(why.ends_with("(singular)"), "{why}");
+        let why = oe_failure(&rigid, true, &e);
+        assert!(
+            why.contains("[mechanics] model") && !why.contains("give A and B"),
+            "{why}"
+        );
+        assert_eq!(oe_failure(&zero, false, &e), "singular");
+        let linear = spec("[[0.0, 1.0], [0.0, 0.0]]", "[[0.0], [0.0]]", true);
+        assert_eq!(oe_failure(&linear, true, &e), "singular");
+    }
 }
