@@ -162,9 +162,7 @@ pub struct LinearSsStructure {
     pub samples: usize,
     /// State-initialisation window of the fit (samples): the error is summed after it.
     pub fit_window: usize,
-    /// Whether an input bias was fitted on top of the record mean (first try); `false`
-    /// when that fit failed and the fit without it did not ([`LinearSsStructure::choice`]
-    /// then says why).
+    /// Whether an input bias was fitted on top of the record mean.
     pub input_bias: bool,
     /// Chosen order (`None`: not fitted).
     pub order: Option<usize>,
@@ -174,8 +172,15 @@ pub struct LinearSsStructure {
     pub singular_values: Vec<f64>,
     /// Poles of the fitted model, `(re, im)` (discrete time).
     pub poles: Vec<(f64, f64)>,
-    /// Why this order: the rule and each candidate's held-out RMSE, in words.
+    /// Why this order: the rule and each candidate's held-out RMSE, in words (and, when
+    /// the refinement on the whole record failed, that the row's model is the held-out
+    /// stage's).
     pub choice: String,
+    /// Why the chosen order's refinement on the whole record failed, when it did: the
+    /// row's model is then the one refined on the rest of the record and scored on its
+    /// held-out end ([`sysid_baselines::LinearSsFit::final_refinement_failure`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub final_refinement_failure: Option<String>,
 }
 
 /// Options of [`run_compare`].
@@ -724,7 +729,9 @@ pub struct CompareOutcome {
 
 /// The linear state-space row's fit on the first record of `data`
 /// ([`sysid_baselines::fit_linear_ss`], orders 1 to `opts.ss_max_order`); a fit that fails
-/// is a [`Failure`] at [`FailedAt::Fit`] (no row). Its state-initialisation window is
+/// is a [`Failure`] at [`FailedAt::Fit`] (no row). When only its last step, the chosen
+/// order's refinement on the whole record, failed, the row's model is the held-out
+/// stage's, and [`LinearSsStructure`] says so. Its state-initialisation window is
 /// `LinearSsConfig`'s (50 samples), at most the judge's `window` and an eighth of the
 /// record (the held-out quarter must be longer than it).
 fn fit_linear_ss_row(
@@ -752,54 +759,43 @@ fn fit_linear_ss_row(
         singular_values: Vec::new(),
         poles: Vec::new(),
         choice: String::new(),
+        final_refinement_failure: None,
     };
-    // With the input bias the free-run refinement can find it (or a numerator) not
-    // identifiable on a short record; the fit without it is then tried, and the choice
-    // says so.
-    let mut without_bias = None;
-    // Err: the reason of the failure (the row's).
+    // Err: the reason of the failure (the row's). A failed refinement on the whole
+    // record is no failure: the fit keeps the held-out stage's model and says why.
     let fitted = stage(progress, "linear SS fit", || {
         let first = data
             .window(0, 0, samples)
             .map_err(|e| format!("the first estimation record: {}", with_causes(&e)))?;
-        fit_linear_ss(&first, &config).or_else(|e| {
-            let why = with_causes(&e);
-            without_bias = Some(why.clone());
-            let plain = LinearSsConfig {
-                fit_input_offset: false,
-                ..config.clone()
-            };
-            fit_linear_ss(&first, &plain).map_err(|e2| {
-                format!(
-                    "with an input bias: {why}; without one: {}",
-                    with_causes(&e2)
-                )
-            })
-        })
+        fit_linear_ss(&first, &config).map_err(|e| with_causes(&e))
     });
     match fitted {
         Ok(f) => {
-            if let Some(why) = &without_bias {
-                structure.input_bias = false;
-                structure.choice =
-                    format!("without an input bias (the fit with one failed: {why}); ");
-            }
             let held = |c: &OrderCandidate| match (c.refined_rmse, &c.failure) {
                 (Some(r), _) => format!("n = {}: {r:.4e}", c.order),
                 (None, Some(why)) => format!("n = {}: failed ({why})", c.order),
                 (None, None) => format!("n = {}: diverged", c.order),
             };
-            structure.choice += &format!(
+            let kept = match &f.final_refinement_failure {
+                Some(why) => format!(
+                    ", which failed ({why}): the row's model is the held-out stage's (refined on \
+                     the rest, scored on the held-out end)"
+                ),
+                None => String::new(),
+            };
+            structure.choice = format!(
                 "n = {}: the smallest order whose free-run RMSE on the held-out last {:.0} % of \
                  the first estimation record (after a fit on the rest, state from its first {} \
                  samples) is within {:.0} % of the best order's ({}); then refined on the whole \
-                 record",
+                 record{}",
                 f.order,
                 100.0 * config.validation_fraction,
                 config.window,
                 100.0 * config.order_tolerance,
-                f.candidates.iter().map(held).collect::<Vec<_>>().join(", ")
+                f.candidates.iter().map(held).collect::<Vec<_>>().join(", "),
+                kept
             );
+            structure.final_refinement_failure = f.final_refinement_failure;
             structure.label = format!("{LINEAR_SS_ROW}, n = {})", f.order);
             structure.order = Some(f.order);
             structure.candidates = f.candidates;
