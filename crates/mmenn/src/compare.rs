@@ -194,9 +194,7 @@ pub struct LinearSsStructure {
     pub samples: usize,
     /// State-initialisation window of the fit (samples): the error is summed after it.
     pub fit_window: usize,
-    /// Whether an input bias was fitted on top of the record mean (first try); `false`
-    /// when that fit failed and the fit without it did not ([`LinearSsStructure::choice`]
-    /// then says why).
+    /// Whether an input bias was fitted on top of the record mean.
     pub input_bias: bool,
     /// Chosen order (`None`: not fitted).
     pub order: Option<usize>,
@@ -206,8 +204,15 @@ pub struct LinearSsStructure {
     pub singular_values: Vec<f64>,
     /// Poles of the fitted model, `(re, im)` (discrete time).
     pub poles: Vec<(f64, f64)>,
-    /// Why this order: the rule and each candidate's held-out RMSE, in words.
+    /// Why this order: the rule and each candidate's held-out RMSE, in words (and, when
+    /// the refinement on the whole record failed, that the row's model is the held-out
+    /// stage's).
     pub choice: String,
+    /// Why the chosen order's refinement on the whole record failed, when it did: the
+    /// row's model is then the one refined on the rest of the record and scored on its
+    /// held-out end ([`sysid_baselines::LinearSsFit::final_refinement_failure`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub final_refinement_failure: Option<String>,
 }
 
 /// Options of [`run_compare`].
@@ -281,14 +286,47 @@ pub struct CompareSummary {
     pub validation_use: Option<ValidationUse>,
 }
 
-/// Whether `A` and `B` are zero in every row the default linear OE fits (the corrected
-/// states): such a model file keeps its dynamics in `[[terms]]`, and the output-error fit
-/// of its linear part has nothing to start from.
-fn linear_part_is_zero(lin: &LinearModel) -> bool {
-    let rows = lin.corrected_states().unwrap_or_default();
-    rows.iter().all(|&i| {
-        lin.a().row(i).iter().all(|v| *v == 0.0) && lin.b().row(i).iter().all(|v| *v == 0.0)
-    })
+/// Whether the model file has no linear part: its `A` and `B` are all zero (its dynamics
+/// are all in `[[terms]]`), or it is a `[mechanics]` model (its dynamics are the
+/// mass-matrix equations). The one predicate behind both consequences: no "assumed model"
+/// row (the given model's row judges the file), and a linear OE fit that fails is
+/// explained by it (the fit starts where no coefficient moves the output).
+fn has_no_linear_part(spec: &ModelSpec) -> bool {
+    let lin = &spec.linear;
+    spec.mechanics.is_some()
+        || (lin.a().iter().all(|v| *v == 0.0) && lin.b().iter().all(|v| *v == 0.0))
+}
+
+/// Why a model file has no linear part, in words (see [`has_no_linear_part`]).
+fn no_linear_part_words(spec: &ModelSpec) -> &'static str {
+    if spec.mechanics.is_some() {
+        "it is a [mechanics] model, its dynamics the mass-matrix equations"
+    } else {
+        "its A and B are zero, its dynamics all in [[terms]]"
+    }
+}
+
+/// Why the linear OE fit failed: the error, explained when the default parameters were
+/// free and the model file has no linear part (the fit started where no coefficient
+/// moves the output), with the remedy and the linear baseline that stands.
+fn oe_failure(spec: &ModelSpec, default_free: bool, e: &dyn std::error::Error) -> String {
+    if !default_free || !has_no_linear_part(spec) {
+        return with_causes(e);
+    }
+    // A and B to start from are the remedy unless the dynamics are mechanics.
+    let remedy = if spec.mechanics.is_some() {
+        ""
+    } else {
+        "give A and B (e.g. the terms linearised at an operating point) to get this row; "
+    };
+    format!(
+        "the model file has no linear part ({}), so an output-error fit of its linear part \
+         starts where no coefficient moves the output; {remedy}the '{LINEAR_SS_ROW}, n = …)' \
+         row is the linear baseline here (a black-box state-space model fitted to the data \
+         alone) ({})",
+        no_linear_part_words(spec),
+        with_causes(e)
+    )
 }
 
 fn default_free(spec: &ModelSpec) -> Vec<String> {
@@ -759,7 +797,9 @@ fn fit_frols_kfold(
 
 /// The linear state-space row's fit on the first record of `data`
 /// ([`sysid_baselines::fit_linear_ss`], orders 1 to `opts.ss_max_order`); a fit that fails
-/// is a [`Failure`] at [`FailedAt::Fit`] (no row). Its state-initialisation window is
+/// is a [`Failure`] at [`FailedAt::Fit`] (no row). When only its last step, the chosen
+/// order's refinement on the whole record, failed, the row's model is the held-out
+/// stage's, and [`LinearSsStructure`] says so. Its state-initialisation window is
 /// `LinearSsConfig`'s (50 samples), at most the judge's `window` and an eighth of the
 /// record (the held-out quarter must be longer than it).
 fn fit_linear_ss_row(
@@ -787,54 +827,43 @@ fn fit_linear_ss_row(
         singular_values: Vec::new(),
         poles: Vec::new(),
         choice: String::new(),
+        final_refinement_failure: None,
     };
-    // With the input bias the free-run refinement can find it (or a numerator) not
-    // identifiable on a short record; the fit without it is then tried, and the choice
-    // says so.
-    let mut without_bias = None;
-    // Err: the reason of the failure (the row's).
+    // Err: the reason of the failure (the row's). A failed refinement on the whole
+    // record is no failure: the fit keeps the held-out stage's model and says why.
     let fitted = stage(progress, "linear SS fit", || {
         let first = data
             .window(0, 0, samples)
             .map_err(|e| format!("the first estimation record: {}", with_causes(&e)))?;
-        fit_linear_ss(&first, &config).or_else(|e| {
-            let why = with_causes(&e);
-            without_bias = Some(why.clone());
-            let plain = LinearSsConfig {
-                fit_input_offset: false,
-                ..config.clone()
-            };
-            fit_linear_ss(&first, &plain).map_err(|e2| {
-                format!(
-                    "with an input bias: {why}; without one: {}",
-                    with_causes(&e2)
-                )
-            })
-        })
+        fit_linear_ss(&first, &config).map_err(|e| with_causes(&e))
     });
     match fitted {
         Ok(f) => {
-            if let Some(why) = &without_bias {
-                structure.input_bias = false;
-                structure.choice =
-                    format!("without an input bias (the fit with one failed: {why}); ");
-            }
             let held = |c: &OrderCandidate| match (c.refined_rmse, &c.failure) {
                 (Some(r), _) => format!("n = {}: {r:.4e}", c.order),
                 (None, Some(why)) => format!("n = {}: failed ({why})", c.order),
                 (None, None) => format!("n = {}: diverged", c.order),
             };
-            structure.choice += &format!(
+            let kept = match &f.final_refinement_failure {
+                Some(why) => format!(
+                    ", which failed ({why}): the row's model is the held-out stage's (refined on \
+                     the rest, scored on the held-out end)"
+                ),
+                None => String::new(),
+            };
+            structure.choice = format!(
                 "n = {}: the smallest order whose free-run RMSE on the held-out last {:.0} % of \
                  the first estimation record (after a fit on the rest, state from its first {} \
                  samples) is within {:.0} % of the best order's ({}); then refined on the whole \
-                 record",
+                 record{}",
                 f.order,
                 100.0 * config.validation_fraction,
                 config.window,
                 100.0 * config.order_tolerance,
-                f.candidates.iter().map(held).collect::<Vec<_>>().join(", ")
+                f.candidates.iter().map(held).collect::<Vec<_>>().join(", "),
+                kept
             );
+            structure.final_refinement_failure = f.final_refinement_failure;
             structure.label = format!("{LINEAR_SS_ROW}, n = {})", f.order);
             structure.order = Some(f.order);
             structure.candidates = f.candidates;
@@ -896,36 +925,23 @@ pub fn compute_compare_with_progress(
     let mut failures = Vec::new();
     // A baseline that cannot be fitted (e.g. a free parameter the data cannot identify)
     // does not stop the comparison: it has no row, and the summary says why.
-    let (oe_model, oe_parameters, oe_error) = match stage(progress, "linear OE fit", || {
-        fit_oe(&lin, data, &oe_config)
-    }) {
-        Ok(f) => {
-            let mut m = f.model;
-            m.observer_window = window.max(10 * lin.n_states());
-            (Some(m), f.parameters, None)
-        }
-        Err(e) => {
-            let reason = if opts.oe_free.is_none() && linear_part_is_zero(&lin) {
-                format!(
-                    "the model file's A and B are zero in the rows the linear OE fits (its \
-                         dynamics are all in [[terms]] or [mechanics]), so an output-error fit of its linear \
-                         part starts where no coefficient moves the output; give A and B (e.g. \
-                         the terms linearised at an operating point) to get this row; the \
-                         '{LINEAR_SS_ROW}, n = …)' row is the linear baseline here (a black-box \
-                         state-space model fitted to the data alone) ({})",
-                    with_causes(&e)
-                )
-            } else {
-                with_causes(&e)
-            };
-            failures.push(Failure {
-                model: "linear OE".into(),
-                reason: reason.clone(),
-                at: FailedAt::Fit,
-            });
-            (None, Vec::new(), Some(reason))
-        }
-    };
+    let (oe_model, oe_parameters, oe_error) =
+        match stage(progress, "linear OE fit", || fit_oe(&lin, data, &oe_config)) {
+            Ok(f) => {
+                let mut m = f.model;
+                m.observer_window = window.max(10 * lin.n_states());
+                (Some(m), f.parameters, None)
+            }
+            Err(e) => {
+                let reason = oe_failure(&spec, opts.oe_free.is_none(), &e);
+                failures.push(Failure {
+                    model: "linear OE".into(),
+                    reason: reason.clone(),
+                    at: FailedAt::Fit,
+                });
+                (None, Vec::new(), Some(reason))
+            }
+        };
     let (ss_structure, ss_model) = fit_linear_ss_row(data, opts, window, progress, &mut failures);
     let orders = match opts.narx_lags {
         Some(l) => NarxOrders {
@@ -1030,10 +1046,9 @@ pub fn compute_compare_with_progress(
     let fit = compute_fit(data, &spec, val.as_ref(), &opts.fit, progress)?;
     let hybrid = LoadedModel::from_hybrid(Path::new("mme_nn/model.json"), fit.model.clone())?;
     // A zero linear part is no model of anything: no row for it when the model file's
-    // own dynamics have theirs.
-    let no_linear_part = given.is_some()
-        && (spec.mechanics.is_some()
-            || (lin.a().iter().all(|v| *v == 0.0) && lin.b().iter().all(|v| *v == 0.0)));
+    // own dynamics have theirs (the given model's row; without one, the assumed row is
+    // the only row of the model file and stays).
+    let no_linear_part = given.is_some() && has_no_linear_part(&spec);
     let models = Models {
         assumed: (!no_linear_part).then_some(&lin),
         oe: oe_model.as_ref(),
@@ -1159,13 +1174,9 @@ pub fn compute_compare_with_progress(
             "{}{judge_rule}",
             if no_linear_part {
                 format!(
-                    "no row: the model file's linear part (A, B) is zero, its dynamics are all \
-                     in {} (the '{GIVEN_MODEL_ROW}' row); the rule would be ",
-                    if spec.mechanics.is_some() {
-                        "[mechanics]"
-                    } else {
-                        "[[terms]]"
-                    }
+                    "no row: the model file has no linear part ({}; judged in the \
+                     '{GIVEN_MODEL_ROW}' row); the rule would be ",
+                    no_linear_part_words(&spec)
                 )
             } else if loaded.kind == ModelKind::Assumed && spec.acquisition.is_none() {
                 String::new()
@@ -1451,4 +1462,62 @@ fn compare_report(s: &CompareSummary) -> String {
     );
     r.push_str(&crate::html::figures_section(&s.files));
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(a: &str, b: &str, terms: bool) -> ModelSpec {
+        let mut text = format!(
+            "states = [\"theta\", \"omega\"]\ninputs = [\"u\"]\nA = {a}\nB = {b}\n\
+             measured = [\"theta\"]\ncorrected = [\"omega\"]\nnoise_variance = [0.01]\n"
+        );
+        if terms {
+            text.push_str(
+                "\n[[terms]]\nstate = \"omega\"\neffect = \"pendulum\"\n\
+                 term = \"-19.62*theta - 0.2*omega - 2*u\"\ncoefficient = 1.0\n",
+            );
+        }
+        crate::model_file::parse_model(Path::new("m.toml"), &text).unwrap()
+    }
+
+    /// One predicate: no linear part when A and B are all zero or the file is a
+    /// `[mechanics]` model; a non-zero entry anywhere (a kinematic row, a damping term in
+    /// the corrected row, an input gain) is a linear part.
+    #[test]
+    fn no_linear_part_is_zero_a_and_b_or_mechanics() {
+        let zero = spec("[[0.0, 0.0], [0.0, 0.0]]", "[[0.0], [0.0]]", true);
+        assert!(has_no_linear_part(&zero));
+        for (a, b) in [
+            ("[[0.0, 1.0], [0.0, 0.0]]", "[[0.0], [0.0]]"),
+            ("[[0.0, 0.0], [0.0, -0.1]]", "[[0.0], [0.0]]"),
+            ("[[0.0, 0.0], [0.0, 0.0]]", "[[0.0], [1.0]]"),
+        ] {
+            assert!(!has_no_linear_part(&spec(a, b, true)), "A = {a}, B = {b}");
+        }
+        let rigid = crate::model_file::read_model(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/two_link/rigid_body.toml"),
+        )
+        .unwrap();
+        assert!(rigid.mechanics.is_some());
+        assert!(has_no_linear_part(&rigid));
+        // The linear OE failure is explained by the same predicate, with the remedy
+        // that fits the file; free parameters given by hand keep the bare error.
+        let e = std::io::Error::other("singular");
+        let why = oe_failure(&zero, true, &e);
+        assert!(
+            why.contains("A and B are zero") && why.contains("give A and B"),
+            "{why}"
+        );
+        assert!(why.ends_with("(singular)"), "{why}");
+        let why = oe_failure(&rigid, true, &e);
+        assert!(
+            why.contains("[mechanics] model") && !why.contains("give A and B"),
+            "{why}"
+        );
+        assert_eq!(oe_failure(&zero, false, &e), "singular");
+        let linear = spec("[[0.0, 1.0], [0.0, 0.0]]", "[[0.0], [0.0]]", true);
+        assert_eq!(oe_failure(&linear, true, &e), "singular");
+    }
 }

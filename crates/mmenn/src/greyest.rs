@@ -638,71 +638,40 @@ fn judged_as_predict(
 
 /// The figure of record `k` (1-based in its name): each output measured and simulated
 /// free-run from the calibrated start (the estimator's final free run), over the
-/// residual.
+/// residual; none when the record has no final free run of its length.
 fn record_figure(outcome: &GreyestOutcome, k: usize) -> Option<crate::plot::Panels> {
-    use crate::plot::Series;
     let exp = outcome.records.get(k)?;
     let states = outcome.fit.states.get(k)?;
     let lin = &outcome.spec.linear;
-    if states.ncols() != exp.len() {
-        return None;
-    }
-    let y = lin.c() * states;
-    let t = exp.times();
     let names = lin.output_names();
-    let with_unit = |n: &str| match outcome.spec.units.get(n) {
-        Some(u) => format!("{n} ({u})"),
-        None => n.to_string(),
-    };
-    let y_label = match names {
-        [one] => with_unit(one),
-        _ => "output (units in the legend)".to_string(),
-    };
-    let (mut series, mut residuals) = (Vec::new(), Vec::new());
-    for (i, name) in names.iter().enumerate() {
-        let measured: Vec<f64> = exp.outputs().row(i).iter().copied().collect();
-        let simulated: Vec<f64> = y.row(i).iter().copied().collect();
-        let fit = outcome
-            .fit
-            .fit_percent
-            .get(k)
-            .and_then(|f| f.get(i))
-            .copied()
-            .unwrap_or(f64::NAN);
-        series.push(Series::points(
-            format!("{} measured", with_unit(name)),
-            t.clone(),
-            measured.clone(),
-        ));
-        series.push(Series::line(
-            format!("{name} free run from the calibrated start (fit {fit:.2} %)"),
-            t.clone(),
-            simulated.clone(),
-        ));
-        residuals.push(
-            Series::line(
-                format!("{name} measured − simulated"),
-                t.clone(),
-                measured
-                    .iter()
-                    .zip(&simulated)
-                    .map(|(m, s)| m - s)
-                    .collect::<Vec<f64>>(),
-            )
-            .coloured(2 * i + 1),
-        );
-    }
+    let labels: Vec<String> = names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let fit = outcome
+                .fit
+                .fit_percent
+                .get(k)
+                .and_then(|f| f.get(i))
+                .copied()
+                .unwrap_or(f64::NAN);
+            format!("{name} free run from the calibrated start (fit {fit:.2} %)")
+        })
+        .collect();
     let file = outcome
         .summary
         .records
         .get(k)
         .map_or_else(String::new, |r| format!(" ({})", r.file));
-    Some(crate::plot::Panels::time_with_residuals(
+    crate::plot::Panels::outputs_with_residuals(
         format!("grey-box estimate, record {}{file}", k + 1),
-        y_label,
-        series,
-        residuals,
-    ))
+        names,
+        &outcome.spec.units,
+        exp,
+        &(lin.c() * states),
+        &labels,
+    )
+    .ok()
 }
 
 /// Write `model.toml`, `greyest.json`, `report.md`, `report.html` and a figure per record

@@ -8,10 +8,13 @@
 //! dot per occupied cell (the grid is coarsened until the dots fit the budget). Both
 //! reductions are deterministic and only change what is drawn, never the data.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Arc;
 
+use nalgebra::DMatrix;
 use plotters::prelude::*;
+use sysid_core::Experiment;
 
 use crate::atomic::write_atomic;
 use crate::error::{MmennError, Result};
@@ -537,6 +540,62 @@ impl Panels {
         }
     }
 
+    /// A record's outputs measured and simulated, over their residuals: per output
+    /// `names[i]` (row `i` of the record's outputs and of `simulated`), its measured
+    /// points (legend "name (unit) measured", the unit from `units` when it has one), its
+    /// simulated line (legend `labels[i]`, where the caller puts the fit %) and, in the
+    /// lower panel, measured − simulated in the line's colour. NaN samples (a missing
+    /// measurement, no prediction) are not drawn. The y label is the output with its
+    /// unit when there is one output. An error when `simulated`, `labels` or the record's
+    /// outputs do not have one row per name, or `simulated` not one column per sample.
+    pub fn outputs_with_residuals(
+        title: String,
+        names: &[String],
+        units: &BTreeMap<String, String>,
+        record: &Experiment,
+        simulated: &DMatrix<f64>,
+        labels: &[String],
+    ) -> Result<Self> {
+        let measured = record.outputs();
+        let shapes = [
+            ("measured outputs", measured.nrows(), names.len()),
+            ("simulated outputs", simulated.nrows(), names.len()),
+            ("legend labels", labels.len(), names.len()),
+            ("simulated samples", simulated.ncols(), record.len()),
+        ];
+        if let Some((what, got, want)) = shapes.iter().find(|(_, got, want)| got != want) {
+            return Err(MmennError::Plot(format!(
+                "figure \"{title}\": {got} {what}, expected {want}"
+            )));
+        }
+        let with_unit = |n: &str| match units.get(n) {
+            Some(u) => format!("{n} ({u})"),
+            None => n.to_string(),
+        };
+        let y_label = match names {
+            [one] => with_unit(one),
+            _ => "output (units in the legend)".to_string(),
+        };
+        let t: Arc<[f64]> = record.times().into();
+        let (mut series, mut residuals) = (Vec::new(), Vec::new());
+        for (i, (name, label)) in names.iter().zip(labels).enumerate() {
+            let m: Vec<f64> = measured.row(i).iter().copied().collect();
+            let s: Vec<f64> = simulated.row(i).iter().copied().collect();
+            let r: Vec<f64> = m.iter().zip(&s).map(|(m, s)| m - s).collect();
+            series.push(Series::points(
+                format!("{} measured", with_unit(name)),
+                t.clone(),
+                m,
+            ));
+            series.push(Series::line(label.clone(), t.clone(), s));
+            residuals.push(
+                Series::line(format!("{name} measured − simulated"), t.clone(), r)
+                    .coloured(2 * i + 1),
+            );
+        }
+        Ok(Self::time_with_residuals(title, y_label, series, residuals))
+    }
+
     /// Render to SVG text: both panels over the union of their x ranges.
     pub fn to_svg(&self) -> Result<String> {
         let (a0, a1) = self.top.x_range();
@@ -726,6 +785,102 @@ mod tests {
             a,
             thin_points(&[&pts], (0.0, 3.0), (0.0, 3.0), (800, 400), DOT_BUDGET)
         );
+    }
+
+    /// The shared record figure of `fit` and `greyest`: two series per output above (its
+    /// measured points, its simulated line with the caller's label), one residual per
+    /// output below (measured − simulated, in its line's colour, NaN where a measurement
+    /// is missing), and an error for shapes that do not match.
+    #[test]
+    fn outputs_with_residuals_draws_each_output_over_its_residual() {
+        let n = 40;
+        let t: Vec<f64> = (0..n).map(|k| 0.5 + 0.1 * k as f64).collect();
+        let mut y = DMatrix::from_fn(2, n, |i, k| (i + 1) as f64 * (0.2 * k as f64).sin());
+        y[(0, 7)] = f64::NAN; // a missing measurement
+        let sim = DMatrix::from_fn(2, n, |i, k| 0.9 * (i + 1) as f64 * (0.2 * k as f64).sin());
+        let record =
+            Experiment::new(0.5, 0.1, DMatrix::from_element(1, n, 1.0), y.clone()).unwrap();
+        let names = vec!["x".to_string(), "theta".to_string()];
+        let units = BTreeMap::from([("x".to_string(), "m".to_string())]);
+        let labels = vec![
+            "x model (fit 90.0 %)".to_string(),
+            "theta model".to_string(),
+        ];
+        let p =
+            Panels::outputs_with_residuals("title".into(), &names, &units, &record, &sim, &labels)
+                .unwrap();
+        assert_eq!(p.top.series.len(), 2 * names.len());
+        assert_eq!(p.bottom.series.len(), names.len());
+        assert_eq!(p.top.title, "title");
+        assert_eq!(p.top.y_label, "output (units in the legend)");
+        let top: Vec<(&str, Mark)> = p
+            .top
+            .series
+            .iter()
+            .map(|s| (s.label.as_str(), s.mark))
+            .collect();
+        assert_eq!(
+            top,
+            [
+                ("x (m) measured", Mark::Points),
+                ("x model (fit 90.0 %)", Mark::Line),
+                ("theta measured", Mark::Points),
+                ("theta model", Mark::Line),
+            ]
+        );
+        for (i, r) in p.bottom.series.iter().enumerate() {
+            assert_eq!(r.label, format!("{} measured − simulated", names[i]));
+            assert_eq!(r.colour, Some(2 * i + 1), "the colour of its line");
+            assert_eq!(&*r.x, t.as_slice());
+            assert_eq!(r.y[12].to_bits(), (y[(i, 12)] - sim[(i, 12)]).to_bits());
+            assert_eq!(
+                &*p.top.series[2 * i + 1].y,
+                sim.row(i).iter().copied().collect::<Vec<f64>>().as_slice()
+            );
+        }
+        // The missing measurement is neither a dot nor a residual point.
+        assert!(p.top.series[0].y[7].is_nan() && p.bottom.series[0].y[7].is_nan());
+        assert_eq!(finite(&p.top.series[0]).count(), n - 1);
+        assert_eq!(finite(&p.bottom.series[0]).count(), n - 1);
+        assert_eq!(finite(&p.bottom.series[1]).count(), n);
+        let svg = p.to_svg().unwrap();
+        for needle in [
+            "x (m) measured",
+            "x model (fit 90.0 %)",
+            "theta measured − simulated",
+        ] {
+            assert!(svg.contains(needle), "missing {needle}");
+        }
+        // One output: its name and unit label the y axis.
+        let one = Panels::outputs_with_residuals(
+            "one".into(),
+            &names[..1],
+            &units,
+            &Experiment::new(
+                0.5,
+                0.1,
+                DMatrix::from_element(1, n, 1.0),
+                y.rows(0, 1).into_owned(),
+            )
+            .unwrap(),
+            &sim.rows(0, 1).into_owned(),
+            &labels[..1],
+        )
+        .unwrap();
+        assert_eq!(one.top.y_label, "x (m)");
+        assert_eq!(one.bottom.y_label, "x (m)");
+        // Shapes that do not match are an error, not a truncated or panicking figure.
+        let short = sim.columns(0, n - 1).into_owned();
+        let fig = |names: &[String], sim: &DMatrix<f64>, labels: &[String]| {
+            Panels::outputs_with_residuals("bad".into(), names, &units, &record, sim, labels)
+        };
+        assert!(matches!(
+            fig(&names, &short, &labels),
+            Err(MmennError::Plot(_))
+        ));
+        assert!(fig(&names, &sim, &labels[..1]).is_err());
+        assert!(fig(&names[..1], &sim, &labels[..1]).is_err());
+        assert!(fig(&names, &sim.rows(0, 1).into_owned(), &labels).is_err());
     }
 
     #[test]

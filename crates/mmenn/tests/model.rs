@@ -121,6 +121,22 @@ fn discovered_model_gets_one_fit_in_predict_and_compare() {
         (a - b).abs() <= 1e-9 * a.abs().max(1.0),
         "MME/NN: compare {a} vs predict {b}"
     );
+    // On this 201-sample record the linear SS row's refinement on the whole record fails
+    // (a numerator not identifiable): its model is the held-out stage's, and the row's
+    // note says so (the input bias stays; there is no retry without it).
+    let ss = &c.linear_ss;
+    let why = ss.final_refinement_failure.as_deref().unwrap_or_default();
+    assert!(why.contains("not identifiable"), "{}", ss.choice);
+    assert!(ss.input_bias);
+    assert!(
+        ss.choice.contains(&format!("which failed ({why})"))
+            && ss
+                .choice
+                .contains("the row's model is the held-out stage's"),
+        "{}",
+        ss.choice
+    );
+    assert!(val.rows().iter().any(|r| r.label == ss.label));
     // The discovered model beats its own linear part on the test record.
     let assumed = val
         .rows()

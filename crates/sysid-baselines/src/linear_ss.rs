@@ -24,7 +24,10 @@
 //! the free-run refinement on that part and the free-run RMSE on the held-out rest (state
 //! from its first `window` samples). The chosen order is the smallest whose held-out RMSE
 //! is within `order_tolerance` of the best; its refined model is refined again on the
-//! whole record.
+//! whole record. When that last refinement fails (a parameter not identifiable on the
+//! whole record, a divergence), the fit keeps the chosen order's model from the held-out
+//! stage (refined on the fitting part, scored on the held-out rest) and says why in
+//! [`LinearSsFit::final_refinement_failure`].
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -145,7 +148,9 @@ pub struct OrderCandidate {
 /// Result of [`fit_linear_ss`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LinearSsFit {
-    /// The refined model on the whole record.
+    /// The chosen order's model refined on the whole record; when that refinement failed
+    /// ([`LinearSsFit::final_refinement_failure`]), its model from the held-out stage
+    /// (refined on the fitting part, the one the held-out RMSE scored).
     pub model: LinearSsModel,
     /// The subspace model of the chosen order on the whole record, before refinement
     /// (its `x0` fitted from its window like the refined one).
@@ -156,17 +161,27 @@ pub struct LinearSsFit {
     pub singular_values: Vec<f64>,
     /// Every order tried.
     pub candidates: Vec<OrderCandidate>,
-    /// Free-run RMSE of the refined model on the whole record after its window.
+    /// Free-run RMSE of `model` on the whole record after its window.
     pub training_rmse: f64,
-    /// The final refinement's solver report.
+    /// The solver report of `model`'s refinement: on the whole record, or on the fitting
+    /// part when the whole-record refinement failed.
     pub report: SolveReport,
+    /// Why the refinement of the chosen order on the whole record failed, when it did
+    /// (`model` is then the held-out stage's); `None` when it succeeded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub final_refinement_failure: Option<String>,
 }
 
 /// Fit the linear state-space baseline to the first experiment of `data` (one input, one
 /// output; missing samples are not allowed). See the module documentation for the steps.
 ///
+/// A failure of the last step, the chosen order's refinement on the whole record, is no
+/// error: the held-out stage's model of that order is returned, the failure recorded in
+/// [`LinearSsFit::final_refinement_failure`].
+///
 /// Errors: invalid config, not SISO, more than one experiment, missing samples, a record
-/// too short for the horizon and window, or every order failing.
+/// too short for the horizon and window, every order failing, or the model returned
+/// diverging on the whole record.
 pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSsFit> {
     config.validate()?;
     if data.experiments().len() != 1 {
@@ -240,7 +255,8 @@ pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSs
         }
     };
     let mut candidates = Vec::new();
-    let mut refined: Vec<Option<LinearSsModel>> = Vec::new();
+    // Each order's model refined on the fitting part, with its solver report.
+    let mut refined: Vec<Option<(LinearSsModel, SolveReport)>> = Vec::new();
     for &n in &orders {
         let attempt = subspace_model(
             &mo,
@@ -252,18 +268,17 @@ pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSs
         )
         .and_then(|m0| {
             let sub = rmse_after(&m0, &held);
-            let (m1, _) = refine(&m0, &fit_part, config, base.input_offset)?;
-            Ok((sub, m1))
+            Ok((sub, refine(&m0, &fit_part, config, base.input_offset)?))
         });
         match attempt {
-            Ok((sub, m1)) => {
+            Ok((sub, (m1, report))) => {
                 candidates.push(OrderCandidate {
                     order: n,
                     subspace_rmse: sub,
                     refined_rmse: rmse_after(&m1, &held),
                     failure: None,
                 });
-                refined.push(Some(m1));
+                refined.push(Some((m1, report)));
             }
             Err(e) => {
                 candidates.push(OrderCandidate {
@@ -303,10 +318,30 @@ pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSs
             value: f64::NAN,
         })?;
     let order = candidates[chosen].order;
-    let start = refined[chosen].clone().ok_or_else(|| diverged(split))?;
+    let (start, start_report) = refined[chosen].clone().ok_or_else(|| diverged(split))?;
     let whole = Record { u: &u, y: &y };
-    let (model, report) = refine(&start, &whole, config, base.input_offset)?;
-    let training_rmse = rmse_after(&model, &whole).ok_or_else(|| diverged(0))?;
+    // The whole-record refinement, or why it failed (an error, or a refined model whose
+    // free run diverges on the record).
+    let refined_whole = refine(&start, &whole, config, base.input_offset)
+        .map_err(|e| e.to_string())
+        .and_then(|(m, report)| match rmse_after(&m, &whole) {
+            Some(rmse) => Ok((m, report, rmse)),
+            None => Err(diverged(0).to_string()),
+        });
+    let (model, report, training_rmse, final_refinement_failure) = match refined_whole {
+        Ok((m, report, rmse)) => (m, report, rmse, None),
+        Err(why) => {
+            let rmse = rmse_after(&start, &whole).ok_or_else(|| BaselineError::Diverged {
+                sample: 0,
+                channel: format!(
+                    "linear state-space output of the held-out stage's model on the whole \
+                     record (kept because the whole-record refinement failed: {why})"
+                ),
+                value: f64::INFINITY,
+            })?;
+            (start, start_report, rmse, Some(why))
+        }
+    };
     // The subspace-only model of the chosen order on the whole record.
     let mo_all = moesp(
         &centred(&u, base.input_offset),
@@ -329,5 +364,6 @@ pub fn fit_linear_ss(data: &Dataset, config: &LinearSsConfig) -> Result<LinearSs
         candidates,
         training_rmse,
         report,
+        final_refinement_failure,
     })
 }

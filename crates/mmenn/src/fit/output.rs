@@ -22,10 +22,10 @@ use crate::plot::{Figure, Series};
 pub fn write_fit(o: &FitOutcome, out: &Path) -> Result<()> {
     ensure_dir(out)?;
     let spec = &o.spec;
-    compare_figure(spec, &o.train_record, &o.train, "training")
+    compare_figure(spec, &o.train_record, &o.train, "training")?
         .write(&out.join("compare_train.svg"))?;
     if let (Some(j), Some(exp)) = (&o.validation, &o.validation_record) {
-        compare_figure(spec, exp, j, "validation").write(&out.join("compare_validation.svg"))?;
+        compare_figure(spec, exp, j, "validation")?.write(&out.join("compare_validation.svg"))?;
     }
     // d̂ and the network's fit of it on the training record.
     let net = match o.summary.network_inputs {
@@ -154,55 +154,29 @@ impl FitSummary {
     }
 }
 
+/// The training or validation record's outputs measured and simulated free-run by the
+/// hybrid model (fit % in the legend), over the residual.
 fn compare_figure(
     spec: &ModelSpec,
     exp: &Experiment,
     rep: &Judgement,
     which: &str,
-) -> crate::plot::Panels {
-    let t = exp.times();
-    let y = &rep.outputs;
-    let mut series = Vec::new();
-    let mut residuals = Vec::new();
+) -> Result<crate::plot::Panels> {
     let outputs = spec.linear.output_names();
-    let with_unit = |n: &str| match spec.units.get(n) {
-        Some(u) => format!("{n} ({u})"),
-        None => n.to_string(),
-    };
-    let y_label = match outputs {
-        [one] => with_unit(one),
-        _ => "output (units in the legend)".to_string(),
-    };
-    for (i, name) in outputs.iter().enumerate() {
-        series.push(Series::points(
-            format!("{} measured", with_unit(name)),
-            t.clone(),
-            row(exp.outputs(), i),
-        ));
-        let fit = rep.channels.get(name).map_or(f64::NAN, |m| m.fit_percent);
-        series.push(Series::line(
-            format!("{name} MME/NN free-run (fit {fit:.1} %)"),
-            t.clone(),
-            row(y, i),
-        ));
-        residuals.push(
-            Series::line(
-                format!("{name} measured − simulated"),
-                t.clone(),
-                row(exp.outputs(), i)
-                    .iter()
-                    .zip(row(y, i))
-                    .map(|(m, s)| m - s)
-                    .collect::<Vec<f64>>(),
-            )
-            .coloured(2 * i + 1),
-        );
-    }
-    crate::plot::Panels::time_with_residuals(
+    let labels: Vec<String> = outputs
+        .iter()
+        .map(|name| {
+            let fit = rep.channels.get(name).map_or(f64::NAN, |m| m.fit_percent);
+            format!("{name} MME/NN free-run (fit {fit:.1} %)")
+        })
+        .collect();
+    crate::plot::Panels::outputs_with_residuals(
         format!("MME/NN hybrid model, free-run simulation ({which} data)"),
-        y_label,
-        series,
-        residuals,
+        outputs,
+        &spec.units,
+        exp,
+        &rep.outputs,
+        &labels,
     )
 }
 

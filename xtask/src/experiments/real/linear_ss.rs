@@ -150,15 +150,23 @@ pub(super) fn linear_ss_variant(
         .take(8)
         .map(|v| format!("{v:.2e}"))
         .collect();
+    // The whole-record refinement, or the held-out stage's model when it failed.
+    let last_step = match &fit.final_refinement_failure {
+        None => "then refined on the whole record".to_string(),
+        Some(why) => format!(
+            "then refined on the whole record, which failed ({why}): the model is the one \
+             refined on the first 75 %"
+        ),
+    };
     table.note(format!(
         "Linear SS{held} ({OFFICIAL}: official split, full sampling rate, all {} estimation samples): \
          PO-MOESP (20 block rows) on the first 75 % of the estimation record, poles grouped \
          into parallel second-order sections, numerators and feedthrough by least squares, then \
          free-run output error (Levenberg–Marquardt; x0 fitted to the first {window} samples as \
          in the test protocol; input bias fitted) for each order up to {}; order {n} = the smallest \
-         within 2 % of the best held-out free-run RMSE on the last 25 % ({}), then refined on \
-         the whole record. MOESP singular values (relative): {}. Poles of the refined model: \
-         {}; input offset {:.6}, output offset {:.6} (recorded units); training free-run RMSE \
+         within 2 % of the best held-out free-run RMSE on the last 25 % ({}), {last_step}. \
+         MOESP singular values (relative): {}. Poles of the refined model: {}; input offset \
+         {:.6}, output offset {:.6} (recorded units); training free-run RMSE \
          {:.4} {unit}; fit time {seconds:.1} s (1 core).",
         data.estimation.experiments()[0].len(),
         cfg.max_order,
