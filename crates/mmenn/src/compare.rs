@@ -103,6 +103,19 @@ pub struct Failure {
     pub reason: String,
     /// Where it failed.
     pub at: FailedAt,
+    /// For [`FailedAt::FreeRun`]: the dataset whose free run failed (`"estimation"` or
+    /// `"validation"`); `None` for a failure that concerns every table.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dataset: Option<String>,
+}
+
+impl Failure {
+    /// Whether this failure belongs in the table of `dataset` (`"estimation"` or
+    /// `"validation"`): a fit failure in every table, a free-run failure only in its own
+    /// dataset's.
+    pub fn concerns(&self, dataset: &str) -> bool {
+        self.dataset.as_deref().is_none_or(|d| d == dataset)
+    }
 }
 
 /// The polynomial NARX row of `compare`: its delays are the NARX network's
@@ -499,6 +512,7 @@ fn judge_all(which: &str, title: &str, data: &Dataset, models: &Models<'_>) -> R
                     model: label.into(),
                     reason: format!("free run on the {which} data: {}", with_causes(&e)),
                     at: FailedAt::FreeRun,
+                    dataset: Some(which.to_string()),
                 }),
             }
             Ok::<(), MmennError>(())
@@ -877,6 +891,7 @@ fn fit_linear_ss_row(
                 model: structure.label.clone(),
                 reason,
                 at: FailedAt::Fit,
+                dataset: None,
             });
             (structure, None)
         }
@@ -938,6 +953,7 @@ pub fn compute_compare_with_progress(
                     model: "linear OE".into(),
                     reason: reason.clone(),
                     at: FailedAt::Fit,
+                    dataset: None,
                 });
                 (None, Vec::new(), Some(reason))
             }
@@ -980,6 +996,7 @@ pub fn compute_compare_with_progress(
                 model: "NARX".into(),
                 reason: with_causes(&e),
                 at: FailedAt::Fit,
+                dataset: None,
             });
             None
         }
@@ -1025,6 +1042,7 @@ pub fn compute_compare_with_progress(
                     model: POLY_NARX_ROW.into(),
                     reason: with_causes(&e),
                     at: FailedAt::Fit,
+                    dataset: None,
                 });
                 (
                     PolyNarxStructure {
@@ -1108,6 +1126,7 @@ pub fn compute_compare_with_progress(
             model: label.into(),
             reason: format!("on the {res_which} data: {}", with_causes(&e)),
             at: FailedAt::Residuals,
+            dataset: None,
         }),
     };
     if !no_linear_part {
@@ -1320,7 +1339,7 @@ pub fn write_compare(o: &CompareOutcome, out: &Path) -> Result<()> {
     Ok(())
 }
 
-fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {
+fn table_md(t: &EvaluationTable, dataset: &str, failures: &[Failure]) -> String {
     // The title names the horizon already ("free-run simulation, …").
     let horizon = t.horizon().to_string();
     let heading = if t.title().contains(&horizon) {
@@ -1342,7 +1361,7 @@ fn table_md(t: &EvaluationTable, failures: &[Failure]) -> String {
     }
     for f in failures {
         // A free-run failure on the other dataset leaves this table's row in place.
-        if t.rows().iter().any(|r| r.label == f.model) {
+        if t.rows().iter().any(|r| r.label == f.model) || !f.concerns(dataset) {
             continue;
         }
         s.push_str(&format!(
@@ -1359,10 +1378,10 @@ fn compare_report(s: &CompareSummary) -> String {
     let mut r = String::from(
         "# Model comparison\n\nEvery number below is **free-run simulation** (inputs only after the initial condition).\n\n",
     );
-    r.push_str(&table_md(&s.estimation, &s.failures));
+    r.push_str(&table_md(&s.estimation, "estimation", &s.failures));
     if let Some(v) = &s.validation {
         r.push('\n');
-        r.push_str(&table_md(v, &s.failures));
+        r.push_str(&table_md(v, "validation", &s.failures));
         r.push_str(match s.validation_use {
             Some(ValidationUse::Select) => {
                 "\nThe MME/NN made its choices on the validation records (`--val-use \
@@ -1467,6 +1486,30 @@ fn compare_report(s: &CompareSummary) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A free-run failure is listed in its own dataset's table only (the terminal and
+    /// report printed the estimation record's divergence under the validation table too);
+    /// a fit failure in every table.
+    #[test]
+    fn a_free_run_failure_concerns_its_own_dataset_only() {
+        let f = |at, dataset: Option<&str>| Failure {
+            model: POLY_NARX_ROW.into(),
+            reason: "diverged".into(),
+            at,
+            dataset: dataset.map(str::to_string),
+        };
+        let est = f(FailedAt::FreeRun, Some("estimation"));
+        assert!(est.concerns("estimation") && !est.concerns("validation"));
+        let fit = f(FailedAt::Fit, None);
+        assert!(fit.concerns("estimation") && fit.concerns("validation"));
+        let t = EvaluationTable::new("validation", Horizon::FreeRun);
+        let md = table_md(
+            &t,
+            "validation",
+            &[est, f(FailedAt::FreeRun, Some("validation"))],
+        );
+        assert_eq!(md.matches("polynomial NARX").count(), 1, "{md}");
+    }
 
     fn spec(a: &str, b: &str, terms: bool) -> ModelSpec {
         let mut text = format!(

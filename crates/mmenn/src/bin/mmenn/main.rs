@@ -649,7 +649,9 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
         mmenn::compare::run_compare_outcome(&data, &a.model, &val, &opts, staged.path(), progress)?;
     staged.commit()?;
     let s = &outcome.summary;
-    for t in std::iter::once(&s.estimation).chain(s.validation.as_ref()) {
+    for (dataset, t) in std::iter::once(("estimation", &s.estimation))
+        .chain(s.validation.as_ref().map(|v| ("validation", v)))
+    {
         outln!("{} — {}:", t.title(), t.horizon());
         for row in t.rows() {
             let cells: Vec<String> = row
@@ -669,7 +671,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
         for f in s
             .failures
             .iter()
-            .filter(|f| t.rows().iter().all(|r| r.label != f.model))
+            .filter(|f| t.rows().iter().all(|r| r.label != f.model) && f.concerns(dataset))
         {
             outln!(
                 "  {:<16} {}: {}",
@@ -677,6 +679,20 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
                 f.at.to_string().to_uppercase(),
                 f.reason
             );
+            let dense = s
+                .poly_narx
+                .as_ref()
+                .is_some_and(|p| p.choice.monomials == mmenn::compare::PolyNarxMonomials::All);
+            if f.model == mmenn::compare::POLY_NARX_ROW
+                && f.at == mmenn::compare::FailedAt::FreeRun
+                && dense
+            {
+                outln!(
+                    "  {:<16} (--poly-monomials frols-kfold keeps a sparse model whose term \
+                     count is chosen by free run)",
+                    ""
+                );
+            }
         }
     }
     for f in &s.residual_failures {
