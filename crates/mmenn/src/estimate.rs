@@ -261,6 +261,11 @@ pub struct EstimateSummary {
     pub noise_method: mme_core::NoiseMethod,
     /// The noise estimator's full report (difference-based cross-check, likelihood).
     pub noise: mme_core::NoiseReport,
+    /// The model-free references an estimated noise variance was judged against, per
+    /// measured channel: `[second differences, spectral floor]` (the floor `null` when the
+    /// records are too short for it); empty when the noise variance was given.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub noise_references: BTreeMap<String, (f64, Option<f64>)>,
     /// Sample variance of measurement minus estimate, per measured channel.
     pub residual_variance: BTreeMap<String, f64>,
     /// Residual variance divided by noise variance, per measured channel (≈ 1 when the
@@ -603,6 +608,19 @@ fn compute_estimate_owned(
         noise_variance: by_name(&est.output_names, &est.noise_variance),
         noise_method: result.noise.method,
         noise: result.noise.clone(),
+        noise_references: if result.noise.difference_based.len() == est.output_names.len() {
+            est.output_names
+                .iter()
+                .zip(&result.noise.difference_based)
+                .enumerate()
+                .map(|(i, (name, d))| {
+                    let floor = result.noise.spectral_floor.get(i).copied().flatten();
+                    (name.clone(), (*d, floor))
+                })
+                .collect()
+        } else {
+            BTreeMap::new()
+        },
         residual_variance: by_name(&est.output_names, &est.residual_variance),
         residual_to_noise: by_name(&est.output_names, &ratio),
         w_search: result.w_search.clone(),

@@ -529,6 +529,15 @@ fn silverbox_noise_variance_is_below_the_published_simulation_floor() {
     .unwrap();
     let nv = s.noise_variance["y"];
     assert!(nv > 0.0 && nv < 9e-8, "noise variance {nv}");
+    // The references it was judged against are in the summary and the report: second
+    // differences far above it, a spectral floor (upper bound of white noise) above it.
+    let (diff, floor) = s.noise_references["y"];
+    assert!(
+        diff > 1e-5 && floor.is_some_and(|f| f > nv && f < diff),
+        "{diff} {floor:?}"
+    );
+    let report = std::fs::read_to_string(dir.join("est").join("report.md")).unwrap();
+    assert!(report.contains("spectral floor"), "{report}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

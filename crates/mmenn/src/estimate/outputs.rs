@@ -324,6 +324,22 @@ pub(super) fn estimate_report(s: &EstimateSummary, spec: &ModelSpec) -> String {
         "Noise variance: {}.\n\n",
         crate::words::noise_method(s.noise_method)
     ));
+    // The model-free references the estimate was judged against (auto only).
+    if !s.noise_references.is_empty() {
+        let refs: Vec<String> = s
+            .noise_references
+            .iter()
+            .map(|(name, (d, f))| {
+                let floor = f.map_or("—".to_string(), |v| format!("{v:.4e}"));
+                format!("{name}: second differences {d:.4e}, spectral floor {floor}")
+            })
+            .collect();
+        r.push_str(&format!(
+            "Model-free references (upper bounds of white noise; a likelihood estimate below \
+             1 % of the lower is taken as the likelihood running to R → 0): {}.\n\n",
+            refs.join("; ")
+        ));
+    }
     for w in &s.warnings {
         r.push_str(&format!("**Warning.** {w}\n\n"));
     }
