@@ -408,15 +408,7 @@ fn silverbox_duffing_with_nothing_kept_is_unexplained_not_none() {
     let dir = std::env::temp_dir().join(format!("mmenn-real-sb-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let text = std::fs::read_to_string(folder.join("train_val_multisine.csv")).unwrap();
-    let head: Vec<&str> = text.lines().take(8193).collect();
-    std::fs::write(dir.join("est.csv"), head.join("\n") + "\n").unwrap();
-    let val: Vec<&str> = text
-        .lines()
-        .take(1)
-        .chain(text.lines().skip(8193).take(8192))
-        .collect();
-    std::fs::write(dir.join("val.csv"), val.join("\n") + "\n").unwrap();
+    silverbox_halves(&folder, &dir);
     std::fs::write(
         dir.join("duffing.toml"),
         r#"

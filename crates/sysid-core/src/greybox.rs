@@ -308,17 +308,7 @@ pub fn estimate_parameters_with<D: ParametricDynamics>(
         }
     }
 
-    let segments: Vec<Segment> = data
-        .records
-        .iter()
-        .enumerate()
-        .map(|(record, e)| Segment {
-            record,
-            start: 0,
-            end: e.len(),
-            linked: false,
-        })
-        .collect();
+    let segments = whole_records(data.records);
     let mut problem = Calibration::new(
         model,
         data.c,
@@ -524,17 +514,7 @@ pub fn free_run_residuals<D: ParametricDynamics>(
         theta.extend_from_slice(x);
     }
     let weight: Vec<f64> = data.noise_variance.iter().map(|v| 1.0 / v.sqrt()).collect();
-    let segments: Vec<Segment> = data
-        .records
-        .iter()
-        .enumerate()
-        .map(|(record, e)| Segment {
-            record,
-            start: 0,
-            end: e.len(),
-            linked: false,
-        })
-        .collect();
+    let segments = whole_records(data.records);
     let mut problem = Calibration::new(
         model,
         data.c,
@@ -912,6 +892,20 @@ fn covariance(jac: &DMatrix<f64>, keep: &[usize], ratio: f64) -> (DMatrix<f64>, 
         }
     }
     (cov, rank)
+}
+
+/// One unlinked segment per record, over the whole record (the free-run solve's split).
+fn whole_records(records: &[Experiment]) -> Vec<Segment> {
+    records
+        .iter()
+        .enumerate()
+        .map(|(record, e)| Segment {
+            record,
+            start: 0,
+            end: e.len(),
+            linked: false,
+        })
+        .collect()
 }
 
 #[cfg(test)]
