@@ -127,12 +127,6 @@ pub(crate) fn spectral_floor(data: &Dataset, binding: &Binding) -> Vec<f64> {
         .map(|k| 0.5 * (1.0 - (tau * k as f64 / l as f64).cos()))
         .collect();
     let norm: f64 = window.iter().map(|w| w * w).sum();
-    let (cos, sin): (Vec<f64>, Vec<f64>) = (0..l)
-        .map(|k| {
-            let a = tau * k as f64 / l as f64;
-            (a.cos(), a.sin())
-        })
-        .unzip();
     // Least-squares line over k = 0..l: centred abscissa.
     let mid = (l as f64 - 1.0) / 2.0;
     let sxx: f64 = (0..l).map(|k| (k as f64 - mid).powi(2)).sum();
@@ -164,17 +158,8 @@ pub(crate) fn spectral_floor(data: &Dataset, binding: &Binding) -> Vec<f64> {
                         *s = (*s - mean - slope * (k as f64 - mid)) * w;
                     }
                     for (j, p) in power.iter_mut().enumerate().skip(1) {
-                        let (mut re, mut im) = (0.0, 0.0);
-                        let mut idx = 0usize;
-                        for s in &seg {
-                            re += s * cos[idx];
-                            im -= s * sin[idx];
-                            idx += j;
-                            if idx >= l {
-                                idx -= l;
-                            }
-                        }
-                        *p += (re * re + im * im) / norm;
+                        let omega = tau * j as f64 / l as f64;
+                        *p += sysid_core::acquisition::goertzel(&seg, omega).norm_sqr() / norm;
                     }
                     segments += 1;
                 }

@@ -319,8 +319,9 @@ fn check_options(o: &AcquisitionOptions, nyquist: f64) -> Result<()> {
 }
 
 /// The DFT `Σ x[n]·e^{−iωn}` by Goertzel's recurrence (one multiply per sample), whose
-/// result `e^{iω(N−1)}·X(ω)` is rotated back here.
-fn goertzel(x: &[f64], omega: f64) -> Complex<f64> {
+/// result `e^{iω(N−1)}·X(ω)` is rotated back here. Also mme-core's spectral floor (the
+/// periodogram of a few hundred bins, where no FFT is needed).
+pub fn goertzel(x: &[f64], omega: f64) -> Complex<f64> {
     let c = 2.0 * omega.cos();
     let (mut s1, mut s2) = (0.0, 0.0);
     for &v in x {

@@ -302,16 +302,23 @@ fn three_term_truth(u: &[f64]) -> Vec<f64> {
 
 const THREE_TERMS: [&str; 3] = ["y(k-1)", "u(k-1)", "u(k-2)^3"];
 
-/// FROLS (degree 3 in two lags, 35 candidates, cap 20) on the first 1500 samples of the
-/// three-term system measured with output noise of σ = `noise`.
-fn three_term_fit(noise: f64) -> (FrolsFit, Vec<f64>, Vec<f64>) {
-    let u = input(2500, 5);
-    let e = input(2500, 29);
+/// `len` samples of the three-term system's input and its output measured with uniform
+/// noise of standard deviation `noise`.
+fn three_term_record(len: usize, noise: f64) -> (Vec<f64>, Vec<f64>) {
+    let u = input(len, 5);
+    let e = input(len, 29);
     let y: Vec<f64> = three_term_truth(&u)
         .iter()
         .zip(&e)
         .map(|(c, e)| c + noise * 3f64.sqrt() * e)
         .collect();
+    (u, y)
+}
+
+/// FROLS (degree 3 in two lags, 35 candidates, cap 20) on the first 1500 samples of the
+/// three-term system measured with output noise of σ = `noise`.
+fn three_term_fit(noise: f64) -> (FrolsFit, Vec<f64>, Vec<f64>) {
+    let (u, y) = three_term_record(2500, noise);
     let fit = fit_frols(
         &dataset(&u[..1500], &y[..1500], 1.0),
         &cubic_config(TermCount::Aic),
@@ -738,13 +745,7 @@ fn a_count_whose_free_run_diverges_on_one_fold_is_not_eligible() {
 /// tolerance is a typed error.
 #[test]
 fn the_kfold_count_keeps_the_three_true_terms() {
-    let u = input(1500, 5);
-    let e = input(1500, 29);
-    let y: Vec<f64> = three_term_truth(&u)
-        .iter()
-        .zip(&e)
-        .map(|(c, e)| c + 0.05 * 3f64.sqrt() * e)
-        .collect();
+    let (u, y) = three_term_record(1500, 0.05);
     let data = dataset(&u, &y, 1.0);
     let k = sysid_baselines::fit_frols_kfold(&data, &cubic_config(TermCount::Aic), 0.02).unwrap();
     let pairs: Vec<(usize, Option<f64>)> = k.scores.iter().map(|s| (s.n, s.value())).collect();
