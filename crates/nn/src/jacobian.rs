@@ -73,6 +73,53 @@ impl Mlp {
         Ok(())
     }
 
+    /// Output `y`, its weight Jacobian `∂y/∂w` (`q × n_w`, columns in the
+    /// [weight layout](Mlp#weight-layout)) and its input Jacobian `∂y/∂x` (`q × n`), all in
+    /// original units, at one input sample, from one forward and `q` backward passes;
+    /// allocation-free once `ws` has grown. For simulation-error training of a model that
+    /// feeds the network's outputs back into its inputs, where both derivatives enter the
+    /// chain rule at every sample.
+    ///
+    /// Errors: `x`, `y`, `dw` or `dx` of the wrong size.
+    pub fn gradients_into(
+        &self,
+        x: &[f64],
+        y: &mut [f64],
+        dw: &mut DMatrix<f64>,
+        dx: &mut DMatrix<f64>,
+        ws: &mut Workspace,
+    ) -> Result<()> {
+        self.check_io(x.len(), y.len())?;
+        let (q, n, nw) = (self.n_outputs(), self.n_inputs(), self.n_weights());
+        for (matrix, m, cols) in [("weight Jacobian", &*dw, nw), ("input Jacobian", &*dx, n)] {
+            if m.nrows() != q || m.ncols() != cols {
+                return Err(NnError::Shape {
+                    matrix,
+                    rows: m.nrows(),
+                    cols: m.ncols(),
+                    expected_rows: q,
+                    expected_cols: cols,
+                });
+            }
+        }
+        ws.prepare(self.architecture());
+        self.input_scaler().scale_into(x, &mut ws.acts[..n]);
+        self.forward_scaled(ws);
+        let out = self.output_range();
+        self.output_scaler().unscale_into(&ws.acts[out], y);
+        let h_out = self.output_scaler().half_range();
+        let h_in = self.input_scaler().half_range();
+        for (o, &h) in h_out.iter().enumerate() {
+            // Seeded with the output's half-range, the pass writes ∂y_o/∂w in original
+            // units and leaves ∂y_o/∂s (scaled input) in the first delta buffer.
+            self.backward(ws, o, h, Some((dw, o)));
+            for (j, &hj) in h_in.iter().enumerate() {
+                dx[(o, j)] = ws.delta[0][j] / hj;
+            }
+        }
+        Ok(())
+    }
+
     /// Call `put(o, j, ∂y_o/∂x_j)` for every output and input (original units). `ws` must
     /// hold a forward pass of the sample.
     pub(crate) fn input_gradients(

@@ -111,4 +111,34 @@ proptest! {
             }
         }
     }
+
+    /// The one-sample gradients (for simulation-error training) are the two checked
+    /// Jacobians above, sample by sample, through one reused workspace.
+    #[test]
+    fn one_sample_gradients_equal_the_checked_jacobians(c in case()) {
+        let (q, n, nw) = (c.net.n_outputs(), c.net.n_inputs(), c.net.n_weights());
+        let full = c.net.weight_jacobian(&c.x).unwrap();
+        let y_all = c.net.predict(&c.x).unwrap();
+        let mut ws = nn::Workspace::new();
+        let (mut y, mut dw, mut dx) = (vec![0.0; q], DMatrix::zeros(q, nw), DMatrix::zeros(q, n));
+        for k in 0..c.x.ncols() {
+            let x: Vec<f64> = c.x.column(k).iter().copied().collect();
+            c.net.gradients_into(&x, &mut y, &mut dw, &mut dx, &mut ws).unwrap();
+            let dx_ref = c.net.input_jacobian(&x).unwrap();
+            for o in 0..q {
+                prop_assert!((y[o] - y_all[(o, k)]).abs() <= 1e-12 * (1.0 + y_all[(o, k)].abs()));
+                for i in 0..nw {
+                    let r = full[(k * q + o, i)];
+                    prop_assert!((dw[(o, i)] - r).abs() <= 1e-12 * (1.0 + r.abs()), "w{} out {}: {} vs {}", i, o, dw[(o, i)], r);
+                }
+                for j in 0..n {
+                    let r = dx_ref[(o, j)];
+                    prop_assert!((dx[(o, j)] - r).abs() <= 1e-12 * (1.0 + r.abs()), "x{} out {}: {} vs {}", j, o, dx[(o, j)], r);
+                }
+            }
+        }
+        // Wrong sizes are errors, not panics.
+        let mut short = DMatrix::zeros(q, nw + 1);
+        prop_assert!(c.net.gradients_into(&c.x.column(0).iter().copied().collect::<Vec<_>>(), &mut y, &mut short, &mut dx, &mut ws).is_err());
+    }
 }
