@@ -401,6 +401,7 @@ fn real(tables: &[Table], out: &mut String) {
                     .find(|r| {
                         r.key[0].ends_with(crate::experiments::real::LINEAR_BASELINE)
                             || r.key[0].ends_with(crate::experiments::real::ACQUISITION)
+                            || r.key[0].ends_with(crate::experiments::real::NARX_CHOSEN)
                     })
                     .or_else(|| rows().next());
                 match row {

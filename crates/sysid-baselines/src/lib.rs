@@ -11,6 +11,7 @@ pub mod linear_ss;
 mod lsq;
 pub mod narx;
 pub mod narx_model;
+mod narx_refine;
 mod narx_sim;
 pub mod oe;
 pub mod oe_model;
@@ -49,7 +50,7 @@ pub use oe::{
     InitialStateTreatment, OeConfig, OeFit, ParameterEstimate, Stability, StabilityVerdict, fit_oe,
 };
 pub use oe_model::{OeModel, X0Policy};
-pub use poly_narx::{PolyNarxConfig, PolyNarxFit, PolyNarxModel, fit_poly_narx};
+pub use poly_narx::{Focus, PolyNarxConfig, PolyNarxFit, PolyNarxModel, Refinement, fit_poly_narx};
 pub use projection::RegressorProjection;
 pub use regressors::NarxOrders;
 pub use residuals::{

@@ -9,6 +9,7 @@ use sysid_core::{Dataset, Model};
 
 use crate::error::{BaselineError, Result, check_config};
 use crate::narx_model::NarxModel;
+use crate::poly_narx::{Focus, Refinement};
 use crate::projection::RegressorProjection;
 use crate::regressors::{NarxOrders, training_rows};
 
@@ -83,6 +84,13 @@ pub struct NarxConfig {
     /// A simulated output more than this many half-ranges of the training data away from
     /// the data's centre counts as diverged. Default 100.
     pub divergence_factor: f64,
+    /// What the chosen network's weights finally minimise. Default
+    /// [`Focus::Prediction`] (the one-step training alone). [`Focus::Simulation`] refines
+    /// them by Levenberg–Marquardt on the free-run error over every training record, with
+    /// exact sensitivities of the recursion (docs/decisions/narx-simulation-focus.md); a
+    /// chosen network whose free run leaves the divergence limits cannot start it, and the
+    /// fit fails with the divergence.
+    pub focus: Focus,
 }
 
 impl Default for NarxConfig {
@@ -101,6 +109,7 @@ impl Default for NarxConfig {
             selection: RestartSelection::FreeRunTraining,
             projection: Projection::Pca { rtol: 1e-3 },
             divergence_factor: 100.0,
+            focus: Focus::Prediction,
         }
     }
 }
@@ -115,6 +124,14 @@ impl NarxConfig {
             "must be finite and > 1",
             self.divergence_factor.is_finite() && self.divergence_factor > 1.0,
         )?;
+        if let Focus::Simulation { max_iterations } = self.focus {
+            check_config(
+                "focus.max_iterations",
+                max_iterations as f64,
+                "must be ≥ 1",
+                max_iterations >= 1,
+            )?;
+        }
         match &self.network {
             NetworkChoice::Hidden { units, restarts } => {
                 check_config("network.units", *units as f64, "must be ≥ 1", *units >= 1)?;
@@ -178,6 +195,10 @@ pub struct NarxFit {
     pub rows: usize,
     /// Rows skipped because they touch a missing sample.
     pub skipped_rows: usize,
+    /// The simulation-error refinement of the chosen network, when
+    /// [`NarxConfig::focus`] asked for it.
+    #[serde(default)]
+    pub refinement: Option<Refinement>,
 }
 
 /// Train a NARX model on the data, series-parallel: each row's regressor holds measured
@@ -257,15 +278,17 @@ pub fn fit_narx(data: &Dataset, config: &NarxConfig) -> Result<NarxFit> {
                 termination: row.termination,
                 free_run_score: None,
             };
-            let model = assemble(result.networks[chosen].clone())?;
+            let mut model = assemble(result.networks[chosen].clone())?;
             let mut record = record;
             record.free_run_score = free_run_score(&model, data)?;
+            let refinement = refine_for(&config.focus, &mut model, data)?;
             return Ok(NarxFit {
                 model,
                 restarts: vec![record],
                 chosen: 0,
                 rows: rows.inputs.ncols(),
                 skipped_rows: rows.skipped,
+                refinement,
             });
         }
     }
@@ -295,14 +318,26 @@ pub fn fit_narx(data: &Dataset, config: &NarxConfig) -> Result<NarxFit> {
         needed: 1,
     })?;
     let restarts: Vec<RestartRecord> = candidates.iter().map(|c| c.1.clone()).collect();
-    let model = candidates.swap_remove(chosen).0;
+    let mut model = candidates.swap_remove(chosen).0;
+    let refinement = refine_for(&config.focus, &mut model, data)?;
     Ok(NarxFit {
         model,
         restarts,
         chosen,
         rows: rows.inputs.ncols(),
         skipped_rows: rows.skipped,
+        refinement,
     })
+}
+
+/// The simulation-error refinement `focus` asks for, if any.
+fn refine_for(focus: &Focus, model: &mut NarxModel, data: &Dataset) -> Result<Option<Refinement>> {
+    match *focus {
+        Focus::Prediction => Ok(None),
+        Focus::Simulation { max_iterations } => {
+            crate::narx_refine::refine(model, data, max_iterations).map(Some)
+        }
+    }
 }
 
 /// Per output, `centre ± factor·half-range` of the measured data.

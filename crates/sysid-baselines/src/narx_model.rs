@@ -129,6 +129,14 @@ impl NarxModel {
         &self.net
     }
 
+    /// Replace the network's weights (same architecture).
+    ///
+    /// Errors: a vector of the wrong length or with a non-finite entry.
+    pub(crate) fn set_network_weights(&mut self, weights: &[f64]) -> Result<()> {
+        self.net.set_weights(weights)?;
+        Ok(())
+    }
+
     /// The regressor projection, if any.
     pub fn projection(&self) -> Option<&RegressorProjection> {
         self.projection.as_ref()

@@ -192,6 +192,14 @@ impl RegressorProjection {
         }
     }
 
+    /// `∂z/∂φ` (`dim × n_reg`): the kept directions with each column divided by its
+    /// element's scale (the projection is affine).
+    pub fn jacobian(&self) -> DMatrix<f64> {
+        DMatrix::from_fn(self.basis.nrows(), self.basis.ncols(), |i, v| {
+            self.basis[(i, v)] / self.scale[v]
+        })
+    }
+
     /// Project every column of `n_reg × rows`.
     pub fn apply_all(&self, regressors: &DMatrix<f64>) -> DMatrix<f64> {
         let z = DMatrix::from_fn(regressors.nrows(), regressors.ncols(), |i, k| {

@@ -43,6 +43,7 @@ pub(crate) mod setups;
 use grey_rows::grey_rows;
 pub use grey_rows::{ACQUISITION, ChosenGrey};
 use linear_ss::linear_ss_rows;
+pub use narx::NARX_CHOSEN;
 pub use notes::{LINEAR_BASELINE, anchors};
 use notes::{published_times, target_note};
 use setups::{emps, oscillator_guess, silverbox, tanks};

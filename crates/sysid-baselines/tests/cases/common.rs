@@ -130,10 +130,12 @@ pub fn series(u: &[f64], y: &[f64], dt: f64) -> Dataset {
     Dataset::new(vec![Channel::new("u")], vec![Channel::new("y")], vec![e]).unwrap()
 }
 
-/// A polynomial NARX model's free-run RMSE over a one-experiment record after its delay
-/// window (`y` the record's measured output).
-pub fn free_run_rmse(model: &sysid_baselines::PolyNarxModel, data: &Dataset, y: &[f64]) -> f64 {
-    use sysid_core::Model;
+/// A NARX model's free-run RMSE over a one-experiment record after its delay window
+/// (`y` the record's measured output).
+pub fn free_run_rmse<M: sysid_core::Model>(model: &M, data: &Dataset, y: &[f64]) -> f64
+where
+    M::Error: std::fmt::Debug,
+{
     let sim = model.simulate(&data.experiments()[0]).unwrap();
     let s = sim.initial_samples;
     ((s..y.len())
