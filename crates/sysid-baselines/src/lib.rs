@@ -44,6 +44,7 @@ pub use linear_ss::{
 };
 pub use narx::{
     NarxConfig, NarxFit, NetworkChoice, Projection, RestartRecord, RestartSelection, fit_narx,
+    refine_narx,
 };
 pub use narx_model::NarxModel;
 pub use oe::{

@@ -330,6 +330,29 @@ pub fn fit_narx(data: &Dataset, config: &NarxConfig) -> Result<NarxFit> {
     })
 }
 
+/// Refine a network NARX already in hand by its free-run error over `data`: the step
+/// [`Focus::Simulation`] adds to [`fit_narx`] after the restart is chosen (so
+/// `fit_narx` with that focus equals `fit_narx` with [`Focus::Prediction`] followed by
+/// this), at most `max_iterations` Jacobians. The model keeps its architecture,
+/// projection, orders and divergence limits; only the weights move.
+///
+/// Errors: `max_iterations` of 0, channel counts differing from the model's, records no
+/// longer than the delay window, a start whose free run leaves the divergence limits
+/// (the sample is named).
+pub fn refine_narx(
+    model: &mut NarxModel,
+    data: &Dataset,
+    max_iterations: usize,
+) -> Result<Refinement> {
+    check_config(
+        "max_iterations",
+        max_iterations as f64,
+        "must be ≥ 1",
+        max_iterations >= 1,
+    )?;
+    crate::narx_refine::refine(model, data, max_iterations)
+}
+
 /// The simulation-error refinement `focus` asks for, if any.
 fn refine_for(focus: &Focus, model: &mut NarxModel, data: &Dataset) -> Result<Option<Refinement>> {
     match *focus {

@@ -287,4 +287,13 @@ fn simulation_focus_refines_the_free_run_on_the_independent_duffing_record() {
     };
     let e = fit_narx(&train, &bad).unwrap_err().to_string();
     assert!(e.contains("focus.max_iterations"), "{e}");
+    // The same refinement on the one-step model in hand gives the same weights.
+    let mut again = one_step.model.clone();
+    let r2 = sysid_baselines::refine_narx(&mut again, &train, 30).unwrap();
+    assert_eq!(&r2, r);
+    assert_eq!(again.network().weights(), refined.model.network().weights());
+    let e = sysid_baselines::refine_narx(&mut again, &train, 0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("max_iterations"), "{e}");
 }

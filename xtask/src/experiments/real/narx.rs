@@ -12,6 +12,7 @@ use mmenn::fit::{STRESS_FACTOR, stress_input};
 use mmenn::sysid_baselines::{
     BaselineError, FrolsConfig, KFOLD_FOLDS, NarxConfig, NarxOrders, NetworkChoice, PolyNarxConfig,
     TermCount, count_by_free_run, fit_frols, fit_narx, fit_poly_narx, poly_narx::Focus,
+    refine_narx,
 };
 use mmenn::sysid_core::{Channel, Dataset, Experiment, InterSample, Model, Prediction};
 
@@ -78,12 +79,12 @@ fn dataset(e: &Experiment, start: usize, len: usize, hold: InterSample) -> Resul
     )?)
 }
 
-fn config(orders: NarxOrders, network: NetworkChoice, focus: Focus) -> NarxConfig {
+/// One-step training (the simulation focus refines its result with [`refine_narx`]).
+fn config(orders: NarxOrders, network: NetworkChoice) -> NarxConfig {
     NarxConfig {
         orders,
         network,
         seed: FIT_SEED,
-        focus,
         ..NarxConfig::default()
     }
 }
@@ -188,15 +189,9 @@ fn narx_inner(
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
 ) -> Result<()> {
-    let focuses = [
-        Focus::Prediction,
-        Focus::Simulation {
-            max_iterations: SIMULATION_ITERATIONS,
-        },
-    ];
     let mut outcomes = Vec::new();
-    for focus in focuses {
-        match narx_select(data, mode, focus) {
+    for (focus, outcome) in narx_select(data, mode)? {
+        match outcome {
             Ok(o) => outcomes.push(o),
             Err(e) => table.note(format!("NARX ({}): not built: {e:#}", focus_name(&focus))),
         }
@@ -222,7 +217,35 @@ fn focus_name(focus: &Focus) -> String {
     }
 }
 
-fn narx_select(data: &BenchmarkData, mode: Mode, focus: Focus) -> Result<NarxOutcome> {
+/// One focus's order selection as it goes.
+#[derive(Default)]
+struct Track {
+    tried: Vec<String>,
+    best: Option<(NarxOrders, f64)>,
+    seconds: f64,
+}
+
+impl Track {
+    fn record(&mut self, orders: NarxOrders, scored: Result<f64, String>, unit: &str) {
+        let (na, nb) = (orders.na, orders.nb);
+        match scored {
+            Ok(r) => {
+                self.tried.push(format!("({na}, {nb}): {r:.4} {unit}"));
+                if self.best.is_none_or(|(_, b)| r < b) {
+                    self.best = Some((orders, r));
+                }
+            }
+            Err(why) => self.tried.push(format!("({na}, {nb}): {why}")),
+        }
+    }
+}
+
+/// The order selection and final fit of both rows. The simulation focus trains the same
+/// networks (same data, orders, restarts and seeds) and refines the chosen one, so each
+/// one-step network is trained once and refined on a copy: `fit_narx` with
+/// [`Focus::Simulation`] is `fit_narx` with [`Focus::Prediction`] then
+/// [`refine_narx`]. Each row's time counts the one-step training it rests on.
+fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<NarxOutcome>)>> {
     let b = data.benchmark;
     let window = b.init_window();
     let (scale, unit) = b.reporting_unit();
@@ -233,50 +256,84 @@ fn narx_select(data: &BenchmarkData, mode: Mode, focus: Focus) -> Result<NarxOut
         last,
         select_samples,
     } = plan(b, mode);
+    let simulation = Focus::Simulation {
+        max_iterations: SIMULATION_ITERATIONS,
+    };
     let clock = Instant::now();
     let (used, head, tail, y_tail) = selection_split(est, select_samples)?;
-    let tail = &tail;
-    let mut tried = Vec::new();
-    let mut best: Option<(NarxOrders, f64)> = None;
+    let split_seconds = clock.elapsed().as_secs_f64();
+    let (mut pred, mut sim) = (Track::default(), Track::default());
+    pred.seconds = split_seconds;
+    sim.seconds = split_seconds;
     for &(na, nb) in &grid {
         let orders = NarxOrders { na, nb, nk: 1 };
         if orders.max_lag() > window {
             continue;
         }
-        let scored = held_out(
-            fit_narx(&head, &config(orders, small.clone(), focus))
-                .and_then(|f| f.model.simulate(tail)),
-            &y_tail,
-            window,
-            scale,
-        );
-        match scored {
-            Ok(r) => {
-                tried.push(format!("({na}, {nb}): {r:.4} {unit}"));
-                if best.is_none_or(|(_, b)| r < b) {
-                    best = Some((orders, r));
-                }
+        let clock = Instant::now();
+        let fit = fit_narx(&head, &config(orders, small.clone()));
+        let one_step = clock.elapsed().as_secs_f64();
+        pred.seconds += one_step;
+        sim.seconds += one_step;
+        match fit {
+            Ok(f) => {
+                let clock = Instant::now();
+                pred.record(
+                    orders,
+                    held_out(f.model.simulate(&tail), &y_tail, window, scale),
+                    unit,
+                );
+                pred.seconds += clock.elapsed().as_secs_f64();
+                let clock = Instant::now();
+                let mut m = f.model;
+                let refined = refine_narx(&mut m, &head, SIMULATION_ITERATIONS)
+                    .and_then(|_| m.simulate(&tail));
+                sim.record(orders, held_out(refined, &y_tail, window, scale), unit);
+                sim.seconds += clock.elapsed().as_secs_f64();
             }
-            Err(why) => tried.push(format!("({na}, {nb}): {why}")),
+            Err(e) => {
+                pred.record(orders, Err(failure(&e)), unit);
+                sim.record(orders, Err(failure(&e)), unit);
+            }
         }
     }
-    let select_seconds = clock.elapsed().as_secs_f64();
-    let Some((orders, held_out)) = best else {
-        anyhow::bail!("every order of the grid failed: {}", tried.join("; "));
-    };
-    let clock = Instant::now();
-    let fit = fit_narx(&data.estimation, &config(orders, last, focus))?;
-    let fit_seconds = clock.elapsed().as_secs_f64();
-    Ok(NarxOutcome {
-        focus,
-        orders,
-        fit,
-        held_out,
-        tried,
-        used,
-        select_seconds,
-        fit_seconds,
-    })
+    let mut out = Vec::new();
+    let mut one_step_final: Option<(NarxOrders, mmenn::sysid_baselines::NarxFit, f64)> = None;
+    for (focus, track) in [(Focus::Prediction, pred), (simulation, sim)] {
+        let outcome = (|| -> Result<NarxOutcome> {
+            let Some((orders, held_out)) = track.best else {
+                anyhow::bail!("every order of the grid failed: {}", track.tried.join("; "));
+            };
+            let (mut fit, mut fit_seconds) = match &one_step_final {
+                Some((o, f, secs)) if *o == orders => (f.clone(), *secs),
+                _ => {
+                    let clock = Instant::now();
+                    let f = fit_narx(&data.estimation, &config(orders, last.clone()))?;
+                    (f, clock.elapsed().as_secs_f64())
+                }
+            };
+            if focus == Focus::Prediction {
+                one_step_final = Some((orders, fit.clone(), fit_seconds));
+            } else {
+                let clock = Instant::now();
+                let r = refine_narx(&mut fit.model, &data.estimation, SIMULATION_ITERATIONS)?;
+                fit.refinement = Some(r);
+                fit_seconds += clock.elapsed().as_secs_f64();
+            }
+            Ok(NarxOutcome {
+                focus,
+                orders,
+                fit,
+                held_out,
+                tried: track.tried,
+                used,
+                select_seconds: track.seconds,
+                fit_seconds,
+            })
+        })();
+        out.push((focus, outcome));
+    }
+    Ok(out)
 }
 
 fn narx_emit(
