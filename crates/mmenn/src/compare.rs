@@ -3,7 +3,9 @@
 //! subspace start, free-run output-error refinement, order up to
 //! [`CompareOptions::ss_max_order`] chosen on the held-out end of the first estimation
 //! record, [`sysid_baselines::fit_linear_ss`]; MATLAB's `n4sid` then `pem`), a NARX
-//! network, a polynomial NARX model ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
+//! network (trained one-step, refined by free-run error with
+//! [`CompareOptions::narx_focus`] = [`Focus::Simulation`]), a polynomial NARX model
+//! ([`POLY_NARX_ROW`]: the NARX network's delays, monomials up to
 //! [`PolyNarxChoice::degree`] of the newest lags, one-step least squares, refined by
 //! free-run error with [`Focus::Simulation`]; off with
 //! `poly_narx: None`) and the MME/NN hybrid model judged the same way on the same data
@@ -35,6 +37,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
+pub use sysid_baselines::Refinement;
 pub use sysid_baselines::poly_narx::Focus;
 use sysid_baselines::{
     EvaluationTable, LinearSsConfig, LinearSsModel, NarxConfig, NarxModel, NarxOrders, OeConfig,
@@ -238,6 +241,11 @@ pub struct CompareOptions {
     pub narx_lags: Option<usize>,
     /// Cap of the suggested NARX delays.
     pub max_narx_lag: usize,
+    /// What the NARX network's weights finally minimise: its one-step error alone
+    /// ([`Focus::Prediction`], the default, as MATLAB's `nlarx`), or that training then
+    /// refined by free-run error over the estimation data ([`Focus::Simulation`], MATLAB
+    /// `nlarx`'s `Focus = "simulation"`; [`sysid_baselines::NarxConfig::focus`]).
+    pub narx_focus: Focus,
     /// Free parameters of the output-error model (`"A[i,j]"`, `"B[i,j]"`); `None` = every
     /// entry of the corrected rows of A and B (the equations MME corrects).
     pub oe_free: Option<Vec<String>>,
@@ -255,6 +263,7 @@ impl Default for CompareOptions {
             fit: FitOptions::default(),
             narx_lags: None,
             max_narx_lag: 10,
+            narx_focus: Focus::Prediction,
             oe_free: None,
             poly_narx: Some(PolyNarxChoice::default()),
             ss_max_order: LinearSsConfig::default().max_order,
@@ -272,6 +281,14 @@ pub struct CompareSummary {
     /// NARX delays used (na output lags, nb input taps from delay nk; they may differ
     /// when suggested) and how they were chosen.
     pub narx_orders: NarxOrders,
+    /// What the NARX network's weights finally minimised ([`CompareOptions::narx_focus`]).
+    pub narx_focus: Focus,
+    /// With [`Focus::Simulation`]: what the free-run refinement of the NARX network did
+    /// (iterations, training free-run RMSE per output before and after); `None` with
+    /// [`Focus::Prediction`] or when the NARX was not fitted.
+    pub narx_refinement: Option<Refinement>,
+    /// How the NARX network was trained, in words (the report's sentence).
+    pub narx_training: String,
     /// The polynomial NARX model (same delays), when asked for.
     pub poly_narx: Option<PolyNarxStructure>,
     /// The linear state-space model (order and how it was chosen).
@@ -438,6 +455,67 @@ fn judge_linear_ss(
         initial_samples: 0,
     };
     Ok((ev, run.outputs))
+}
+
+/// How the NARX network of `config` was trained, in words: one-step (series-parallel)
+/// Levenberg–Marquardt and the restart choice, then, with [`Focus::Simulation`], the
+/// free-run refinement's iterations and each output's training free-run RMSE before and
+/// after (`refinement`, outputs named by `outputs`). `fitted` false: not fitted.
+fn narx_training_words(
+    config: &NarxConfig,
+    fitted: bool,
+    outputs: &[String],
+    refinement: Option<&Refinement>,
+) -> String {
+    let network = match &config.network {
+        sysid_baselines::NetworkChoice::Hidden { units, restarts } => format!(
+            "one tanh layer of {units} unit{}, {restarts} initialisation{}",
+            if *units == 1 { "" } else { "s" },
+            if *restarts == 1 { "" } else { "s" },
+        ),
+        sysid_baselines::NetworkChoice::Sweep { .. } => "sized by the sweep".to_string(),
+    };
+    let choice = match config.selection {
+        sysid_baselines::RestartSelection::FreeRunTraining => {
+            "the one whose free run fits the estimation data best kept"
+        }
+        sysid_baselines::RestartSelection::OneStep => "the one of lowest one-step error kept",
+    };
+    let mut words = format!(
+        "{network}, trained one-step (series-parallel: measured past outputs in every \
+         regressor) by Levenberg–Marquardt, {choice}"
+    );
+    match (config.focus, refinement) {
+        (Focus::Prediction, _) => {}
+        (Focus::Simulation { max_iterations }, Some(r)) => {
+            let rmse: Vec<String> = r
+                .start_rmse
+                .iter()
+                .zip(&r.final_rmse)
+                .enumerate()
+                .map(|(i, (a, b))| {
+                    let name = outputs.get(i).map_or("", String::as_str);
+                    format!("{name} {a:.4e} → {b:.4e}").trim_start().to_string()
+                })
+                .collect();
+            words.push_str(&format!(
+                "; then refined by free-run error over the estimation data: {} \
+                 Levenberg–Marquardt iteration{} (at most {max_iterations}), training \
+                 free-run RMSE {}",
+                r.iterations,
+                if r.iterations == 1 { "" } else { "s" },
+                rmse.join(", ")
+            ));
+        }
+        (Focus::Simulation { max_iterations }, None) => words.push_str(&format!(
+            "; its refinement by free-run error over the estimation data asked for (at \
+             most {max_iterations} Levenberg–Marquardt iterations)"
+        )),
+    }
+    if !fitted {
+        words.push_str("; not fitted (see the models without numbers)");
+    }
+    words
 }
 
 /// An error and each cause its message does not already hold, joined by ": " (e.g. a
@@ -980,17 +1058,15 @@ pub fn compute_compare_with_progress(
             }
         }
     };
-    let narx = match stage(progress, "NARX fit", || {
-        fit_narx(
-            data,
-            &NarxConfig {
-                orders,
-                seed: opts.fit.seed,
-                ..NarxConfig::default()
-            },
-        )
-    }) {
-        Ok(f) => Some(f.model),
+    let narx_config = NarxConfig {
+        orders,
+        seed: opts.fit.seed,
+        focus: opts.narx_focus,
+        ..NarxConfig::default()
+    };
+    let (narx, narx_refinement) = match stage(progress, "NARX fit", || fit_narx(data, &narx_config))
+    {
+        Ok(f) => (Some(f.model), f.refinement),
         Err(e) => {
             failures.push(Failure {
                 model: "NARX".into(),
@@ -998,9 +1074,15 @@ pub fn compute_compare_with_progress(
                 at: FailedAt::Fit,
                 dataset: None,
             });
-            None
+            (None, None)
         }
     };
+    let narx_training = narx_training_words(
+        &narx_config,
+        narx.is_some(),
+        &data.output_names(),
+        narx_refinement.as_ref(),
+    );
     let poly_narx = opts.poly_narx.map(|choice| {
         let fitted = stage(progress, "polynomial NARX fit", || match choice.monomials {
             PolyNarxMonomials::All => fit_poly_narx(
@@ -1287,6 +1369,9 @@ pub fn compute_compare_with_progress(
         estimation: est.table,
         validation,
         narx_orders: orders,
+        narx_focus: opts.narx_focus,
+        narx_refinement,
+        narx_training,
         poly_narx: poly_structure,
         linear_ss: ss_structure,
         oe_parameters,
@@ -1411,8 +1496,8 @@ fn compare_report(s: &CompareSummary) -> String {
         r.push_str(&format!("- **{m}**: {how}\n"));
     }
     r.push_str(&format!(
-        "\nNARX delays: na = {}, nb = {}, nk = {}.\n\n",
-        s.narx_orders.na, s.narx_orders.nb, s.narx_orders.nk
+        "\nNARX delays: na = {}, nb = {}, nk = {}. NARX network: {}.\n\n",
+        s.narx_orders.na, s.narx_orders.nb, s.narx_orders.nk, s.narx_training
     ));
     match &s.poly_narx {
         Some(p) => {

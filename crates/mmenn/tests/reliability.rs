@@ -1244,6 +1244,37 @@ fn cli_poly_focus_reaches_compare_and_a_bad_value_is_refused() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// `--narx-focus simulation` reaches the NARX network: `compare.json` records the focus
+/// and a refinement whose training free-run RMSE fell; anything but `prediction` or
+/// `simulation` is refused naming the flag and the value.
+#[test]
+fn cli_narx_focus_reaches_compare_and_a_bad_value_is_refused() {
+    let dir = scratch("narx-focus");
+    std::fs::write(dir.join("d.csv"), oscillation_csv()).unwrap();
+    std::fs::write(dir.join("m.toml"), PENDULUM).unwrap();
+    let json = compare_json_with(&dir, "o", "--narx-focus", "simulation");
+    assert_eq!(
+        json["narx_focus"]["simulation"]["max_iterations"], 30,
+        "{}",
+        json["narx_focus"]
+    );
+    let r = &json["narx_refinement"];
+    let (start, end) = (
+        r["start_rmse"][0].as_f64().unwrap(),
+        r["final_rmse"][0].as_f64().unwrap(),
+    );
+    assert!(end < start, "{r}");
+    assert!((1..=30).contains(&r["iterations"].as_u64().unwrap()), "{r}");
+    let err = compare_refuses(&dir, "--narx-focus", "bogus");
+    assert!(
+        err.contains("--narx-focus")
+            && err.contains("'bogus'")
+            && err.contains("prediction or simulation"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// A model file that corrects no equation (`corrected` missing, or written empty by
 /// `greyest` for a `[mechanics]` model) makes MME's `d̂` zero by construction. Every
 /// command built on it refuses the file, naming it and suggesting the equations to

@@ -116,8 +116,9 @@ fn poly_degree(text: &str) -> std::result::Result<usize, String> {
     }
 }
 
-/// `compare --poly-focus`: `prediction` or `simulation`.
-fn poly_focus(text: &str) -> std::result::Result<mmenn::compare::Focus, String> {
+/// `compare --narx-focus` and `--poly-focus`: `prediction` or `simulation` (at most 30
+/// Levenberg–Marquardt iterations).
+fn focus(text: &str) -> std::result::Result<mmenn::compare::Focus, String> {
     match text.trim() {
         "prediction" => Ok(mmenn::compare::Focus::Prediction),
         "simulation" => Ok(mmenn::compare::Focus::Simulation { max_iterations: 30 }),
@@ -189,6 +190,11 @@ pub(crate) struct CompareArgs {
     /// NARX delays (default: suggested from PACF/XCF).
     #[arg(long)]
     pub(crate) narx_lags: Option<usize>,
+    /// How the NARX network's weights are estimated: `prediction` (one-step
+    /// Levenberg–Marquardt) or `simulation` (then refined by free-run error over the
+    /// estimation data, at most 30 Levenberg–Marquardt iterations).
+    #[arg(long, value_name = "FOCUS", default_value = "prediction", value_parser = focus)]
+    pub(crate) narx_focus: mmenn::compare::Focus,
     /// Polynomial NARX row (the NARX delays; monomials of the newest output lags and
     /// input taps, see --poly-nonlinear-lags; see --poly-focus): highest total degree,
     /// 1 to 5 (1: linear ARX), or 0 for no polynomial NARX row.
@@ -208,7 +214,7 @@ pub(crate) struct CompareArgs {
     /// How the polynomial NARX coefficients are estimated: `prediction` (one-step least
     /// squares) or `simulation` (then refined by free-run error over the estimation data,
     /// at most 30 Levenberg–Marquardt iterations).
-    #[arg(long, value_name = "FOCUS", default_value = "prediction", value_parser = poly_focus)]
+    #[arg(long, value_name = "FOCUS", default_value = "prediction", value_parser = focus)]
     pub(crate) poly_focus: mmenn::compare::Focus,
     /// Which monomials the polynomial NARX keeps: `all` (every monomial, one least-squares
     /// fit) or `frols-kfold` (sparse: FROLS ranks at most 40 on the first estimation

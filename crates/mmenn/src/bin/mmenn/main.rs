@@ -632,6 +632,7 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
             ..Default::default()
         },
         narx_lags: a.narx_lags,
+        narx_focus: a.narx_focus,
         poly_narx: (a.poly_degree > 0).then_some(mmenn::compare::PolyNarxChoice {
             degree: a.poly_degree,
             nonlinear_lags: a.poly_nonlinear_lags,
@@ -700,6 +701,9 @@ fn compare(a: CompareArgs, force: bool, progress: &Reporter) -> Result<()> {
     }
     if s.linear_ss.order.is_some() {
         outln!("linear SS order {}", s.linear_ss.choice);
+    }
+    if s.narx_refinement.is_some() {
+        outln!("NARX network: {}", s.narx_training);
     }
     if let Some(line) = s.poly_narx.as_ref().and_then(|p| p.selection.as_ref()) {
         outln!("polynomial NARX terms: {line}");
