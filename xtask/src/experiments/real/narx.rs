@@ -298,22 +298,30 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
         }
     }
     let mut out = Vec::new();
-    let mut one_step_final: Option<(NarxOrders, mmenn::sysid_baselines::NarxFit, f64)> = None;
+    let mut one_step_final: Option<(
+        NarxOrders,
+        NetworkChoice,
+        mmenn::sysid_baselines::NarxFit,
+        f64,
+    )> = None;
     for (focus, track) in [(Focus::Prediction, pred), (simulation, sim)] {
         let outcome = (|| -> Result<NarxOutcome> {
             let Some((orders, held_out)) = track.best else {
                 anyhow::bail!("every order of the grid failed: {}", track.tried.join("; "));
             };
+            // The simulation focus's final fit trains the network its selection scored
+            // (docs/decisions/narx-simulation-focus.md, cost amendment).
+            let network = final_network(&focus, &small, &last);
             let (mut fit, mut fit_seconds) = match &one_step_final {
-                Some((o, f, secs)) if *o == orders => (f.clone(), *secs),
+                Some((o, n, f, secs)) if *o == orders && *n == network => (f.clone(), *secs),
                 _ => {
                     let clock = Instant::now();
-                    let f = fit_narx(&data.estimation, &config(orders, last.clone()))?;
+                    let f = fit_narx(&data.estimation, &config(orders, network.clone()))?;
                     (f, clock.elapsed().as_secs_f64())
                 }
             };
             if focus == Focus::Prediction {
-                one_step_final = Some((orders, fit.clone(), fit_seconds));
+                one_step_final = Some((orders, network, fit.clone(), fit_seconds));
             } else {
                 let clock = Instant::now();
                 let r = refine_narx(&mut fit.model, &data.estimation, SIMULATION_ITERATIONS)?;
@@ -336,6 +344,16 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
     Ok(out)
 }
 
+/// The network of a row's final fit: the one-step row trains the plan's larger final
+/// network; the simulation focus trains the network its selection scored (refined), so
+/// the model it reports is of the kind the held-out run validated.
+fn final_network(focus: &Focus, select: &NetworkChoice, last: &NetworkChoice) -> NetworkChoice {
+    match focus {
+        Focus::Prediction => last.clone(),
+        Focus::Simulation { .. } => select.clone(),
+    }
+}
+
 fn narx_emit(
     data: &BenchmarkData,
     mode: Mode,
@@ -353,6 +371,7 @@ fn narx_emit(
         last,
         ..
     } = plan(b, mode);
+    let last = final_network(&o.focus, &small, &last);
     let orders = o.orders;
     let name = match o.focus {
         Focus::Prediction => "NARX",
