@@ -282,6 +282,35 @@ fn a_diverging_polynomial_free_run_costs_only_its_row() {
 /// Noise σ of [`second_order_csv`].
 const SS_SIGMA: f64 = 0.02;
 
+/// A continuous oscillator near [`second_order_csv`]'s truth, with its velocity corrected
+/// (the MME/NN row needs an assumed model).
+const NEAR_OSCILLATOR: &str = r#"
+states = ["y", "v"]
+inputs = ["u"]
+A = [[0.0, 1.0], [-20.0, -2.2]]
+B = [[0.0], [50.0]]
+measured = ["y"]
+corrected = ["v"]
+noise_variance = [0.0004]
+"#;
+
+/// Compare options that keep the MME/NN row small (one hidden unit, one initialisation,
+/// no trajectory training), the NARX at two delays and no polynomial NARX row.
+fn light_options() -> CompareOptions {
+    use mmenn::fit::{HiddenChoice, TrajectoryChoice};
+    CompareOptions {
+        fit: FitOptions {
+            hidden: HiddenChoice::Fixed(1),
+            inits: 1,
+            train_on_trajectories: TrajectoryChoice::None,
+            ..FitOptions::default()
+        },
+        narx_lags: Some(2),
+        poly_narx: None,
+        ..CompareOptions::default()
+    }
+}
+
 /// A record of a discrete second-order system written here, independent of every mmenn
 /// simulator: `y_k = x_k + e_k` with `X(z) = (0.3 z + 0.2)/(z² − 1.6 z + 0.8) U(z)` (poles
 /// 0.8 ± 0.4i, steady-state gain 2.5), the input a random ±1 sequence held 3 to 18
@@ -334,7 +363,6 @@ fn second_order_csv(samples: usize, seed: u64) -> String {
 #[test]
 fn linear_ss_row_finds_the_order_and_noise_level_of_an_independent_record() {
     use mmenn::compare::{LINEAR_SS_ROW, compute_compare};
-    use mmenn::fit::{HiddenChoice, TrajectoryChoice};
     use mmenn::model::LoadedModel;
 
     let dir = std::env::temp_dir().join(format!("mmenn-compare-ss-{}", std::process::id()));
@@ -342,30 +370,8 @@ fn linear_ss_row_finds_the_order_and_noise_level_of_an_independent_record() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("est.csv"), second_order_csv(1000, 1)).unwrap();
     std::fs::write(dir.join("val.csv"), second_order_csv(600, 2)).unwrap();
-    std::fs::write(
-        dir.join("model.toml"),
-        r#"
-states = ["y", "v"]
-inputs = ["u"]
-A = [[0.0, 1.0], [-20.0, -2.2]]
-B = [[0.0], [50.0]]
-measured = ["y"]
-corrected = ["v"]
-noise_variance = [0.0004]
-"#,
-    )
-    .unwrap();
-    let opts = CompareOptions {
-        fit: FitOptions {
-            hidden: HiddenChoice::Fixed(1),
-            inits: 1,
-            train_on_trajectories: TrajectoryChoice::None,
-            ..FitOptions::default()
-        },
-        narx_lags: Some(2),
-        poly_narx: None,
-        ..CompareOptions::default()
-    };
+    std::fs::write(dir.join("model.toml"), NEAR_OSCILLATOR).unwrap();
+    let opts = light_options();
     assert_eq!(opts.ss_max_order, 6);
     let s = run_compare(
         &[dir.join("est.csv")],
@@ -489,36 +495,15 @@ noise_variance = [0.0004]
 #[test]
 fn narx_simulation_focus_is_refined_and_reported() {
     use mmenn::compare::Focus;
-    use mmenn::fit::{HiddenChoice, TrajectoryChoice};
 
     let dir = std::env::temp_dir().join(format!("mmenn-compare-narx-focus-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("est.csv"), second_order_csv(300, 3)).unwrap();
-    std::fs::write(
-        dir.join("model.toml"),
-        r#"
-states = ["y", "v"]
-inputs = ["u"]
-A = [[0.0, 1.0], [-20.0, -2.2]]
-B = [[0.0], [50.0]]
-measured = ["y"]
-corrected = ["v"]
-noise_variance = [0.0004]
-"#,
-    )
-    .unwrap();
+    std::fs::write(dir.join("model.toml"), NEAR_OSCILLATOR).unwrap();
     let base = CompareOptions {
-        fit: FitOptions {
-            hidden: HiddenChoice::Fixed(1),
-            inits: 1,
-            train_on_trajectories: TrajectoryChoice::None,
-            ..FitOptions::default()
-        },
-        narx_lags: Some(2),
-        poly_narx: None,
         ss_max_order: 2,
-        ..CompareOptions::default()
+        ..light_options()
     };
     assert_eq!(base.narx_focus, Focus::Prediction);
     let run = |focus: Focus, out: &str| {

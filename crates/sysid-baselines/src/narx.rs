@@ -124,14 +124,7 @@ impl NarxConfig {
             "must be finite and > 1",
             self.divergence_factor.is_finite() && self.divergence_factor > 1.0,
         )?;
-        if let Focus::Simulation { max_iterations } = self.focus {
-            check_config(
-                "focus.max_iterations",
-                max_iterations as f64,
-                "must be ≥ 1",
-                max_iterations >= 1,
-            )?;
-        }
+        self.focus.validate()?;
         match &self.network {
             NetworkChoice::Hidden { units, restarts } => {
                 check_config("network.units", *units as f64, "must be ≥ 1", *units >= 1)?;

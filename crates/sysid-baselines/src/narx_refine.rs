@@ -10,7 +10,7 @@
 //! sensitivities of the last `na` samples live in a ring, so memory is the Jacobian's
 //! own (`rows × weights`) plus `(na + 1)·p·weights`.
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use nn::Workspace;
 use sysid_core::Dataset;
 
@@ -43,8 +43,6 @@ impl NetSimulationError<'_> {
         let n_w = net.n_weights();
         let n_z = net.n_inputs();
         let len = o.regressor_len(p, q);
-        let n_out_vars = p * o.na;
-        let ring_len = o.na + 1;
         let mut reg = vec![0.0; len];
         let mut tmp = vec![0.0; len];
         let mut z = vec![0.0; n_z];
@@ -52,16 +50,14 @@ impl NetSimulationError<'_> {
         let mut dw = DMatrix::zeros(p, n_w);
         let mut dx = DMatrix::zeros(p, n_z);
         let mut row = vec![0.0; n_w];
-        let mut ring = vec![0.0; if jacobian { ring_len * p * n_w } else { 0 }];
         let mut ws = Workspace::new();
-        let mut res = Vec::new();
-        let mut jac = Vec::new();
+        let mut sens = narx_sim::Sensitivities::new(o, p, n_w, jacobian);
         for exp in self.data.experiments() {
             narx_sim::check(m, exp)?;
             let s = narx_sim::first_complete_window(m, exp)?;
             let mut yhat = exp.outputs().clone();
             let (u, y) = (exp.inputs(), exp.outputs());
-            ring.fill(0.0);
+            sens.start_record();
             for k in s..exp.len() {
                 fill_regressor(
                     |c, j| yhat[(c, j)],
@@ -91,46 +87,28 @@ impl NetSimulationError<'_> {
                     yhat[(c, k)] = *v;
                 }
                 if jacobian {
-                    let slot = (k % ring_len) * p * n_w;
                     for c in 0..p {
                         for (i, r) in row.iter_mut().enumerate() {
                             *r = dw[(c, i)];
                         }
-                        for v in 0..n_out_vars {
-                            let g: f64 = (0..n_z).map(|i| dx[(c, i)] * self.dz[(i, v)]).sum();
-                            if g == 0.0 {
-                                continue;
-                            }
-                            let (ch, lag) = (v / o.na, v % o.na + 1);
-                            let from = ((k - lag) % ring_len) * p * n_w + ch * n_w;
-                            for (r, old) in row.iter_mut().zip(&ring[from..from + n_w]) {
-                                *r += g * old;
-                            }
-                        }
-                        ring[slot + c * n_w..slot + (c + 1) * n_w].copy_from_slice(&row);
+                        // ∂ŷ_c/∂φ_v = Σ_i ∂ŷ_c/∂z_i · ∂z_i/∂φ_v.
+                        sens.chain(k, c, &mut row, |v| {
+                            (0..n_z).map(|i| dx[(c, i)] * self.dz[(i, v)]).sum()
+                        });
                     }
                 }
                 for c in 0..p {
-                    if y[(c, k)].is_nan() {
-                        continue;
-                    }
-                    let w = self.weight[c];
-                    res.push(w * (yhat[(c, k)] - y[(c, k)]));
-                    if jacobian {
-                        let at = (k % ring_len) * p * n_w + c * n_w;
-                        jac.extend(ring[at..at + n_w].iter().map(|v| w * v));
+                    if !y[(c, k)].is_nan() {
+                        sens.push(k, c, self.weight[c], yhat[(c, k)], y[(c, k)]);
                     }
                 }
             }
         }
-        let rows = res.len();
-        let j = jacobian.then(|| DMatrix::from_row_slice(rows, n_w, &jac));
-        Ok(Some((DVector::from_vec(res), j)))
+        Ok(Some(sens.finish()))
     }
 
     /// Free-run RMSE per output (unweighted) at `theta`.
     fn rmse(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let p = self.weight.len();
         let Some((r, _)) = self.run(theta, false)? else {
             return Err(BaselineError::Diverged {
                 sample: 0,
@@ -138,25 +116,7 @@ impl NetSimulationError<'_> {
                 value: f64::INFINITY,
             });
         };
-        let mut sse = vec![0.0; p];
-        let mut n = vec![0usize; p];
-        let mut idx = 0;
-        for exp in self.data.experiments() {
-            let s = narx_sim::first_complete_window(self.model, exp)?;
-            for k in s..exp.len() {
-                for c in 0..p {
-                    if !exp.outputs()[(c, k)].is_nan() {
-                        let e = r[idx] / self.weight[c];
-                        sse[c] += e * e;
-                        n[c] += 1;
-                        idx += 1;
-                    }
-                }
-            }
-        }
-        Ok((0..p)
-            .map(|c| (sse[c] / n[c].max(1) as f64).sqrt())
-            .collect())
+        narx_sim::rmse_per_output(self.model, self.data, &r, &self.weight)
     }
 }
 

@@ -2,7 +2,7 @@
 //! tapped-delay regressor of [`crate::regressors`]: the network NARX and the polynomial
 //! NARX share these loops, so both start, predict and report divergence the same way.
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use sysid_core::{Experiment, Horizon, Prediction};
 
 use crate::error::{BaselineError, Result};
@@ -199,4 +199,123 @@ pub(crate) fn predict<M: OneStep>(m: &M, experiment: &Experiment, k: usize) -> R
         outputs,
         initial_samples: skip,
     })
+}
+
+/// The free-run sensitivities `dŷ_c(k)/dθ` of a one-step map's simulation, for the
+/// simulation-error refinements of both NARX kinds: the last `na + 1` samples' rows of
+/// every output in a ring, and the weighted residuals with their Jacobian rows as they are
+/// produced. `ŷ(k)` reads `ŷ(k−1…k−na)`, so the row of sample `k` is the map's own
+/// derivative plus `Σ_v g_v·dŷ_{ch(v)}(k − lag(v))/dθ` over the regressor's output-lag
+/// entries `v` (laid out channel by channel, lags 1…na).
+pub(crate) struct Sensitivities {
+    orders: NarxOrders,
+    p: usize,
+    n_par: usize,
+    ring: Vec<f64>,
+    residuals: Vec<f64>,
+    jacobian: Option<Vec<f64>>,
+}
+
+impl Sensitivities {
+    /// For `p` outputs and `n_par` parameters; `jacobian` false keeps residuals only.
+    pub(crate) fn new(orders: NarxOrders, p: usize, n_par: usize, jacobian: bool) -> Self {
+        Self {
+            orders,
+            p,
+            n_par,
+            ring: vec![
+                0.0;
+                if jacobian {
+                    (orders.na + 1) * p * n_par
+                } else {
+                    0
+                }
+            ],
+            residuals: Vec::new(),
+            jacobian: jacobian.then(Vec::new),
+        }
+    }
+
+    /// Whether Jacobian rows are kept.
+    pub(crate) fn with_jacobian(&self) -> bool {
+        self.jacobian.is_some()
+    }
+
+    /// A new record starts: the measured delay window has no sensitivity.
+    pub(crate) fn start_record(&mut self) {
+        self.ring.fill(0.0);
+    }
+
+    /// Store output `c`'s row at sample `k ≥ s` (after the start `s`): `row` holds the
+    /// map's own derivative on entry and the chained row on return; `g(v)` is
+    /// `∂ŷ_c(k)/∂φ_v` for output-lag entry `v` (0 skips it).
+    pub(crate) fn chain(&mut self, k: usize, c: usize, row: &mut [f64], g: impl Fn(usize) -> f64) {
+        let (na, n, p) = (self.orders.na, self.n_par, self.p);
+        let ring_len = na + 1;
+        for v in 0..p * na {
+            let gv = g(v);
+            if gv == 0.0 {
+                continue;
+            }
+            let (ch, lag) = (v / na, v % na + 1);
+            let from = ((k - lag) % ring_len) * p * n + ch * n;
+            for (r, old) in row.iter_mut().zip(&self.ring[from..from + n]) {
+                *r += gv * old;
+            }
+        }
+        let slot = (k % ring_len) * p * n + c * n;
+        self.ring[slot..slot + n].copy_from_slice(row);
+    }
+
+    /// Record `w·(ŷ − y)` of output `c` at sample `k` (and its Jacobian row, stored by
+    /// [`Sensitivities::chain`]).
+    pub(crate) fn push(&mut self, k: usize, c: usize, w: f64, yhat: f64, y: f64) {
+        self.residuals.push(w * (yhat - y));
+        if let Some(jac) = self.jacobian.as_mut() {
+            let n = self.n_par;
+            let slot = (k % (self.orders.na + 1)) * self.p * n + c * n;
+            jac.extend(self.ring[slot..slot + n].iter().map(|v| w * v));
+        }
+    }
+
+    /// The residual vector and, when kept, the Jacobian (`rows × n_par`).
+    pub(crate) fn finish(self) -> (DVector<f64>, Option<DMatrix<f64>>) {
+        let rows = self.residuals.len();
+        let n = self.n_par;
+        (
+            DVector::from_vec(self.residuals),
+            self.jacobian.map(|j| DMatrix::from_row_slice(rows, n, &j)),
+        )
+    }
+}
+
+/// Free-run RMSE per output (unweighted) from the weighted residuals a refinement's run
+/// produced over `data` (every measured sample after each record's start, outputs
+/// interleaved where measured).
+pub(crate) fn rmse_per_output<M: OneStep>(
+    m: &M,
+    data: &sysid_core::Dataset,
+    residuals: &DVector<f64>,
+    weight: &[f64],
+) -> Result<Vec<f64>> {
+    let p = weight.len();
+    let mut sse = vec![0.0; p];
+    let mut n = vec![0usize; p];
+    let mut idx = 0;
+    for exp in data.experiments() {
+        let s = first_complete_window(m, exp)?;
+        for k in s..exp.len() {
+            for c in 0..p {
+                if !exp.outputs()[(c, k)].is_nan() {
+                    let e = residuals[idx] / weight[c];
+                    sse[c] += e * e;
+                    n[c] += 1;
+                    idx += 1;
+                }
+            }
+        }
+    }
+    Ok((0..p)
+        .map(|c| (sse[c] / n[c].max(1) as f64).sqrt())
+        .collect())
 }

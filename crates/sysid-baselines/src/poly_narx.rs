@@ -9,7 +9,7 @@
 //! reports its rank). Nothing here is random. The free run and k-step prediction are
 //! those of the network NARX (`narx_sim`).
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use sysid_core::{Dataset, Experiment, Model, Prediction};
 
@@ -65,6 +65,21 @@ pub enum Focus {
     },
 }
 
+impl Focus {
+    /// A simulation focus needs at least one Jacobian (`focus.max_iterations` ≥ 1).
+    pub(crate) fn validate(&self) -> Result<()> {
+        if let Focus::Simulation { max_iterations } = *self {
+            check_config(
+                "focus.max_iterations",
+                max_iterations as f64,
+                "must be ≥ 1",
+                max_iterations >= 1,
+            )?;
+        }
+        Ok(())
+    }
+}
+
 impl Default for PolyNarxConfig {
     fn default() -> Self {
         Self {
@@ -110,15 +125,7 @@ impl PolyNarxConfig {
             "must be finite and > 1",
             self.divergence_factor.is_finite() && self.divergence_factor > 1.0,
         )?;
-        if let Focus::Simulation { max_iterations } = self.focus {
-            check_config(
-                "focus.max_iterations",
-                max_iterations as f64,
-                "must be ≥ 1",
-                max_iterations >= 1,
-            )?;
-        }
-        Ok(())
+        self.focus.validate()
     }
 }
 
@@ -665,22 +672,19 @@ impl SimulationError<'_> {
         let n_par = p * t_count;
         let len = o.regressor_len(p, q);
         let n_out_vars = p * o.na;
-        let ring_len = o.na + 1;
         let mut reg = vec![0.0; len];
         let mut z = vec![0.0; len];
         let mut zc = vec![0.0; len];
         let mut phi = vec![0.0; t_count];
         let mut grad = vec![0.0; p * n_out_vars];
         let mut row = vec![0.0; n_par];
-        let mut ring = vec![0.0; if jacobian { ring_len * p * n_par } else { 0 }];
-        let mut res = Vec::new();
-        let mut jac = Vec::new();
+        let mut sens = narx_sim::Sensitivities::new(o, p, n_par, jacobian);
         for exp in self.data.experiments() {
             narx_sim::check(m, exp)?;
             let s = narx_sim::first_complete_window(m, exp)?;
             let mut yhat = exp.outputs().clone();
             let (u, y) = (exp.inputs(), exp.outputs());
-            ring.fill(0.0);
+            sens.start_record();
             for k in s..exp.len() {
                 crate::regressors::fill_regressor(
                     |c, j| yhat[(c, j)],
@@ -706,7 +710,7 @@ impl SimulationError<'_> {
                     }
                     yhat[(c, k)] = v;
                 }
-                if jacobian {
+                if sens.with_jacobian() {
                     grad.fill(0.0);
                     for c in 0..p {
                         let th = &theta[c * t_count..(c + 1) * t_count];
@@ -726,45 +730,24 @@ impl SimulationError<'_> {
                             }
                         }
                     }
-                    let slot = (k % ring_len) * p * n_par;
                     for c in 0..p {
                         row.fill(0.0);
                         row[c * t_count..(c + 1) * t_count].copy_from_slice(&phi);
-                        for v in 0..n_out_vars {
-                            let g = grad[c * n_out_vars + v] / m.scale[v];
-                            if g == 0.0 {
-                                continue;
-                            }
-                            let (ch, lag) = (v / o.na, v % o.na + 1);
-                            let from = ((k - lag) % ring_len) * p * n_par + ch * n_par;
-                            for (r, s_old) in row.iter_mut().zip(&ring[from..from + n_par]) {
-                                *r += g * s_old;
-                            }
-                        }
-                        ring[slot + c * n_par..slot + (c + 1) * n_par].copy_from_slice(&row);
+                        sens.chain(k, c, &mut row, |v| grad[c * n_out_vars + v] / m.scale[v]);
                     }
                 }
                 for c in 0..p {
-                    if y[(c, k)].is_nan() {
-                        continue;
-                    }
-                    let w = self.weight[c];
-                    res.push(w * (yhat[(c, k)] - y[(c, k)]));
-                    if jacobian {
-                        let slot = (k % ring_len) * p * n_par + c * n_par;
-                        jac.extend(ring[slot..slot + n_par].iter().map(|v| w * v));
+                    if !y[(c, k)].is_nan() {
+                        sens.push(k, c, self.weight[c], yhat[(c, k)], y[(c, k)]);
                     }
                 }
             }
         }
-        let rows = res.len();
-        let j = jacobian.then(|| DMatrix::from_row_slice(rows, n_par, &jac));
-        Ok(Some((DVector::from_vec(res), j)))
+        Ok(Some(sens.finish()))
     }
 
     /// Free-run RMSE per output (unweighted) at `theta`.
     fn rmse(&self, theta: &[f64]) -> Result<Vec<f64>> {
-        let p = self.weight.len();
         let Some((r, _)) = self.run(theta, false)? else {
             return Err(BaselineError::Diverged {
                 sample: 0,
@@ -772,27 +755,7 @@ impl SimulationError<'_> {
                 value: f64::INFINITY,
             });
         };
-        // Residuals are interleaved by output only where every output is measured; the
-        // pooled RMSE per output is computed over the samples of that output.
-        let mut sse = vec![0.0; p];
-        let mut n = vec![0usize; p];
-        let mut idx = 0;
-        for exp in self.data.experiments() {
-            let s = narx_sim::first_complete_window(self.model, exp)?;
-            for k in s..exp.len() {
-                for c in 0..p {
-                    if !exp.outputs()[(c, k)].is_nan() {
-                        let e = r[idx] / self.weight[c];
-                        sse[c] += e * e;
-                        n[c] += 1;
-                        idx += 1;
-                    }
-                }
-            }
-        }
-        Ok((0..p)
-            .map(|c| (sse[c] / n[c].max(1) as f64).sqrt())
-            .collect())
+        narx_sim::rmse_per_output(self.model, self.data, &r, &self.weight)
     }
 }
 

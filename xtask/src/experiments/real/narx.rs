@@ -173,8 +173,14 @@ struct NarxOutcome {
 }
 
 /// Jacobians at most of the simulation-focus refinement
-/// (docs/decisions/narx-simulation-focus.md).
-const SIMULATION_ITERATIONS: usize = 30;
+/// (docs/decisions/narx-simulation-focus.md); the quick run (a regression guard, whose
+/// critical path is the Silverbox experiment) keeps 5.
+fn simulation_iterations(mode: Mode) -> usize {
+    match mode {
+        Mode::Quick => 5,
+        Mode::Full => 30,
+    }
+}
 
 /// Marks the network NARX row whose selection scored lower on held-out training data
 /// (docs/decisions/narx-simulation-focus.md; the glance table reads it).
@@ -256,8 +262,9 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
         last,
         select_samples,
     } = plan(b, mode);
+    let iterations = simulation_iterations(mode);
     let simulation = Focus::Simulation {
-        max_iterations: SIMULATION_ITERATIONS,
+        max_iterations: iterations,
     };
     let clock = Instant::now();
     let (used, head, tail, y_tail) = selection_split(est, select_samples)?;
@@ -286,8 +293,8 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
                 pred.seconds += clock.elapsed().as_secs_f64();
                 let clock = Instant::now();
                 let mut m = f.model;
-                let refined = refine_narx(&mut m, &head, SIMULATION_ITERATIONS)
-                    .and_then(|_| m.simulate(&tail));
+                let refined =
+                    refine_narx(&mut m, &head, iterations).and_then(|_| m.simulate(&tail));
                 sim.record(orders, held_out(refined, &y_tail, window, scale), unit);
                 sim.seconds += clock.elapsed().as_secs_f64();
             }
@@ -324,7 +331,7 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
                 one_step_final = Some((orders, network, fit.clone(), fit_seconds));
             } else {
                 let clock = Instant::now();
-                let r = refine_narx(&mut fit.model, &data.estimation, SIMULATION_ITERATIONS)?;
+                let r = refine_narx(&mut fit.model, &data.estimation, iterations)?;
                 fit.refinement = Some(r);
                 fit_seconds += clock.elapsed().as_secs_f64();
             }
