@@ -96,11 +96,70 @@ struct ReproduceArgs {
     quiet: bool,
 }
 
-fn workspace_root() -> PathBuf {
+/// The workspace this binary was compiled from, or an error when the command is run from
+/// inside another mmenn workspace: two checkouts sharing one `CARGO_TARGET_DIR` overwrite
+/// each other's `target/release/xtask`, and cargo, seeing its own package fresh, runs
+/// the other checkout's binary. Its code would then write into, and stamp results for, a
+/// tree it was not built from.
+fn workspace_root() -> Result<PathBuf> {
     let here = Path::new(env!("CARGO_MANIFEST_DIR"));
-    here.parent()
+    let built = here
+        .parent()
         .map(Path::to_path_buf)
-        .unwrap_or_else(|| here.to_path_buf())
+        .unwrap_or_else(|| here.to_path_buf());
+    let cwd = std::env::current_dir().context("reading the current directory")?;
+    root_for(&built, &cwd)
+}
+
+/// [`workspace_root`]'s check: `built` unless `cwd` lies inside another workspace with an
+/// `xtask` package.
+fn root_for(built: &Path, cwd: &Path) -> Result<PathBuf> {
+    let invoked = cwd
+        .ancestors()
+        .find(|d| d.join("xtask").join("Cargo.toml").is_file() && d.join("Cargo.toml").is_file());
+    if let Some(invoked) = invoked {
+        let same = match (invoked.canonicalize(), built.canonicalize()) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => invoked == built,
+        };
+        if !same {
+            anyhow::bail!(
+                "this xtask binary was built from {} but is run in {}: another checkout \
+                 sharing the target directory overwrote it. Rebuild it here (touch \
+                 xtask/src/main.rs, then cargo xtask …) or give each checkout its own \
+                 CARGO_TARGET_DIR",
+                built.display(),
+                invoked.display()
+            );
+        }
+    }
+    Ok(built.to_path_buf())
+}
+
+#[cfg(test)]
+mod root_tests {
+    use super::root_for;
+
+    /// A binary built from one checkout and run inside another is refused, naming both;
+    /// run inside its own checkout (any sub-folder) or outside any, it uses its own.
+    #[test]
+    fn a_binary_from_another_checkout_is_refused() {
+        let base = std::env::temp_dir().join(format!("mmenn-root-{}", std::process::id()));
+        let (a, b) = (base.join("a"), base.join("b"));
+        for w in [&a, &b] {
+            std::fs::create_dir_all(w.join("xtask").join("src")).unwrap();
+            std::fs::write(w.join("Cargo.toml"), "[workspace]\n").unwrap();
+            std::fs::write(w.join("xtask").join("Cargo.toml"), "[package]\n").unwrap();
+        }
+        assert_eq!(root_for(&a, &a.join("xtask").join("src")).unwrap(), a);
+        assert_eq!(root_for(&a, &base).unwrap(), a);
+        let e = root_for(&a, &b).unwrap_err().to_string();
+        assert!(
+            e.contains("built from") && e.contains(&*b.to_string_lossy()),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&base).unwrap();
+    }
 }
 
 /// Timing of one job.
@@ -122,7 +181,7 @@ fn reproduce(args: ReproduceArgs) -> Result<()> {
             .build_global()
             .context("setting the worker threads")?;
     }
-    let root = workspace_root();
+    let root = workspace_root()?;
     let out_root = args.out.clone().unwrap_or_else(|| root.clone());
     let results = match mode {
         Mode::Full => out_root.join("docs").join("results"),
@@ -429,7 +488,7 @@ fn run_jobs(
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Reproduce(args) => reproduce(args),
-        Command::Fuzz(args) => fuzz::fuzz(&workspace_root(), &args.targets, args.seconds),
-        Command::Cycles => cycles::cycles(&workspace_root()),
+        Command::Fuzz(args) => fuzz::fuzz(&workspace_root()?, &args.targets, args.seconds),
+        Command::Cycles => cycles::cycles(&workspace_root()?),
     }
 }
