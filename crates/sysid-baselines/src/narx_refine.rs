@@ -126,6 +126,19 @@ impl LeastSquares for NetSimulationError<'_> {
     }
 }
 
+/// `∂z/∂φ_v` of the network's input `z` for the regressor's output-lag entries `v`
+/// (`n_z × p·na`): the projection's Jacobian columns, or the identity's without one.
+fn lag_jacobian(model: &NarxModel) -> DMatrix<f64> {
+    let n_out_vars = model.output_names().len() * model.orders().na;
+    let n_z = model.network().n_inputs();
+    match model.projection() {
+        Some(proj) => proj.jacobian().columns(0, n_out_vars).into_owned(),
+        None => DMatrix::identity(n_z, n_z)
+            .columns(0, n_out_vars)
+            .into_owned(),
+    }
+}
+
 /// Refine `model`'s weights by free-run error over `data`, at most `max_iterations`
 /// Jacobians. The start must run free over every record (its divergence, with the
 /// sample, is the error).
@@ -137,17 +150,9 @@ pub(crate) fn refine(
     for exp in data.experiments() {
         narx_sim::simulate(model, exp)?;
     }
-    let o = model.orders();
     let p = model.output_names().len();
-    let weight = crate::poly_narx::output_weights(data, p);
-    let n_out_vars = p * o.na;
-    let n_z = model.network().n_inputs();
-    let dz = match model.projection() {
-        Some(proj) => proj.jacobian().columns(0, n_out_vars).into_owned(),
-        None => DMatrix::identity(n_z, n_z)
-            .columns(0, n_out_vars)
-            .into_owned(),
-    };
+    let weight = narx_sim::output_weights(data, p);
+    let dz = lag_jacobian(model);
     let theta0 = model.network().weights().to_vec();
     let problem = NetSimulationError {
         model,
@@ -221,15 +226,7 @@ mod tests {
                 ..NarxConfig::default()
             };
             let model = fit_narx(&data, &config).unwrap().model;
-            let p = model.output_names().len();
-            let o = model.orders();
-            let n_z = model.network().n_inputs();
-            let dz = match model.projection() {
-                Some(proj) => proj.jacobian().columns(0, p * o.na).into_owned(),
-                None => DMatrix::identity(n_z, n_z)
-                    .columns(0, p * o.na)
-                    .into_owned(),
-            };
+            let dz = lag_jacobian(&model);
             let problem = NetSimulationError {
                 model: &model,
                 data: &data,

@@ -319,3 +319,22 @@ pub(crate) fn rmse_per_output<M: OneStep>(
         .map(|c| (sse[c] / n[c].max(1) as f64).sqrt())
         .collect())
 }
+
+/// 1 / standard deviation of each of the `p` outputs over every record of `data` (1 for
+/// a constant output): the weights of the simulation-error residuals.
+pub(crate) fn output_weights(data: &sysid_core::Dataset, p: usize) -> Vec<f64> {
+    (0..p)
+        .map(|c| {
+            let vals: Vec<f64> = data
+                .experiments()
+                .iter()
+                .flat_map(|e| e.outputs().row(c).iter().copied().collect::<Vec<_>>())
+                .filter(|v| !v.is_nan())
+                .collect();
+            let mean = vals.iter().sum::<f64>() / vals.len().max(1) as f64;
+            let var =
+                vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / vals.len().max(1) as f64;
+            if var > 0.0 { 1.0 / var.sqrt() } else { 1.0 }
+        })
+        .collect()
+}

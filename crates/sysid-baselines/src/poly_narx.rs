@@ -765,25 +765,6 @@ impl LeastSquares for SimulationError<'_> {
     }
 }
 
-/// 1 / standard deviation of each of the `p` outputs over every record of `data` (1 for
-/// a constant output): the weights of the simulation-error residuals.
-pub(crate) fn output_weights(data: &Dataset, p: usize) -> Vec<f64> {
-    (0..p)
-        .map(|c| {
-            let vals: Vec<f64> = data
-                .experiments()
-                .iter()
-                .flat_map(|e| e.outputs().row(c).iter().copied().collect::<Vec<_>>())
-                .filter(|v| !v.is_nan())
-                .collect();
-            let mean = vals.iter().sum::<f64>() / vals.len().max(1) as f64;
-            let var =
-                vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / vals.len().max(1) as f64;
-            if var > 0.0 { 1.0 / var.sqrt() } else { 1.0 }
-        })
-        .collect()
-}
-
 /// Refine `model`'s coefficients by free-run error over `data` (see [`Focus::Simulation`]).
 fn refine(model: &mut PolyNarxModel, data: &Dataset, max_iterations: usize) -> Result<Refinement> {
     // The start must run free over every record (its divergence, with the sample, is the
@@ -792,7 +773,7 @@ fn refine(model: &mut PolyNarxModel, data: &Dataset, max_iterations: usize) -> R
         narx_sim::simulate(model, exp)?;
     }
     let p = model.output_names.len();
-    let weight = output_weights(data, p);
+    let weight = narx_sim::output_weights(data, p);
     let theta0: Vec<f64> = (0..p)
         .flat_map(|c| {
             model

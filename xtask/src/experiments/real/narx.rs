@@ -163,6 +163,9 @@ pub fn narx_rows(
 struct NarxOutcome {
     focus: Focus,
     orders: NarxOrders,
+    /// The networks of the selection runs and of the final fit.
+    select_net: NetworkChoice,
+    final_net: NetworkChoice,
     fit: mmenn::sysid_baselines::NarxFit,
     /// The chosen order's held-out free-run RMSE in the selection (reporting unit).
     held_out: f64,
@@ -208,7 +211,7 @@ fn narx_inner(
         .min_by(|a, b| a.1.held_out.total_cmp(&b.1.held_out).then(a.0.cmp(&b.0)))
         .map(|(i, _)| i);
     for (i, o) in outcomes.iter().enumerate() {
-        narx_emit(data, mode, o, chosen == Some(i), table, sims, offset);
+        narx_emit(data, o, chosen == Some(i), table, sims, offset);
     }
     Ok(())
 }
@@ -328,7 +331,7 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
                 }
             };
             if focus == Focus::Prediction {
-                one_step_final = Some((orders, network, fit.clone(), fit_seconds));
+                one_step_final = Some((orders, network.clone(), fit.clone(), fit_seconds));
             } else {
                 let clock = Instant::now();
                 let r = refine_narx(&mut fit.model, &data.estimation, iterations)?;
@@ -338,6 +341,8 @@ fn narx_select(data: &BenchmarkData, mode: Mode) -> Result<Vec<(Focus, Result<Na
             Ok(NarxOutcome {
                 focus,
                 orders,
+                select_net: small.clone(),
+                final_net: network,
                 fit,
                 held_out,
                 tried: track.tried,
@@ -363,7 +368,6 @@ fn final_network(focus: &Focus, select: &NetworkChoice, last: &NetworkChoice) ->
 
 fn narx_emit(
     data: &BenchmarkData,
-    mode: Mode,
     o: &NarxOutcome,
     chosen: bool,
     table: &mut Table,
@@ -373,12 +377,6 @@ fn narx_emit(
     let b = data.benchmark;
     let window = b.init_window();
     let est = &data.estimation.experiments()[0];
-    let Plan {
-        select: small,
-        last,
-        ..
-    } = plan(b, mode);
-    let last = final_network(&o.focus, &small, &last);
     let orders = o.orders;
     let name = match o.focus {
         Focus::Prediction => "NARX",
@@ -427,14 +425,14 @@ fn narx_emit(
          {:.1} s, final fit {:.1} s wall, rayon pool of {} threads \
          on 2 shared cores.",
         focus_name(&o.focus),
-        net(&small),
+        net(&o.select_net),
         100.0 * SELECT_FRACTION,
         o.used,
         est.len(),
         o.tried.join(", "),
         orders.na,
         orders.nb,
-        net(&last),
+        net(&o.final_net),
         if chosen {
             " Of the two network NARX rows, this one's chosen order ran free lower on the \
              held-out part of the training record, so the glance table shows it \
