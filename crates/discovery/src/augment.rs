@@ -42,7 +42,7 @@ use nalgebra::{DMatrix, DVector};
 use sysid_core::integrate::DEFAULT_BLOW_UP;
 use sysid_core::{
     Dataset, Dynamics, Experiment, Integrator, IterationRecord, LeastSquaresProblem, LinearModel,
-    LmSettings, Term, TermModel, TermSpec, Termination, levenberg_marquardt, simulate_with,
+    LmSettings, Term, TermModel, TermSpec, Termination, levenberg_marquardt, simulate_experiment,
 };
 
 use crate::error::{DiscoveryError, Result};
@@ -231,17 +231,7 @@ fn simulate_window<D: Dynamics + ?Sized>(
     integrator: &Integrator,
     blow_up: f64,
 ) -> sysid_core::Result<DMatrix<f64>> {
-    let inputs = experiment.inputs().columns(0, len).into_owned();
-    let x = simulate_with(
-        f,
-        x0,
-        experiment.t0(),
-        experiment.dt(),
-        &inputs,
-        experiment.intersample(),
-        integrator,
-        blow_up,
-    )?;
+    let x = simulate_experiment(f, x0, experiment, 0..len, integrator, blow_up)?;
     Ok(c * x)
 }
 

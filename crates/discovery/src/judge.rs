@@ -39,7 +39,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use sysid_core::integrate::DEFAULT_BLOW_UP;
-use sysid_core::{Dataset, DpOptions, Experiment, Integrator, TermModel, simulate_with};
+use sysid_core::{Dataset, DpOptions, Experiment, Integrator, TermModel, simulate_experiment};
 
 use crate::augment::{CalibrationConfig, InitialState, OutputWeights, calibrate};
 use crate::error::{DiscoveryError, Result};
@@ -310,20 +310,11 @@ pub(crate) fn draw(
     let c = model.linear().c();
     let mut experiments = Vec::with_capacity(data.experiments().len());
     for (e, (exp, x0e)) in data.experiments().iter().zip(x0).enumerate() {
-        let xs = simulate_with(
-            model,
-            x0e,
-            exp.t0(),
-            exp.dt(),
-            exp.inputs(),
-            exp.intersample(),
-            integrator,
-            DEFAULT_BLOW_UP,
-        )
-        .map_err(|source| DiscoveryError::Simulation {
-            experiment: e,
-            source,
-        })?;
+        let xs = simulate_experiment(model, x0e, exp, 0..exp.len(), integrator, DEFAULT_BLOW_UP)
+            .map_err(|source| DiscoveryError::Simulation {
+                experiment: e,
+                source,
+            })?;
         let mut y: DMatrix<f64> = c * xs;
         let noise = gaussian_noise(variance, y.ncols(), seed, stream + e as u64);
         for ch in 0..variance.len() {
@@ -645,7 +636,7 @@ fn statrs_upper_tail(x: f64, k: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use sysid_core::{Channel, InterSample};
+    use sysid_core::{Channel, InterSample, simulate_with};
 
     use crate::test_support::oscillator;
 

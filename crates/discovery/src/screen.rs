@@ -153,13 +153,11 @@ impl Screen {
         let n = linear.n_states();
         let mut trajectories = Vec::new();
         for (exp, x0e) in data.experiments().iter().zip(x0) {
-            let xs = sysid_core::simulate_with(
+            let xs = sysid_core::simulate_experiment(
                 model,
                 x0e,
-                exp.t0(),
-                exp.dt(),
-                exp.inputs(),
-                exp.intersample(),
+                exp,
+                0..exp.len(),
                 integrator,
                 sysid_core::integrate::DEFAULT_BLOW_UP,
             )?;

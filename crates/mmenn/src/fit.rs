@@ -153,9 +153,7 @@ fn select_by_free_run(
     let mut best: Option<(usize, f64)> = None;
     for (i, net) in networks.iter().enumerate() {
         let model = hybrid_model(spec, net.clone(), x0, substeps, domain)?;
-        let Ok(xs) =
-            model.simulate_states_with(x0, exp.t0(), exp.dt(), exp.inputs(), exp.intersample())
-        else {
+        let Ok(xs) = model.simulate_experiment_states(x0, exp, 0..exp.len()) else {
             continue;
         };
         let y = c * xs;

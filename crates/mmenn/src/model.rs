@@ -34,7 +34,7 @@ use nalgebra::DMatrix;
 use serde::Serialize;
 use sysid_core::{
     ChannelMetrics, Dynamics, Experiment, Horizon, Integrator, InterSample, JudgeOptions,
-    PhysicalModel, TermModel, simulate_with,
+    PhysicalModel, TermModel, simulate_experiment, simulate_with,
 };
 pub use sysid_core::{InitialRule, Judgement, Observation, ScoredWindow};
 
@@ -294,8 +294,20 @@ impl LoadedModel {
     }
 
     /// Free-run states (`n × N`) over `exp`'s inputs from `x0`, the inputs between samples
-    /// as the model says.
+    /// as the model says (a record read as the model reads it, through its own grid when
+    /// band-limited: [`simulate_experiment`]).
     pub fn simulate_states(&self, x0: &[f64], exp: &Experiment) -> Result<DMatrix<f64>> {
+        if exp.intersample() == self.intersample() {
+            return simulate_experiment(
+                &self.dynamics,
+                x0,
+                exp,
+                0..exp.len(),
+                &self.integrator,
+                BLOW_UP,
+            )
+            .map_err(core("free-run simulation of the model"));
+        }
         simulate_with(
             &self.dynamics,
             x0,

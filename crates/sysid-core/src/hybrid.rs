@@ -9,7 +9,7 @@ use nalgebra::DMatrix;
 use crate::dataset::InterSample;
 use crate::dynamics::{Correction, Dynamics, Horizon, Model, Prediction};
 use crate::error::{CoreError, Result};
-use crate::integrate::{Integrator, simulate, simulate_with};
+use crate::integrate::{Integrator, simulate, simulate_experiment, simulate_with};
 
 /// `ẋ = f(x, u) + E·g(x, u)`, `y = C x`, with a free-run initial state.
 #[derive(Debug, Clone)]
@@ -151,6 +151,18 @@ impl<F: Dynamics, G: Correction> CorrectedModel<F, G> {
             self.blow_up,
         )
     }
+
+    /// Free-run states over samples `range` of `exp` from `x0` (the state at
+    /// `range.start`), the inputs between samples as the record says; a band-limited
+    /// record is read through its own grid ([`simulate_experiment`]).
+    pub fn simulate_experiment_states(
+        &self,
+        x0: &[f64],
+        exp: &crate::Experiment,
+        range: std::ops::Range<usize>,
+    ) -> Result<DMatrix<f64>> {
+        simulate_experiment(self, x0, exp, range, &self.integrator, self.blow_up)
+    }
 }
 
 impl<F: Dynamics, G: Correction> Dynamics for CorrectedModel<F, G> {
@@ -191,13 +203,7 @@ impl<F: Dynamics, G: Correction> Model for CorrectedModel<F, G> {
     /// Free-run simulation from `self.x0` over the experiment's inputs, held or
     /// interpolated between samples as [`crate::Experiment::intersample`] says.
     fn simulate(&self, experiment: &crate::Experiment) -> Result<Prediction> {
-        let xs = self.simulate_states_with(
-            &self.x0,
-            experiment.t0(),
-            experiment.dt(),
-            experiment.inputs(),
-            experiment.intersample(),
-        )?;
+        let xs = self.simulate_experiment_states(&self.x0, experiment, 0..experiment.len())?;
         Ok(Prediction {
             horizon: Horizon::FreeRun,
             outputs: &self.c * xs,

@@ -8,7 +8,7 @@ use nalgebra::DMatrix;
 use crate::dataset::Experiment;
 use crate::dynamics::Dynamics;
 use crate::error::{CoreError, Result};
-use crate::integrate::{Integrator, simulate_with};
+use crate::integrate::{Integrator, simulate_experiment};
 use crate::least_squares::{
     LeastSquaresProblem, LmSettings, forward_difference, levenberg_marquardt,
 };
@@ -51,14 +51,11 @@ impl<D: Dynamics + ?Sized> FreeResponse<'_, D> {
     /// `ỹ − C x(t_k; x0)` over the window, missing samples skipped.
     fn residuals_into(&self, x0: &[f64], r: &mut [f64]) -> Result<()> {
         let len = self.opt.window.min(self.exp.len());
-        let u = self.exp.inputs().columns(0, len).into_owned();
-        let xs = simulate_with(
+        let xs = simulate_experiment(
             self.f,
             x0,
-            self.exp.t0(),
-            self.exp.dt(),
-            &u,
-            self.exp.intersample(),
+            self.exp,
+            0..len,
             &self.opt.integrator,
             self.opt.blow_up,
         )?;

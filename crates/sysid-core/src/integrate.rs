@@ -441,6 +441,10 @@ pub fn simulate<D: Dynamics + ?Sized>(
 }
 
 /// [`simulate`] with the input between samples as `hold` says.
+///
+/// For [`InterSample::Bl`] the band-limited grid of `inputs` is computed on every call
+/// (the record's ends held); a record's own grid, computed once, is read by
+/// [`simulate_experiment`].
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_with<D: Dynamics + ?Sized>(
     f: &D,
@@ -452,57 +456,147 @@ pub fn simulate_with<D: Dynamics + ?Sized>(
     method: &Integrator,
     blow_up: f64,
 ) -> Result<DMatrix<f64>> {
-    let n = f.n_states();
-    CoreError::check_len("initial state", x0.len(), n)?;
+    CoreError::check_len("initial state", x0.len(), f.n_states())?;
     CoreError::check_len("input channels", inputs.nrows(), f.n_inputs())?;
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(CoreError::BadSamplePeriod { dt });
+    let grid = (hold == InterSample::Bl && inputs.ncols() > 0).then(|| band_limited_grid(inputs));
+    let run = Run {
+        t0,
+        dt,
+        inputs: inputs.as_slice(),
+        m: inputs.nrows(),
+        len: inputs.ncols(),
+        hold,
+        grid: grid.as_deref(),
+    };
+    run.simulate(f, x0, method, blow_up)
+}
+
+/// Free run over samples `range` of `exp` from `x0` (the state at sample `range.start`),
+/// the input between samples as the record says: `n × range.len()` states, column `j` at
+/// sample `range.start + j`.
+///
+/// A band-limited record is read through its own grid, computed once when the record was
+/// made ([`Experiment::band_limited_grid`]): no per-call cost, and the samples beyond the
+/// range shape the input near its ends as they do in the whole record, as the sensitivity
+/// runs read it ([`Experiment::step_input`]). The same bits as [`simulate_with`] over the
+/// record's inputs for the whole record.
+///
+/// Errors: a range beyond the record, a state of the wrong length, a channel-count
+/// mismatch, a diverging run ([`CoreError::Diverged`]).
+pub fn simulate_experiment<D: Dynamics + ?Sized>(
+    f: &D,
+    x0: &[f64],
+    exp: &Experiment,
+    range: std::ops::Range<usize>,
+    method: &Integrator,
+    blow_up: f64,
+) -> Result<DMatrix<f64>> {
+    if range.start > range.end || range.end > exp.len() {
+        return Err(CoreError::Range {
+            start: range.start,
+            end: range.end,
+            len: exp.len(),
+        });
     }
-    let len = inputs.ncols();
-    let mut out = DMatrix::zeros(n, len);
-    if len == 0 {
-        return Ok(out);
-    }
-    let mut x = x0.to_vec();
-    let mut ws = Workspace::new(n);
-    out.column_mut(0).copy_from_slice(&x);
-    let m = inputs.nrows();
-    let grid = (hold == InterSample::Bl).then(|| band_limited_grid(inputs));
-    if grid.is_some() {
-        ws.u.resize(m, 0.0);
-    }
-    for k in 1..len {
-        let ua = &inputs.as_slice()[(k - 1) * m..k * m];
-        let ub = &inputs.as_slice()[k * m..(k + 1) * m];
-        let ta = t0 + (k - 1) as f64 * dt;
-        let tb = t0 + k as f64 * dt;
-        match &grid {
-            Some(g) => {
-                let first = (k - 1) * BL_FACTOR * m;
-                let path = GridPath {
-                    ta,
-                    span: tb - ta,
-                    points: &g[first..first + (BL_FACTOR + 1) * m],
-                    per_interval: BL_FACTOR,
-                };
-                interval_path(f, ta, tb, &mut x, &path, method, &mut ws)?;
+    let m = exp.n_inputs();
+    CoreError::check_len("initial state", x0.len(), f.n_states())?;
+    CoreError::check_len("input channels", m, f.n_inputs())?;
+    let inputs = &exp.inputs().as_slice()[range.start * m..range.end * m];
+    let hold = exp.intersample();
+    let owned;
+    let grid = match (hold, exp.band_limited_grid()) {
+        (InterSample::Bl, _) if range.is_empty() => None,
+        (InterSample::Bl, Some(g)) => {
+            Some(&g[range.start * BL_FACTOR * m..((range.end - 1) * BL_FACTOR + 1) * m])
+        }
+        (InterSample::Bl, None) => {
+            owned = band_limited_grid(&exp.inputs().columns(range.start, range.len()).into_owned());
+            Some(owned.as_slice())
+        }
+        _ => None,
+    };
+    let run = Run {
+        t0: exp.time(range.start),
+        dt: exp.dt(),
+        inputs,
+        m,
+        len: range.len(),
+        hold,
+        grid,
+    };
+    run.simulate(f, x0, method, blow_up)
+}
+
+/// One free run's inputs: `inputs` column-major (`m` per sample), and for a band-limited
+/// reading its grid over the same samples.
+struct Run<'a> {
+    t0: f64,
+    dt: f64,
+    inputs: &'a [f64],
+    m: usize,
+    /// Samples (also with no input channels).
+    len: usize,
+    hold: InterSample,
+    grid: Option<&'a [f64]>,
+}
+
+impl Run<'_> {
+    fn simulate<D: Dynamics + ?Sized>(
+        &self,
+        f: &D,
+        x0: &[f64],
+        method: &Integrator,
+        blow_up: f64,
+    ) -> Result<DMatrix<f64>> {
+        let n = f.n_states();
+        let (t0, dt, m) = (self.t0, self.dt, self.m);
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(CoreError::BadSamplePeriod { dt });
+        }
+        let len = self.len;
+        let mut out = DMatrix::zeros(n, len);
+        if len == 0 {
+            return Ok(out);
+        }
+        let mut x = x0.to_vec();
+        let mut ws = Workspace::new(n);
+        out.column_mut(0).copy_from_slice(&x);
+        if self.grid.is_some() {
+            ws.u.resize(m, 0.0);
+        }
+        for k in 1..len {
+            let ua = &self.inputs[(k - 1) * m..k * m];
+            let ub = &self.inputs[k * m..(k + 1) * m];
+            let ta = t0 + (k - 1) as f64 * dt;
+            let tb = t0 + k as f64 * dt;
+            match self.grid {
+                Some(g) => {
+                    let first = (k - 1) * BL_FACTOR * m;
+                    let path = GridPath {
+                        ta,
+                        span: tb - ta,
+                        points: &g[first..first + (BL_FACTOR + 1) * m],
+                        per_interval: BL_FACTOR,
+                    };
+                    interval_path(f, ta, tb, &mut x, &path, method, &mut ws)?;
+                }
+                None => integrate_sample(f, ta, tb, &mut x, ua, ub, self.hold, method, &mut ws)?,
             }
-            None => integrate_sample(f, ta, tb, &mut x, ua, ub, hold, method, &mut ws)?,
+            if let Some((state, value)) = x
+                .iter()
+                .enumerate()
+                .find(|(_, v)| !v.is_finite() || v.abs() > blow_up)
+            {
+                return Err(CoreError::Diverged {
+                    t: tb,
+                    state,
+                    value: *value,
+                });
+            }
+            out.column_mut(k).copy_from_slice(&x);
         }
-        if let Some((state, value)) = x
-            .iter()
-            .enumerate()
-            .find(|(_, v)| !v.is_finite() || v.abs() > blow_up)
-        {
-            return Err(CoreError::Diverged {
-                t: tb,
-                state,
-                value: *value,
-            });
-        }
-        out.column_mut(k).copy_from_slice(&x);
+        Ok(out)
     }
-    Ok(out)
 }
 
 #[cfg(test)]
@@ -694,5 +788,109 @@ mod tests {
                 "{lag} vs {expected}"
             );
         }
+    }
+
+    /// A record of `ẋ = λx + u` driven by a multisine, read as `hold` says.
+    fn decay_record(hold: InterSample) -> Experiment {
+        let (len, dt, t0) = (300, 0.1, 2.0);
+        let u = DMatrix::from_fn(1, len, |_, k| {
+            let t = k as f64 * dt;
+            (1.3 * t).sin() + 0.5 * (4.1 * t + 0.3).sin()
+        });
+        Experiment::new(t0, dt, u, DMatrix::zeros(1, len))
+            .unwrap()
+            .with_intersample(hold)
+    }
+
+    /// Over the whole record `simulate_experiment` is `simulate_with` over the record's
+    /// inputs (which computes the band-limited grid itself), bit for bit; over a range of a
+    /// held or linearly interpolated record it is `simulate_with` over that range's inputs
+    /// from its first sample's time.
+    #[test]
+    fn simulate_experiment_equals_simulate_with() {
+        let f = Decay(-0.7);
+        let rk4 = Integrator::Rk4 { substeps: 4 };
+        for hold in [InterSample::Zoh, InterSample::Foh, InterSample::Bl] {
+            let exp = decay_record(hold);
+            let whole = simulate_experiment(&f, &[0.4], &exp, 0..exp.len(), &rk4, 1e6).unwrap();
+            let direct = simulate_with(
+                &f,
+                &[0.4],
+                exp.t0(),
+                exp.dt(),
+                exp.inputs(),
+                hold,
+                &rk4,
+                1e6,
+            )
+            .unwrap();
+            assert_eq!(whole, direct, "{hold:?}");
+            if hold != InterSample::Bl {
+                let part = simulate_experiment(&f, &[0.1], &exp, 40..170, &rk4, 1e6).unwrap();
+                let u = exp.inputs().columns(40, 130).into_owned();
+                let direct =
+                    simulate_with(&f, &[0.1], exp.time(40), exp.dt(), &u, hold, &rk4, 1e6).unwrap();
+                assert_eq!(part, direct, "{hold:?}");
+            }
+        }
+    }
+
+    /// A band-limited record's free run over its first samples is the start of the free
+    /// run over all of them (both read the record's grid); cut out of the record, the
+    /// samples near the cut read a grid with the record's end held there instead, and the
+    /// runs part.
+    #[test]
+    fn band_limited_prefix_is_the_start_of_the_whole_run() {
+        let f = Decay(-0.7);
+        let rk4 = Integrator::Rk4 { substeps: 4 };
+        let exp = decay_record(InterSample::Bl);
+        let whole = simulate_experiment(&f, &[0.4], &exp, 0..exp.len(), &rk4, 1e6).unwrap();
+        let prefix = simulate_experiment(&f, &[0.4], &exp, 0..120, &rk4, 1e6).unwrap();
+        assert_eq!(prefix, whole.columns(0, 120).into_owned());
+        let cut = exp.inputs().columns(0, 120).into_owned();
+        let alone = simulate_with(
+            &f,
+            &[0.4],
+            exp.t0(),
+            exp.dt(),
+            &cut,
+            InterSample::Bl,
+            &rk4,
+            1e6,
+        )
+        .unwrap();
+        assert!((alone[(0, 119)] - whole[(0, 119)]).abs() > 1e-9);
+        // A run from an inner sample starts from the state given there.
+        let inner = simulate_experiment(&f, &[whole[(0, 50)]], &exp, 50..120, &rk4, 1e6).unwrap();
+        for j in 0..70 {
+            assert!(
+                (inner[(0, j)] - whole[(0, 50 + j)]).abs() < 1e-12,
+                "sample {}",
+                50 + j
+            );
+        }
+    }
+
+    /// A range beyond the record and a state of the wrong length are errors, not panics; an
+    /// empty range is an empty run.
+    #[test]
+    fn simulate_experiment_rejects_bad_ranges() {
+        let f = Decay(-0.7);
+        let rk4 = Integrator::Rk4 { substeps: 1 };
+        let exp = decay_record(InterSample::Bl);
+        assert!(matches!(
+            simulate_experiment(&f, &[0.0], &exp, 10..301, &rk4, 1e6),
+            Err(CoreError::Range {
+                start: 10,
+                end: 301,
+                len: 300
+            })
+        ));
+        #[allow(clippy::reversed_empty_ranges)]
+        let reversed = 20..10;
+        assert!(simulate_experiment(&f, &[0.0], &exp, reversed, &rk4, 1e6).is_err());
+        assert!(simulate_experiment(&f, &[0.0, 1.0], &exp, 0..10, &rk4, 1e6).is_err());
+        let empty = simulate_experiment(&f, &[0.0], &exp, 5..5, &rk4, 1e6).unwrap();
+        assert_eq!(empty.ncols(), 0);
     }
 }

@@ -30,7 +30,7 @@ use crate::dataset::Experiment;
 use crate::dynamics::{Dynamics, Horizon};
 use crate::error::{CoreError, Result};
 use crate::initial::{InitialStateFit, fit_initial_state};
-use crate::integrate::{Integrator, simulate_with};
+use crate::integrate::{Integrator, simulate_experiment};
 use crate::linear::LinearModel;
 use crate::metrics::{ChannelMetrics, channel_metrics};
 
@@ -319,17 +319,7 @@ fn window_cost<D: Dynamics + ?Sized>(
     fit: &InitialStateFit,
 ) -> Result<f64> {
     let len = fit.window.min(exp.len());
-    let u = exp.inputs().columns(0, len).into_owned();
-    let xs = simulate_with(
-        model,
-        x0,
-        exp.t0(),
-        exp.dt(),
-        &u,
-        exp.intersample(),
-        &fit.integrator,
-        fit.blow_up,
-    )?;
+    let xs = simulate_experiment(model, x0, exp, 0..len, &fit.integrator, fit.blow_up)?;
     let y = &obs.matrix * xs;
     let mut cost = 0.0;
     for k in 0..len {
@@ -451,13 +441,11 @@ pub fn judge_free_run<D: Dynamics + ?Sized>(
 ) -> Result<Judgement> {
     check_rows(model, obs, exp)?;
     let (x0, x0_rule) = initial_state(model, exp, obs, rule, opts)?;
-    let states = simulate_with(
+    let states = simulate_experiment(
         model,
         &x0,
-        exp.t0(),
-        exp.dt(),
-        exp.inputs(),
-        exp.intersample(),
+        exp,
+        0..exp.len(),
         &opts.integrator,
         opts.blow_up,
     )?;
@@ -533,14 +521,11 @@ pub fn judge_k_step<D: Dynamics + ?Sized>(
                 x[state] = y[row];
             }
         }
-        let u = exp.inputs().columns(start, k + 1).into_owned();
-        let xs = simulate_with(
+        let xs = simulate_experiment(
             model,
             &x,
-            exp.time(start),
-            exp.dt(),
-            &u,
-            exp.intersample(),
+            exp,
+            start..start + k + 1,
             &opts.integrator,
             opts.blow_up,
         )?;

@@ -35,7 +35,7 @@ pub use greybox::{
 };
 pub use hybrid::CorrectedModel;
 pub use initial::{InitialStateFit, fit_initial_state};
-pub use integrate::{DpOptions, Integrator, simulate, simulate_with};
+pub use integrate::{DpOptions, Integrator, simulate, simulate_experiment, simulate_with};
 pub use judge::{
     DEFAULT_X0_WINDOW, InitialRule, JudgeOptions, Judgement, Observation, ScoredWindow,
     judge_free_run, judge_k_step, score, score_rows,

@@ -28,13 +28,11 @@ pub(super) fn free_run_states(
     x0: &[f64],
     exp: &Experiment,
 ) -> sysid_core::Result<DMatrix<f64>> {
-    sysid_core::simulate_with(
+    sysid_core::simulate_experiment(
         model,
         x0,
-        exp.t0(),
-        exp.dt(),
-        exp.inputs(),
-        exp.intersample(),
+        exp,
+        0..exp.len(),
         &sysid_core::Integrator::default(),
         sysid_core::integrate::DEFAULT_BLOW_UP,
     )

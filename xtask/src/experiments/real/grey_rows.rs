@@ -174,8 +174,30 @@ pub(super) fn grey_rows(
     let mut best: Option<(String, grey::GreySpec, grey::GreyFit)> = None;
     let mut tried = Vec::new();
     let mut beyond = Vec::new();
-    for (name, spec) in candidates {
-        match grey::fit_grey(&spec, est, &with_extra, window) {
+    // The candidates are independent: each is calibrated on its own thread (not rayon's
+    // pool, whose threads the NARX rows beside this need), then chosen in order as before.
+    let threads = candidates.len().max(1);
+    let fits: Vec<(String, grey::GreySpec, Result<grey::GreyFit>)> = std::thread::scope(|s| {
+        let handles: Vec<_> = candidates
+            .into_iter()
+            .map(|(name, spec)| {
+                let with_extra = &with_extra;
+                s.spawn(move || {
+                    let fit = grey::fit_grey(&spec, est, with_extra, window);
+                    (name, spec, fit)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            })
+            .collect()
+    });
+    for (name, spec, fit) in fits {
+        match fit {
             Ok(mut fit) => {
                 tried.push(format!("{name}: {:.4} {unit}", scale * fit.train_rmse));
                 for (t, (_, e)) in fit.tests[tests.len()..]
@@ -230,7 +252,7 @@ pub(super) fn grey_rows(
         push_same_x0(table, &label, name, &chosen_spec, &fit, e, scale);
     }
     table.set_for_model(&label, "train_s", seconds);
-    table.set_for_model(&label, "threads", 1.0);
+    table.set_for_model(&label, "threads", threads as f64);
     table.note(format!(
         "Grey box ({OFFICIAL}): the published physics as named terms, coefficients and the \
          training initial state calibrated by free-run output error (mmenn::discovery::calibrate: \
@@ -239,7 +261,7 @@ pub(super) fn grey_rows(
          outputs with the coefficients held. Candidates (training free-run RMSE; the lowest \
          is reported, chosen without the test records): {}. Chosen: {chosen}. Calibrated \
          terms: {}. Training initial state {:?} (recorded units); training free-run RMSE {:.4} {unit}; training wall time {seconds:.1} s \
-         for all candidates (1 core of 2 shared).",
+         for all candidates (calibrated in parallel, one thread each, on 2 shared cores).",
         est.len(),
         tried.join("; "),
         grey_terms(&fit),
