@@ -17,10 +17,9 @@ pub const TABLE: &str = "discovery_oscillator";
 /// The jobs: the scenarios in four contiguous groups (rows merge into one table in
 /// scenario order), so that no single job holds the whole experiment (724 s in one job on
 /// cd26143: longer than the 10-minute target of the whole run). Costs: the seconds of both
-/// noise levels in the full run on eaa2cd0 (154, 270, 125 and 426; 2 cores shared with a
-/// helper's builds).
+/// noise levels in the full run on 8a5e8a1 (vm, 2 cores).
 pub fn jobs() -> Vec<Job> {
-    [(0..5, 154), (5..6, 270), (6..8, 125), (8..9, 426)]
+    [(0..5, 38), (5..6, 63), (6..8, 52), (8..9, 182)]
         .into_iter()
         .map(|(range, cost)| {
             let names: Vec<&str> = SCENARIOS[range.clone()].iter().map(|s| s.label).collect();

@@ -111,7 +111,7 @@ fn cases() -> Vec<Case> {
         ch4_table: FREE_RUN,
         ch5: None,
         rate: None,
-        cost: 50,
+        cost: 6,
     };
     let mut v = vec![
         Case {
@@ -138,7 +138,7 @@ fn cases() -> Vec<Case> {
             label: "MME/NN (ignorance model)",
             ch4_table: DOUBLE,
             ch5: Some((t54, true)),
-            cost: 150,
+            cost: 14,
             ..base
         },
         Case {
@@ -148,7 +148,7 @@ fn cases() -> Vec<Case> {
             label: "MME/NN (regression-updated model)",
             ch4_table: DOUBLE,
             ch5: Some((t54, false)),
-            cost: 150,
+            cost: 21,
             ..base
         },
         Case {
@@ -158,7 +158,7 @@ fn cases() -> Vec<Case> {
             label: "MME/NN (regression-updated model)",
             ch4_table: DOUBLE,
             ch5: Some((t55, true)),
-            cost: 200,
+            cost: 15,
             ..base
         },
     ];
@@ -173,7 +173,7 @@ fn cases() -> Vec<Case> {
             data,
             ch5: table_5_6.then_some((t56, true)),
             rate: Some(fs),
-            cost: (5.0 * fs) as u32,
+            cost: (0.4 * fs).ceil() as u32,
             ..base
         });
     }
