@@ -376,6 +376,19 @@ pub(super) fn target_note(b: Benchmark, table: &Table) -> String {
             older_rows.join("; ")
         ));
     }
+    // The black boxes' seed medians against the hybrid's one seed
+    // (docs/decisions/narx-seed-spread.md): said where the table has a median row.
+    if table
+        .rows
+        .iter()
+        .any(|r| r.key[0].contains(super::narx::SEED_MEDIAN))
+    {
+        note.push_str(&format!(
+            " The MME/NN row is one network seed's ({FIT_SEED}); the NARX it is compared \
+             with is the median over several seeds (its row). The hybrid's own spread over \
+             seeds was measured outside this run, in docs/decisions/narx-seed-spread.md."
+        ));
+    }
     if missed {
         note.push_str(&format!(
             " Where a target is missed, the cause: {}.",
