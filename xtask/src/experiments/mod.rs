@@ -146,6 +146,21 @@ pub fn line(label: impl Into<String>, x: &[f64], y: &[f64]) -> Series {
     Series::line(label, a, b)
 }
 
+/// The median of `v` (sorted in place; an even count's is the mean of the middle two; NaN
+/// when empty).
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
 /// A row of a matrix as a vector.
 pub fn row(m: &nalgebra::DMatrix<f64>, i: usize) -> Vec<f64> {
     m.row(i).iter().copied().collect()

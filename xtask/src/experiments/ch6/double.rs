@@ -22,7 +22,7 @@ use mmenn::simulate::assumed_model_spec;
 use rayon::prelude::*;
 
 use super::{FeatureSet, error_rows, new_table};
-use crate::experiments::{Ctx, FIT_SEED, Job, Mode, Outcome};
+use crate::experiments::{Ctx, FIT_SEED, Job, Mode, Outcome, median};
 
 /// Table id.
 pub const TABLE: &str = "ch6_double_pendulum_condition";
@@ -119,19 +119,6 @@ fn record(label: usize, c2: f64, seed: u64) -> Result<Record> {
         nets,
         physical,
     })
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        return f64::NAN;
-    }
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Damping ratios of the linearised model's two modes at joint damping `c2` (the other

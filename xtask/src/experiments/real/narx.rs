@@ -214,7 +214,7 @@ fn narx_inner(
     for (i, o) in outcomes.iter().enumerate() {
         let spread = (o.focus != Focus::Prediction && !seeds.is_empty())
             .then(|| seed_spread(data, o, seeds, simulation_iterations(mode)));
-        let median_row = matches!(spread, Some(Ok(_)));
+        let median_row = spread.is_some();
         narx_emit(
             data,
             o,
@@ -223,13 +223,8 @@ fn narx_inner(
             sims,
             offset,
         );
-        match spread {
-            Some(Ok(spread)) => spread_emit(data, o, &spread, chosen == Some(i), table),
-            Some(Err(e)) => table.note(format!(
-                "NARX ({}) over network seeds: not built: {e:#}",
-                focus_name(&o.focus)
-            )),
-            None => {}
+        if let Some(spread) = spread {
+            spread_emit(data, o, &spread, chosen == Some(i), table);
         }
     }
     Ok(())
@@ -283,13 +278,9 @@ fn test_scores<M: Model<Error = BaselineError>>(
 }
 
 /// The simulation-focus final fit of `o` repeated with each of `seeds` (same orders,
-/// network, data and refinement), scored on the test records.
-fn seed_spread(
-    data: &BenchmarkData,
-    o: &NarxOutcome,
-    seeds: &[u64],
-    iterations: usize,
-) -> Result<Spread> {
+/// network, data and refinement), scored on the test records; a seed whose fit fails is
+/// listed as failed.
+fn seed_spread(data: &BenchmarkData, o: &NarxOutcome, seeds: &[u64], iterations: usize) -> Spread {
     let (scale, _) = data.benchmark.reporting_unit();
     let refined_rmse = |fit: &mmenn::sysid_baselines::NarxFit| {
         fit.refinement
@@ -326,10 +317,10 @@ fn seed_spread(
             },
         });
     }
-    Ok(Spread {
+    Spread {
         fits,
         seconds: clock.elapsed().as_secs_f64(),
-    })
+    }
 }
 
 /// The median of `scores` (a failed or diverged one counts as larger than any number; an
@@ -339,16 +330,7 @@ fn median_score(scores: &[&Result<f64, String>]) -> Option<f64> {
         .iter()
         .map(|s| s.as_ref().map_or(f64::INFINITY, |&r| r))
         .collect();
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    let m = if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    };
+    let m = crate::experiments::median(&mut v);
     m.is_finite().then_some(m)
 }
 
