@@ -362,6 +362,20 @@ enum Shape {
     Square(usize),
     PowI(usize, i32),
     Product(usize, usize),
+    /// `c·x_i`.
+    ConstTimes(f64, usize),
+    /// `c·(x_i·x_i)`.
+    ConstTimesSquare(f64, usize),
+    /// `c·x_iⁿ` (`powi`).
+    ConstTimesPowI(f64, usize, i32),
+    /// `(x_i·x_i)·x_j`.
+    SquareTimes(usize, usize),
+    /// `x_j·(x_i·x_i)`.
+    TimesSquare(usize, usize),
+    /// `(c·x_i)·x_j`.
+    ConstProduct(f64, usize, usize),
+    /// `x_j·|x_i|`.
+    TimesAbs(usize, usize),
     /// The stack machine with [`SMALL_STACK`] slots.
     Small,
     /// The stack machine with [`STACK`] slots.
@@ -373,14 +387,21 @@ const SMALL_STACK: usize = 4;
 
 impl Shape {
     fn of(program: &[Op], need: usize) -> Shape {
-        use tree::BinOp::Mul;
         match *program {
             [Op::Const(c)] => Shape::Const(c),
             [Op::Var(i)] => Shape::Var(i),
             [Op::Var(i), Op::Square] => Shape::Square(i),
             [Op::Var(i), Op::PowI(n)] => Shape::PowI(i, n),
-            [Op::Var(i), Op::Var(j), Op::Bin(Mul)] => Shape::Product(i, j),
-            [Op::Var(i), Op::Var(j), Op::BinRev(Mul)] => Shape::Product(j, i),
+            [Op::Var(i), Op::MulVar(j)] => Shape::Product(i, j),
+            [Op::Const(c), Op::MulVar(i)] | [Op::Var(i), Op::ConstMul(c)] => {
+                Shape::ConstTimes(c, i)
+            }
+            [Op::Var(i), Op::Square, Op::ConstMul(c)] => Shape::ConstTimesSquare(c, i),
+            [Op::Var(i), Op::PowI(n), Op::ConstMul(c)] => Shape::ConstTimesPowI(c, i, n),
+            [Op::Var(i), Op::Square, Op::MulVar(j)] => Shape::SquareTimes(i, j),
+            [Op::Var(i), Op::Square, Op::VarMul(j)] => Shape::TimesSquare(i, j),
+            [Op::Const(c), Op::MulVar(i), Op::MulVar(j)] => Shape::ConstProduct(c, i, j),
+            [Op::Var(i), Op::Call(Func::Abs), Op::VarMul(j)] => Shape::TimesAbs(i, j),
             _ if need <= SMALL_STACK => Shape::Small,
             _ => Shape::Large,
         }
@@ -472,6 +493,22 @@ impl Expr {
             }
             Shape::PowI(i, n) => var(i).powi(n),
             Shape::Product(i, j) => var(i) * var(j),
+            Shape::ConstTimes(c, i) => c * var(i),
+            Shape::ConstTimesSquare(c, i) => {
+                let x = var(i);
+                c * (x * x)
+            }
+            Shape::ConstTimesPowI(c, i, n) => c * var(i).powi(n),
+            Shape::SquareTimes(i, j) => {
+                let x = var(i);
+                x * x * var(j)
+            }
+            Shape::TimesSquare(i, j) => {
+                let x = var(i);
+                var(j) * (x * x)
+            }
+            Shape::ConstProduct(c, i, j) => c * var(i) * var(j),
+            Shape::TimesAbs(i, j) => var(j) * var(i).abs(),
             Shape::Small => self.exec_small(var),
             Shape::Large => self.exec_large(var),
         }
@@ -490,6 +527,10 @@ impl Expr {
     }
 
     /// The postfix program on a stack of `N` slots.
+    // Every operation is written `a op b` with its operands in their places in the tree
+    // (`x_i + top` is not `top += x_i`): the program computes what the tree says, operand
+    // for operand.
+    #[allow(clippy::assign_op_pattern)]
     #[inline(always)]
     fn exec<const N: usize>(&self, var: impl Fn(usize) -> f64) -> f64 {
         let mut stack = [0.0_f64; N];
@@ -516,6 +557,26 @@ impl Expr {
                     sp -= 1;
                     stack[sp - 1] = op.apply(stack[sp], stack[sp - 1]);
                 }
+                Op::AddVar(i) => stack[sp - 1] = stack[sp - 1] + var(i),
+                Op::SubVar(i) => stack[sp - 1] = stack[sp - 1] - var(i),
+                Op::MulVar(i) => stack[sp - 1] = stack[sp - 1] * var(i),
+                Op::DivVar(i) => stack[sp - 1] = stack[sp - 1] / var(i),
+                Op::VarAdd(i) => stack[sp - 1] = var(i) + stack[sp - 1],
+                Op::VarSub(i) => stack[sp - 1] = var(i) - stack[sp - 1],
+                Op::VarMul(i) => stack[sp - 1] = var(i) * stack[sp - 1],
+                Op::VarDiv(i) => stack[sp - 1] = var(i) / stack[sp - 1],
+                Op::AddConst(c) => stack[sp - 1] = stack[sp - 1] + c,
+                Op::SubConst(c) => stack[sp - 1] = stack[sp - 1] - c,
+                Op::MulConst(c) => stack[sp - 1] = stack[sp - 1] * c,
+                Op::DivConst(c) => stack[sp - 1] = stack[sp - 1] / c,
+                Op::ConstAdd(c) => stack[sp - 1] = c + stack[sp - 1],
+                Op::ConstSub(c) => stack[sp - 1] = c - stack[sp - 1],
+                Op::ConstMul(c) => stack[sp - 1] = c * stack[sp - 1],
+                Op::ConstDiv(c) => stack[sp - 1] = c / stack[sp - 1],
+                Op::BinVar(op, i) => stack[sp - 1] = op.apply(stack[sp - 1], var(i)),
+                Op::VarBin(op, i) => stack[sp - 1] = op.apply(var(i), stack[sp - 1]),
+                Op::BinConst(op, c) => stack[sp - 1] = op.apply(stack[sp - 1], c),
+                Op::ConstBin(op, c) => stack[sp - 1] = op.apply(c, stack[sp - 1]),
             }
         }
         stack[0]

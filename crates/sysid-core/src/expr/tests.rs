@@ -362,14 +362,22 @@ fn rebinding_variables_by_name() {
 }
 
 /// A right-nested chain of non-commutative operators is the worst case for a postfix
-/// stack; with operands emitted deeper-first it still needs only 2 slots.
+/// stack; with operands emitted deeper-first it still needs only 2 slots, and 1 when the
+/// left operands are leaves (read in place).
 #[test]
 fn deep_right_nesting_fits_the_fixed_stack() {
     let n = MAX_DEPTH / 2 - 2;
+    let nested = format!("{}x{}", "abs(x)/(".repeat(n / 2), ")".repeat(n / 2));
+    let e = parse(&nested, &["x"]);
+    assert_eq!(compile(&e.tree).1, 2);
+    assert_eq!(
+        e.eval(&[-3.0]).to_bits(),
+        tree_value(&e.tree, &[-3.0]).to_bits()
+    );
     let text = format!("{}x{}", "x/(".repeat(n), ")".repeat(n));
     let e = parse(&text, &["x"]);
     let (_, need) = compile(&e.tree);
-    assert_eq!(need, 2);
+    assert_eq!(need, 1);
     // x/(x/(x/…x)) alternates between x and 1: n divisions of x = 3 give 1 for even n.
     let want = if n.is_multiple_of(2) { 3.0 } else { 1.0 };
     assert!((e.eval(&[3.0]) - want).abs() <= 1e-15 * n as f64);
@@ -486,6 +494,91 @@ fn substitution_and_three_slice_evaluation() {
     assert_eq!(log.to_string(), "log(0)");
 }
 
+/// Reference semantics, independent of the compiled program: the tree evaluated
+/// recursively by the module doc's rules (`a^2` is `a·a`, a constant integer exponent up
+/// to 16 `powi`, any other power `powf`).
+fn tree_value(t: &Tree, v: &[f64]) -> f64 {
+    match t {
+        Tree::Const(c) => *c,
+        Tree::Var(i) => v[*i],
+        Tree::Neg(a) => -tree_value(a, v),
+        Tree::Call(f, a) => f.apply(tree_value(a, v)),
+        Tree::Bin(tree::BinOp::Pow, a, b) => match **b {
+            Tree::Const(2.0) => {
+                let x = tree_value(a, v);
+                x * x
+            }
+            Tree::Const(c) if c.fract() == 0.0 && c.abs() <= 16.0 => {
+                tree_value(a, v).powi(c as i32)
+            }
+            _ => tree::BinOp::Pow.apply(tree_value(a, v), tree_value(b, v)),
+        },
+        Tree::Bin(op, a, b) => op.apply(tree_value(a, v), tree_value(b, v)),
+    }
+}
+
+/// The compiled program (every instruction form: operands pushed or read in place,
+/// left or right, each operator) against the tree evaluated recursively, bit for bit, on
+/// the terms of the real benchmarks' grey boxes and their derivatives, at points with
+/// zeros, signs, infinities and NaN.
+#[test]
+fn programs_evaluate_exactly_as_the_tree() {
+    let vars = ["y", "v", "w", "u"];
+    let texts = [
+        "sqrt((y + abs(y))/2)",
+        "sqrt((v + abs(v))/2 + 0.0001)",
+        "(v - 5)*sqrt((y + abs(y))/2)",
+        "(y - 10 + abs(y - 10))/2",
+        "(w - 5)*u",
+        "tanh(v/0.0003)",
+        "(v + abs(v))/2",
+        "(v - abs(v))/2",
+        "y^3",
+        "y^5",
+        "y^2*v",
+        "v*abs(v)",
+        "u*y^2",
+        "u*y",
+        "y*v*w",
+        "3 - y",
+        "y - 3",
+        "3/y",
+        "y/3",
+        "1/(1 + y^2)",
+        "atan2(y, v)",
+        "atan2(2, v)",
+        "atan2(y, 2)",
+        "min(y, v) + max(1, w)",
+        "y^0.5 + 2^y + y^v",
+        "xmuly(y, v) + xdivy(v, y)",
+        "exp(-y^2)*sin(3*v) - cos(w)/2",
+        "-(y*v) + (w - u)*(y + v)",
+    ];
+    let values = [0.0, -0.0, 0.75, -2.25, 12.5, f64::INFINITY, f64::NAN];
+    for text in texts {
+        let e = parse(text, &vars);
+        let mut all = vec![e.clone()];
+        for var in 0..vars.len() {
+            all.push(e.derivative(var).expect("differentiable"));
+        }
+        for f in &all {
+            for &a in &values {
+                for &b in &values {
+                    for &c in &[0.0, -1.5] {
+                        let point = [a, b, c, 0.3 - c];
+                        let got = f.eval(&point);
+                        let want = tree_value(&f.tree, &point);
+                        assert!(
+                            got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                            "{f} at {point:?}: {got} vs {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn shapes_evaluate_exactly_as_the_stack_program() {
     // Every shortcut shape, and expressions just outside each, against the postfix
@@ -515,6 +608,17 @@ fn shapes_evaluate_exactly_as_the_stack_program() {
         "x^2^2",
         "xmuly(x, y)",
         "xdivy(x, y)",
+        "3*x^2",
+        "x^2*3",
+        "-2.5*y^4",
+        "x^2*y",
+        "y*x^2",
+        "2*x*y",
+        "(2*x)*y",
+        "2*(x*y)",
+        "y*abs(x)",
+        "abs(x)*y",
+        "y*sign(x)",
     ];
     let values = [0.0, -0.0, 1.5, -2.25, 1e300, -7.0, f64::INFINITY, f64::NAN];
     for text in texts {
@@ -524,10 +628,13 @@ fn shapes_evaluate_exactly_as_the_stack_program() {
                 let point = [a, b, 0.75];
                 let fast = e.eval(&point);
                 let full = e.exec::<STACK>(|i| point[i]);
-                assert!(
-                    fast.to_bits() == full.to_bits() || (fast.is_nan() && full.is_nan()),
-                    "{text} at {point:?}: {fast} vs {full}"
-                );
+                let reference = tree_value(&e.tree, &point);
+                for other in [full, reference] {
+                    assert!(
+                        fast.to_bits() == other.to_bits() || (fast.is_nan() && other.is_nan()),
+                        "{text} at {point:?}: {fast} vs {other}"
+                    );
+                }
             }
         }
     }
@@ -537,6 +644,31 @@ fn shapes_evaluate_exactly_as_the_stack_program() {
     assert!(matches!(parse("x^2", &vars).shape, Shape::Square(0)));
     assert!(matches!(parse("4", &vars).shape, Shape::Const(_)));
     assert!(matches!(parse("(x*y)*z", &vars).shape, Shape::Small));
+    assert!(matches!(parse("2*x", &vars).shape, Shape::ConstTimes(..)));
+    assert!(matches!(
+        parse("3*x^2", &vars).shape,
+        Shape::ConstTimesSquare(..)
+    ));
+    assert!(matches!(
+        parse("-2.5*y^4", &vars).shape,
+        Shape::ConstTimesPowI(..)
+    ));
+    assert!(matches!(
+        parse("x^2*y", &vars).shape,
+        Shape::SquareTimes(0, 1)
+    ));
+    assert!(matches!(
+        parse("y*x^2", &vars).shape,
+        Shape::TimesSquare(0, 1)
+    ));
+    assert!(matches!(
+        parse("2*x*y", &vars).shape,
+        Shape::ConstProduct(..)
+    ));
+    assert!(matches!(
+        parse("y*abs(x)", &vars).shape,
+        Shape::TimesAbs(0, 1)
+    ));
 }
 
 /// Central difference `∂e/∂v_var` with step `ε^(1/3)·max(1, |v_var|)`.

@@ -120,6 +120,78 @@ pub(super) enum Op {
     Bin(BinOp),
     /// Pops `a` then `b`, pushes `a op b` (the right operand was evaluated first).
     BinRev(BinOp),
+    // A binary operation with a constant or variable operand that is read in the
+    // instruction, not pushed: `top ∘ x_i` (`AddVar`, …), `x_i ∘ top` (`VarAdd`, …),
+    // `top ∘ c` (`AddConst`, …) and `c ∘ top` (`ConstAdd`, …) for the four arithmetic
+    // operations, each its own instruction so that evaluating it is one dispatch; the
+    // other operators through `BinVar`, `VarBin`, `BinConst` and `ConstBin`.
+    AddVar(usize),
+    SubVar(usize),
+    MulVar(usize),
+    DivVar(usize),
+    VarAdd(usize),
+    VarSub(usize),
+    VarMul(usize),
+    VarDiv(usize),
+    AddConst(f64),
+    SubConst(f64),
+    MulConst(f64),
+    DivConst(f64),
+    ConstAdd(f64),
+    ConstSub(f64),
+    ConstMul(f64),
+    ConstDiv(f64),
+    /// `top op x_i`.
+    BinVar(BinOp, usize),
+    /// `x_i op top`.
+    VarBin(BinOp, usize),
+    /// `top op c`.
+    BinConst(BinOp, f64),
+    /// `c op top`.
+    ConstBin(BinOp, f64),
+}
+
+/// The instruction applying `op` to the top of the stack and a leaf operand read in
+/// place: on the right (`leaf_right`) or on the left.
+fn fused(op: BinOp, leaf: Leaf, leaf_right: bool) -> Op {
+    use BinOp::{Add, Div, Mul, Sub};
+    match (leaf, leaf_right, op) {
+        (Leaf::Var(i), true, Add) => Op::AddVar(i),
+        (Leaf::Var(i), true, Sub) => Op::SubVar(i),
+        (Leaf::Var(i), true, Mul) => Op::MulVar(i),
+        (Leaf::Var(i), true, Div) => Op::DivVar(i),
+        (Leaf::Var(i), true, op) => Op::BinVar(op, i),
+        (Leaf::Var(i), false, Add) => Op::VarAdd(i),
+        (Leaf::Var(i), false, Sub) => Op::VarSub(i),
+        (Leaf::Var(i), false, Mul) => Op::VarMul(i),
+        (Leaf::Var(i), false, Div) => Op::VarDiv(i),
+        (Leaf::Var(i), false, op) => Op::VarBin(op, i),
+        (Leaf::Const(c), true, Add) => Op::AddConst(c),
+        (Leaf::Const(c), true, Sub) => Op::SubConst(c),
+        (Leaf::Const(c), true, Mul) => Op::MulConst(c),
+        (Leaf::Const(c), true, Div) => Op::DivConst(c),
+        (Leaf::Const(c), true, op) => Op::BinConst(op, c),
+        (Leaf::Const(c), false, Add) => Op::ConstAdd(c),
+        (Leaf::Const(c), false, Sub) => Op::ConstSub(c),
+        (Leaf::Const(c), false, Mul) => Op::ConstMul(c),
+        (Leaf::Const(c), false, Div) => Op::ConstDiv(c),
+        (Leaf::Const(c), false, op) => Op::ConstBin(op, c),
+    }
+}
+
+/// A constant or variable operand.
+#[derive(Clone, Copy)]
+enum Leaf {
+    Const(f64),
+    Var(usize),
+}
+
+fn leaf(t: &Tree) -> Option<Leaf> {
+    match *t {
+        Tree::Const(c) => Some(Leaf::Const(c)),
+        Tree::Var(i) => Some(Leaf::Var(i)),
+        _ => None,
+    }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -439,9 +511,12 @@ fn integer_exponent(t: &Tree) -> Option<i32> {
     }
 }
 
-/// Postfix program and the stack slots it needs. Binary operands are emitted
-/// deeper-subtree-first (Sethi–Ullman), which is exact: the operation is the same, only
-/// the evaluation order of independent operands changes.
+/// Postfix program and the stack slots it needs. A binary operation with a constant or
+/// variable operand reads that operand in its own instruction instead of pushing it (one
+/// dispatch instead of two, one slot fewer; the right operand when both are leaves);
+/// otherwise its operands are emitted deeper-subtree-first (Sethi–Ullman). Both are exact:
+/// every operation gets the same operands in the same places, only the evaluation order
+/// of independent operands changes.
 pub(super) fn compile(t: &Tree) -> (Vec<Op>, usize) {
     match t {
         Tree::Const(c) => (vec![Op::Const(*c)], 1),
@@ -465,6 +540,16 @@ pub(super) fn compile(t: &Tree) -> (Vec<Op>, usize) {
             (p, need)
         }
         Tree::Bin(op, a, b) => {
+            let leaf_operand = match (leaf(a), leaf(b)) {
+                (_, Some(l)) => Some((a, l, true)),
+                (Some(l), None) => Some((b, l, false)),
+                (None, None) => None,
+            };
+            if let Some((other, l, leaf_right)) = leaf_operand {
+                let (mut p, need) = compile(other);
+                p.push(fused(*op, l, leaf_right));
+                return (p, need);
+            }
             let (pa, na) = compile(a);
             let (pb, nb) = compile(b);
             let need = if na == nb { na + 1 } else { na.max(nb) };
