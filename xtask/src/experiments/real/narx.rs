@@ -212,10 +212,8 @@ fn narx_inner(
         .map(|(i, _)| i);
     let seeds = spread_seeds(data.benchmark, mode);
     for (i, o) in outcomes.iter().enumerate() {
-        let spread = (o.focus != Focus::Prediction && !seeds.is_empty())
-            .then(|| seed_spread(data, o, seeds, simulation_iterations(mode)));
-        let median_row = spread.is_some();
-        narx_emit(
+        let median_row = o.focus != Focus::Prediction && !seeds.is_empty();
+        let reported = narx_emit(
             data,
             o,
             chosen == Some(i) && !median_row,
@@ -223,7 +221,8 @@ fn narx_inner(
             sims,
             offset,
         );
-        if let Some(spread) = spread {
+        if median_row {
+            let spread = seed_spread(data, o, reported, seeds, simulation_iterations(mode));
             spread_emit(data, o, &spread, chosen == Some(i), table);
         }
     }
@@ -260,28 +259,20 @@ struct Spread {
     seconds: f64,
 }
 
-/// Each test record's RMSE of `model` under the protocol, or why it has none.
-fn test_scores<M: Model<Error = BaselineError>>(
-    model: &M,
-    data: &BenchmarkData,
-) -> Vec<Result<f64, String>> {
-    let b = data.benchmark;
-    let (window, (scale, _)) = (b.init_window(), b.reporting_unit());
-    data.tests
-        .iter()
-        .map(|test| {
-            let e = &test.data.experiments()[0];
-            let y = row(e.outputs(), 0);
-            held_out(model.simulate(e), &y, window, scale)
-        })
-        .collect()
-}
-
 /// The simulation-focus final fit of `o` repeated with each of `seeds` (same orders,
 /// network, data and refinement), scored on the test records; a seed whose fit fails is
-/// listed as failed.
-fn seed_spread(data: &BenchmarkData, o: &NarxOutcome, seeds: &[u64], iterations: usize) -> Spread {
-    let (scale, _) = data.benchmark.reporting_unit();
+/// listed as failed. `reported` holds the test scores of `o`'s own fit (its rows').
+fn seed_spread(
+    data: &BenchmarkData,
+    o: &NarxOutcome,
+    reported: Vec<Result<f64, String>>,
+    seeds: &[u64],
+    iterations: usize,
+) -> Spread {
+    let (window, (scale, _)) = (
+        data.benchmark.init_window(),
+        data.benchmark.reporting_unit(),
+    );
     let refined_rmse = |fit: &mmenn::sysid_baselines::NarxFit| {
         fit.refinement
             .as_ref()
@@ -291,7 +282,7 @@ fn seed_spread(data: &BenchmarkData, o: &NarxOutcome, seeds: &[u64], iterations:
     let mut fits = vec![SeedFit {
         seed: FIT_SEED,
         train: refined_rmse(&o.fit),
-        tests: test_scores(&o.fit.model, data),
+        tests: reported,
     }];
     let clock = Instant::now();
     for &seed in seeds {
@@ -308,7 +299,14 @@ fn seed_spread(data: &BenchmarkData, o: &NarxOutcome, seeds: &[u64], iterations:
             Ok(fit) => SeedFit {
                 seed,
                 train: refined_rmse(&fit),
-                tests: test_scores(&fit.model, data),
+                tests: data
+                    .tests
+                    .iter()
+                    .map(|test| {
+                        let e = &test.data.experiments()[0];
+                        held_out(fit.model.simulate(e), &row(e.outputs(), 0), window, scale)
+                    })
+                    .collect(),
             },
             Err(e) => SeedFit {
                 seed,
@@ -561,6 +559,8 @@ fn final_network(focus: &Focus, select: &NetworkChoice, last: &NetworkChoice) ->
     }
 }
 
+/// The row of `o`'s fit on each test record, its note and its time; returns each test
+/// record's score (RMSE, or why it has none).
 fn narx_emit(
     data: &BenchmarkData,
     o: &NarxOutcome,
@@ -568,7 +568,7 @@ fn narx_emit(
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
-) {
+) -> Vec<Result<f64, String>> {
     let b = data.benchmark;
     let window = b.init_window();
     let est = &data.estimation.experiments()[0];
@@ -588,7 +588,7 @@ fn narx_emit(
         "{OFFICIAL}: all training samples at full rate; delay window = the first {} of the {window} initialisation samples, RMSE after them",
         orders.max_lag()
     );
-    test_rows(
+    let scores = test_rows(
         &o.fit.model,
         data,
         &label,
@@ -641,10 +641,12 @@ fn narx_emit(
     ));
     table.set_for_model(&label, "train_s", o.select_seconds + o.fit_seconds);
     table.set_for_model(&label, "threads", rayon::current_num_threads() as f64);
+    scores
 }
 
 /// Each test record's free run of `model` as a row (or its divergence as a remark); the
-/// first test record's run joins the figure when it has the figure's grid.
+/// first test record's run joins the figure when it has the figure's grid. Returns each
+/// record's score as [`held_out`] gives it.
 #[allow(clippy::too_many_arguments)]
 fn test_rows<M: Model<Error = BaselineError>>(
     model: &M,
@@ -655,13 +657,15 @@ fn test_rows<M: Model<Error = BaselineError>>(
     table: &mut Table,
     sims: &mut Vec<(String, Vec<f64>)>,
     offset: f64,
-) {
+) -> Vec<Result<f64, String>> {
     let b = data.benchmark;
     let (window, (scale, _)) = (b.init_window(), b.reporting_unit());
+    let mut scores = Vec::with_capacity(data.tests.len());
     for (i, test) in data.tests.iter().enumerate() {
         let e = &test.data.experiments()[0];
         let y = row(e.outputs(), 0);
-        match model.simulate(e) {
+        let run = model.simulate(e);
+        match &run {
             Ok(p) => {
                 let v = row(&p.outputs, 0);
                 match rmse_after(&y, &v, window, scale) {
@@ -685,12 +689,14 @@ fn test_rows<M: Model<Error = BaselineError>>(
                 &[None],
                 &format!(
                     "diverged at t = {:.3} s (sample {sample}; {channel} = {value:.3e})",
-                    e.time(sample) - e.t0()
+                    e.time(*sample) - e.t0()
                 ),
             ),
-            Err(err) => table.push_remark(&[label, &test.name, protocol], &[None], &failure(&err)),
+            Err(err) => table.push_remark(&[label, &test.name, protocol], &[None], &failure(err)),
         }
+        scores.push(held_out(run, &y, window, scale));
     }
+    scores
 }
 
 /// The polynomial NARX candidates (docs/decisions/polynomial-narx-baseline.md):
