@@ -353,8 +353,9 @@ pub struct Expr {
 
 /// How [`Expr::run`] evaluates the program: the shapes most model terms and their
 /// derivatives have (a constant, a variable, its square or integer power, a product of two
-/// variables) directly, the rest on a stack of the size the program needs. Each shape
-/// computes exactly what its program computes (same operations, same order).
+/// variables, and the polynomial terms' `c·x`, `c·x²`, `c·xⁿ`, `x²·y`, `c·x·y`, `y·|x|`)
+/// directly, the rest on a stack of the size the program needs. Each shape computes
+/// exactly what its program computes (same operations, same operands, same order).
 #[derive(Debug, Clone, Copy)]
 enum Shape {
     Const(f64),
