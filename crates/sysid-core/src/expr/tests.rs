@@ -494,6 +494,11 @@ fn substitution_and_three_slice_evaluation() {
     assert_eq!(log.to_string(), "log(0)");
 }
 
+/// The same bits, or both NaN (a NaN's payload is not part of the semantics).
+fn same(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+}
+
 /// Reference semantics, independent of the compiled program: the tree evaluated
 /// recursively by the module doc's rules (`a^2` is `a·a`, a constant integer exponent up
 /// to 16 `powi`, any other power `powf`).
@@ -568,10 +573,7 @@ fn programs_evaluate_exactly_as_the_tree() {
                         let point = [a, b, c, 0.3 - c];
                         let got = f.eval(&point);
                         let want = tree_value(&f.tree, &point);
-                        assert!(
-                            got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
-                            "{f} at {point:?}: {got} vs {want}"
-                        );
+                        assert!(same(got, want), "{f} at {point:?}: {got} vs {want}");
                     }
                 }
             }
@@ -630,45 +632,31 @@ fn shapes_evaluate_exactly_as_the_stack_program() {
                 let full = e.exec::<STACK>(|i| point[i]);
                 let reference = tree_value(&e.tree, &point);
                 for other in [full, reference] {
-                    assert!(
-                        fast.to_bits() == other.to_bits() || (fast.is_nan() && other.is_nan()),
-                        "{text} at {point:?}: {fast} vs {other}"
-                    );
+                    assert!(same(fast, other), "{text} at {point:?}: {fast} vs {other}");
                 }
             }
         }
     }
     // The shapes are taken where they apply.
-    assert!(matches!(parse("y^3", &vars).shape, Shape::PowI(1, 3)));
-    assert!(matches!(parse("x*y", &vars).shape, Shape::Product(..)));
-    assert!(matches!(parse("x^2", &vars).shape, Shape::Square(0)));
-    assert!(matches!(parse("4", &vars).shape, Shape::Const(_)));
-    assert!(matches!(parse("(x*y)*z", &vars).shape, Shape::Small));
-    assert!(matches!(parse("2*x", &vars).shape, Shape::ConstTimes(..)));
-    assert!(matches!(
-        parse("3*x^2", &vars).shape,
-        Shape::ConstTimesSquare(..)
-    ));
-    assert!(matches!(
-        parse("-2.5*y^4", &vars).shape,
-        Shape::ConstTimesPowI(..)
-    ));
-    assert!(matches!(
-        parse("x^2*y", &vars).shape,
-        Shape::SquareTimes(0, 1)
-    ));
-    assert!(matches!(
-        parse("y*x^2", &vars).shape,
-        Shape::TimesSquare(0, 1)
-    ));
-    assert!(matches!(
-        parse("2*x*y", &vars).shape,
-        Shape::ConstProduct(..)
-    ));
-    assert!(matches!(
-        parse("y*abs(x)", &vars).shape,
-        Shape::TimesAbs(0, 1)
-    ));
+    type IsShape = fn(&Shape) -> bool;
+    let taken: [(&str, IsShape); 12] = [
+        ("y^3", |s| matches!(s, Shape::PowI(1, 3))),
+        ("x*y", |s| matches!(s, Shape::Product(0, 1))),
+        ("x^2", |s| matches!(s, Shape::Square(0))),
+        ("4", |s| matches!(s, Shape::Const(_))),
+        ("(x*y)*z", |s| matches!(s, Shape::Small)),
+        ("2*x", |s| matches!(s, Shape::ConstTimes(_, 0))),
+        ("3*x^2", |s| matches!(s, Shape::ConstTimesSquare(_, 0))),
+        ("-2.5*y^4", |s| matches!(s, Shape::ConstTimesPowI(_, 1, 4))),
+        ("x^2*y", |s| matches!(s, Shape::SquareTimes(0, 1))),
+        ("y*x^2", |s| matches!(s, Shape::TimesSquare(0, 1))),
+        ("2*x*y", |s| matches!(s, Shape::ConstProduct(_, 0, 1))),
+        ("y*abs(x)", |s| matches!(s, Shape::TimesAbs(0, 1))),
+    ];
+    for (text, is) in taken {
+        let shape = parse(text, &vars).shape;
+        assert!(is(&shape), "{text}: {shape:?}");
+    }
 }
 
 /// Central difference `∂e/∂v_var` with step `ε^(1/3)·max(1, |v_var|)`.

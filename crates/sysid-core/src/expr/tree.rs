@@ -154,28 +154,41 @@ pub(super) enum Op {
 /// The instruction applying `op` to the top of the stack and a leaf operand read in
 /// place: on the right (`leaf_right`) or on the left.
 fn fused(op: BinOp, leaf: Leaf, leaf_right: bool) -> Op {
-    use BinOp::{Add, Div, Mul, Sub};
-    match (leaf, leaf_right, op) {
-        (Leaf::Var(i), true, Add) => Op::AddVar(i),
-        (Leaf::Var(i), true, Sub) => Op::SubVar(i),
-        (Leaf::Var(i), true, Mul) => Op::MulVar(i),
-        (Leaf::Var(i), true, Div) => Op::DivVar(i),
-        (Leaf::Var(i), true, op) => Op::BinVar(op, i),
-        (Leaf::Var(i), false, Add) => Op::VarAdd(i),
-        (Leaf::Var(i), false, Sub) => Op::VarSub(i),
-        (Leaf::Var(i), false, Mul) => Op::VarMul(i),
-        (Leaf::Var(i), false, Div) => Op::VarDiv(i),
-        (Leaf::Var(i), false, op) => Op::VarBin(op, i),
-        (Leaf::Const(c), true, Add) => Op::AddConst(c),
-        (Leaf::Const(c), true, Sub) => Op::SubConst(c),
-        (Leaf::Const(c), true, Mul) => Op::MulConst(c),
-        (Leaf::Const(c), true, Div) => Op::DivConst(c),
-        (Leaf::Const(c), true, op) => Op::BinConst(op, c),
-        (Leaf::Const(c), false, Add) => Op::ConstAdd(c),
-        (Leaf::Const(c), false, Sub) => Op::ConstSub(c),
-        (Leaf::Const(c), false, Mul) => Op::ConstMul(c),
-        (Leaf::Const(c), false, Div) => Op::ConstDiv(c),
-        (Leaf::Const(c), false, op) => Op::ConstBin(op, c),
+    // The four arithmetic instructions of one operand form, or the general one.
+    let pick = |[add, sub, mul, div]: [Op; 4], other: Op| match op {
+        BinOp::Add => add,
+        BinOp::Sub => sub,
+        BinOp::Mul => mul,
+        BinOp::Div => div,
+        _ => other,
+    };
+    match (leaf, leaf_right) {
+        (Leaf::Var(i), true) => pick(
+            [Op::AddVar(i), Op::SubVar(i), Op::MulVar(i), Op::DivVar(i)],
+            Op::BinVar(op, i),
+        ),
+        (Leaf::Var(i), false) => pick(
+            [Op::VarAdd(i), Op::VarSub(i), Op::VarMul(i), Op::VarDiv(i)],
+            Op::VarBin(op, i),
+        ),
+        (Leaf::Const(c), true) => pick(
+            [
+                Op::AddConst(c),
+                Op::SubConst(c),
+                Op::MulConst(c),
+                Op::DivConst(c),
+            ],
+            Op::BinConst(op, c),
+        ),
+        (Leaf::Const(c), false) => pick(
+            [
+                Op::ConstAdd(c),
+                Op::ConstSub(c),
+                Op::ConstMul(c),
+                Op::ConstDiv(c),
+            ],
+            Op::ConstBin(op, c),
+        ),
     }
 }
 
