@@ -532,6 +532,9 @@ pub fn readme(
     claim_condition(tables, &mut s);
     targets(tables, &mut s);
     real(tables, &mut s);
+    if let Some(bar) = crate::experiments::real::bar_section(tables) {
+        s.push_str(&bar);
+    }
     s.push_str("## Tables\n\nEach table is also in `tables/<id>.md` and `tables/<id>.json` (with this run's stamp and every column's tolerance).\n\n");
     for t in tables {
         s.push_str(&format!("<a id=\"{}\"></a>\n\n", t.id));

@@ -44,7 +44,7 @@ use grey_rows::grey_rows;
 pub use grey_rows::{ACQUISITION, ChosenGrey};
 use linear_ss::linear_ss_rows;
 pub use narx::NARX_CHOSEN;
-pub use notes::{LINEAR_BASELINE, anchors};
+pub use notes::{LINEAR_BASELINE, anchors, bar_section};
 use notes::{published_times, target_note};
 use setups::{emps, oscillator_guess, silverbox, tanks};
 
