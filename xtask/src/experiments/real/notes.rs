@@ -659,7 +659,8 @@ pub fn bar_section(tables: &[Table]) -> Option<String> {
          protocol ({OFFICIAL}) on {} of {} benchmarks ({}). Judged where each anchor was \
          measured, under its own published protocol (EMPS: dynoNet's number on the \
          estimation record by its published script; Silverbox arrow: PNLSS on the older \
-         window; the others on the official records), it is met on {} of {} ({}). Where the \
+         window; the others on the official records), it is met on {} of {} ({}); issue \
+         16's done-when is read this way (docs/decisions/emps-anchor-protocol.md). Where the \
          best physics-first number is the MME/NN hybrid's, it is one network seed's ({}); \
          the hybrid's spread over seeds was measured outside this run \
          (docs/decisions/narx-seed-spread.md), and the last two columns say whether the \
