@@ -278,7 +278,7 @@ pub(super) fn gap_cause(b: Benchmark) -> &'static str {
 const HYBRID_NAME: &str = "MME/NN on the grey box";
 
 /// One physics-first row of a record, as target 4 judges it.
-pub struct Judged {
+pub(super) struct Judged {
     /// The name the row goes by in the target note.
     pub name: String,
     /// Its free-run RMSE (`None`: no number).
@@ -289,7 +289,7 @@ pub struct Judged {
 
 /// Target 4 on one record of a benchmark's table (official protocol unless the record is
 /// [`DYNONET_RECORD`]): the target, the best black box, and every physics-first row.
-pub struct RecordTarget {
+pub(super) struct RecordTarget {
     /// The table's record name.
     pub record: &'static str,
     /// The target: the best published number.
@@ -341,7 +341,7 @@ impl RecordTarget {
 }
 
 /// Target 4 on every record of `b`'s table that has a target.
-pub fn record_targets(b: Benchmark, table: &Table) -> Vec<RecordTarget> {
+pub(super) fn record_targets(b: Benchmark, table: &Table) -> Vec<RecordTarget> {
     let older = same_x0_protocol();
     targets(b)
         .iter()
