@@ -24,7 +24,7 @@ use crate::refine::{Holdout, RefineCandidate, RefineConfig, Refinement, Search};
 use crate::samples::{Samples, samples_from_estimate};
 use crate::standin::{StandIn, StandInConfig};
 use crate::{
-    CalibrationConfig, Effect, InitialState, LibraryConfig, OutputWeights, StateRoles,
+    CalibrationConfig, Effect, InitialState, LibraryConfig, OutputWeights, Role, StateRoles,
     build_library, calibrate, measured_values,
 };
 use holdout::{holdout_initial_states, recalibrate_on, split_records};
@@ -110,6 +110,10 @@ pub struct WorkflowConfig {
     /// Reference draws of the flexible stand-in (`standin`), which a `found` or
     /// `none` verdict must also pass; 0 skips it. Default 12.
     pub stand_in_draws: usize,
+    /// Roles given by the user, by state name, replacing the inferred ones
+    /// ([`StateRoles::infer`]): e.g. a level read in volts, whose unit alone makes it
+    /// [`Role::Other`]. Default none.
+    pub roles: Vec<(String, Role)>,
 }
 
 impl Default for WorkflowConfig {
@@ -123,6 +127,7 @@ impl Default for WorkflowConfig {
             holdout_fraction: 0.5,
             noise_given: false,
             stand_in_draws: 12,
+            roles: Vec::new(),
         }
     }
 }
@@ -269,6 +274,7 @@ fn run_planned<M: Mme + Sync>(
                     connections: crate::term_connections(&current),
                     ..LibraryConfig::default()
                 },
+                roles: config.roles.clone(),
                 ..DiscoveryConfig::default()
             },
         )?;
@@ -332,7 +338,8 @@ fn run_planned<M: Mme + Sync>(
         // `crate::refine`): every library term of the corrected equations is a
         // candidate, the regression's choice the starting set, coefficients calibrated by
         // free-run simulation error for every set tried.
-        let (candidates, initial) = round_candidates(&current, units, &samples, &proposed)?;
+        let (candidates, initial) =
+            round_candidates(&current, units, &config.roles, &samples, &proposed)?;
         let x0s = x0_of(est);
         // Validation records, when given, judge every candidate set (coefficients are
         // calibrated on the estimation data only).

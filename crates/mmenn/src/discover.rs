@@ -505,8 +505,16 @@ pub fn run_discover_with_progress(
         column: None,
         problem,
     })?;
+    // The model file's `[roles]` first, then any a library caller set (later ones win).
+    let roles = original
+        .roles
+        .iter()
+        .map(|(name, role)| (name.clone(), *role))
+        .chain(opts.workflow.roles.iter().cloned())
+        .collect();
     let config = WorkflowConfig {
         noise_given: matches!(original.noise_variance, NoiseVariance::Given(_)),
+        roles,
         ..opts.workflow.clone()
     };
     let observer = Reported {

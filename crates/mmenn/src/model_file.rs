@@ -307,6 +307,10 @@ pub struct ModelSpec {
     /// any: every command that judges the model reads the records through it
     /// ([`crate::acquisition`]).
     pub acquisition: Option<AcquisitionFilter>,
+    /// Physical roles given to states by name (`[roles]`), replacing the ones `discover`
+    /// infers from `A`, the units and the names (`discovery::StateRoles`): e.g. a level
+    /// read in volts. Empty when none.
+    pub roles: BTreeMap<String, discovery::Role>,
 }
 
 fn is_zoh(hold: &InterSample) -> bool {
@@ -361,6 +365,8 @@ struct ModelToml {
     acquisition: Option<AcquisitionToml>,
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     x0_prior: BTreeMap<String, PriorToml>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    roles: BTreeMap<String, discovery::Role>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     terms: Vec<TermEntry>,
 }
@@ -611,6 +617,13 @@ fn build_with_prior(mut raw: ModelToml) -> Result<(ModelSpec, Vec<StatePrior>), 
             });
         }
     }
+    if let Some(name) = raw.roles.keys().find(|n| !raw.states.contains(n)) {
+        return Err(ModelProblem::UnknownName {
+            key: "roles",
+            name: name.clone(),
+            kind: "state",
+        });
+    }
     for t in &raw.terms {
         if !raw.states.contains(&t.state) {
             return Err(ModelProblem::UnknownName {
@@ -666,6 +679,7 @@ fn build_with_prior(mut raw: ModelToml) -> Result<(ModelSpec, Vec<StatePrior>), 
         parameters,
         mechanics: raw.mechanics,
         acquisition,
+        roles: raw.roles,
     };
     if spec.is_physical() {
         spec.physical_model()?;
@@ -856,6 +870,7 @@ pub fn format_model(spec: &ModelSpec) -> Result<String> {
         mechanics: spec.mechanics.clone(),
         acquisition: spec.acquisition.as_ref().map(AcquisitionToml::of),
         x0_prior: BTreeMap::new(),
+        roles: spec.roles.clone(),
         terms: spec.terms.clone(),
     };
     toml::to_string(&raw).map_err(|e| MmennError::Model {

@@ -34,6 +34,7 @@ pub fn assumed_model_spec(sim: &SimulatedData) -> ModelSpec {
         parameters: Vec::new(),
         mechanics: None,
         acquisition: None,
+        roles: Default::default(),
     }
 }
 

@@ -95,6 +95,7 @@ pub fn write_spec(path: &Path, linear: &LinearModel, hold: InterSample) {
         parameters: Vec::new(),
         mechanics: None,
         acquisition: None,
+        roles: Default::default(),
     };
     write_model(path, &spec).unwrap();
 }

@@ -324,6 +324,7 @@ pub fn model_file(
         parameters: Vec::new(),
         mechanics: None,
         acquisition: None,
+        roles: Default::default(),
     }
 }
 

@@ -572,6 +572,7 @@ fn oe_hybrid_rows(
             parameters: Vec::new(),
             mechanics: None,
             acquisition: None,
+            roles: Default::default(),
         },
     )?;
     let (max_hidden, inits) = match ctx.mode {

@@ -186,11 +186,12 @@ pub(super) fn alternative_explanation(
 pub(super) fn round_candidates(
     model: &TermModel,
     units: &BTreeMap<String, String>,
+    roles: &[(String, Role)],
     samples: &[Samples],
     proposed: &[FoundEffect],
 ) -> crate::Result<(Vec<RefineCandidate>, Vec<usize>)> {
     let linear = model.linear();
-    let roles = StateRoles::infer(linear, units, &[])?;
+    let roles = StateRoles::infer(linear, units, roles)?;
     let library = LibraryConfig {
         connections: crate::term_connections(model),
         ..LibraryConfig::default()

@@ -197,3 +197,67 @@ fn noise_variances_of_the_wrong_length_are_an_error() {
         crate::validation::validation_run(&current, current.linear(), &data, WINDOW, &[], false);
     assert!(matches!(got, Err(DiscoveryError::Length { .. })), "{got:?}");
 }
+
+/// The roles a user gives reach the free-run search's candidates: two tanks read in volts
+/// are `Other` by their unit, so no level law is a candidate; with `[roles]` making them
+/// levels, the orifice outflow of each is (the regression's proposals take the same
+/// overrides through `DiscoveryConfig::roles`).
+#[test]
+fn given_roles_open_the_level_laws_to_the_search() {
+    let names = ModelNames {
+        states: vec!["h1".into(), "h2".into()],
+        inputs: vec!["u".into()],
+        outputs: vec!["y".into()],
+        corrections: vec!["h1".into(), "h2".into()],
+    };
+    let linear = LinearModel::with_names(
+        DMatrix::from_row_slice(2, 2, &[-0.02, 0.0, 0.02, -0.015]),
+        DMatrix::from_row_slice(2, 1, &[0.03, 0.0]),
+        DMatrix::from_row_slice(1, 2, &[0.0, 1.0]),
+        DMatrix::identity(2, 2),
+        names,
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let model = TermModel::from_specs(linear, std::iter::empty::<(&str, &str, &str, f64)>())
+        .unwrap_or_else(|e| panic!("{e}"));
+    let units: BTreeMap<String, String> = ["h1", "h2", "u", "y"]
+        .iter()
+        .map(|n| (n.to_string(), "V".to_string()))
+        .collect();
+    let len = 400;
+    let states = DMatrix::from_fn(2, len, |i, k| {
+        5.0 + (i as f64 + 1.0) * (0.01 * k as f64).sin()
+    });
+    let inputs = DMatrix::from_fn(1, len, |_, k| 3.0 + (0.03 * k as f64).sin());
+    let samples =
+        Samples::new(states, inputs, DMatrix::zeros(2, len)).unwrap_or_else(|e| panic!("{e}"));
+    let orifices = |roles: &[(String, Role)]| -> Vec<String> {
+        let (candidates, _) =
+            steps::round_candidates(&model, &units, roles, std::slice::from_ref(&samples), &[])
+                .unwrap_or_else(|e| panic!("{e}"));
+        candidates
+            .iter()
+            .filter(|c| c.effect == "orifice_outflow")
+            .map(|c| format!("{}: {}", c.state, c.term))
+            .collect()
+    };
+    assert!(orifices(&[]).is_empty(), "{:?}", orifices(&[]));
+    let levels = [
+        ("h1".to_string(), Role::Level),
+        ("h2".to_string(), Role::Level),
+    ];
+    let with = orifices(&levels);
+    assert!(
+        with.iter()
+            .any(|c| c.starts_with("h1: ") && c.contains("sqrt(abs(h1))")),
+        "{with:?}"
+    );
+    assert!(
+        with.iter()
+            .any(|c| c.starts_with("h2: ") && c.contains("sqrt(abs(h2))")),
+        "{with:?}"
+    );
+    // A role for a state the model lacks is an error naming it.
+    let bad = [("h3".to_string(), Role::Level)];
+    assert!(steps::round_candidates(&model, &units, &bad, &[samples], &[]).is_err());
+}

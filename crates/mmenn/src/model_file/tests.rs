@@ -470,3 +470,59 @@ fn x0_prior_table_is_read_checked_and_not_written() {
         ModelProblem::Syntax { .. }
     ));
 }
+
+/// `[roles]`: read by state name, written back, and refused when it names no state or an
+/// unknown role (a syntax error naming the value, with its line).
+#[test]
+fn roles_table_round_trips_and_bad_entries_are_typed() {
+    let text = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+A = [[-0.02, 0.0], [0.02, -0.015]]
+B = [[0.03], [0.0]]
+C = [[0.0, 1.0]]
+outputs = ["y"]
+corrected = ["h2"]
+units = { h1 = "V", h2 = "V", u = "V", y = "V" }
+
+[roles]
+h1 = "level"
+h2 = "level"
+"#;
+    let spec = parse_model(Path::new("m.toml"), text).unwrap();
+    assert_eq!(
+        spec.roles.iter().collect::<Vec<_>>(),
+        vec![
+            (&"h1".to_string(), &discovery::Role::Level),
+            (&"h2".to_string(), &discovery::Role::Level)
+        ]
+    );
+    let written = format_model(&spec).unwrap();
+    assert!(written.contains("[roles]"), "{written}");
+    assert_eq!(parse_model(Path::new("m.toml"), &written).unwrap(), spec);
+    // Without the table there are none, and none are written.
+    let plain = text.replace("[roles]\nh1 = \"level\"\nh2 = \"level\"\n", "");
+    let spec = parse_model(Path::new("m.toml"), &plain).unwrap();
+    assert!(spec.roles.is_empty());
+    assert!(!format_model(&spec).unwrap().contains("roles"));
+    // A name that is no state (an output here).
+    assert!(matches!(
+        problem(&text.replace("h2 = \"level\"\n", "y = \"level\"\n")),
+        ModelProblem::UnknownName { key: "roles", name, kind: "state" } if name == "y"
+    ));
+    // A role discover does not know.
+    match parse_model(
+        Path::new("m.toml"),
+        &text.replace("h1 = \"level\"", "h1 = \"tank\""),
+    ) {
+        Err(MmennError::Model {
+            line: Some(12),
+            problem: ModelProblem::Syntax { message },
+            ..
+        }) => assert!(
+            message.contains("tank") && message.contains("level"),
+            "{message}"
+        ),
+        other => panic!("expected a syntax error on line 12, got {other:?}"),
+    }
+}
