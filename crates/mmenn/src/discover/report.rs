@@ -220,6 +220,9 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
     for w in &s.warnings {
         r.push_str(&format!("**Warning.** {w}\n\n"));
     }
+    if let Some(round) = s.rounds.first() {
+        r.push_str(&roles_line(&round.discovery.roles));
+    }
     if !s.effects.is_empty() {
         r.push_str("| effect | equation | term | coefficient (free-run calibrated) | its 95 % CI | regression 95 % CI | share of d̂ | named by |\n|---|---|---|---|---|---|---|---|\n");
         for e in &s.effects {
@@ -355,6 +358,27 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
 }
 
 /// `a, b` as inline code: `` `a`, `b` `` (`none` when empty).
+/// The roles the catalogue was matched against: which laws may enter which equation.
+fn roles_line(roles: &[(String, discovery::Role)]) -> String {
+    let name = |r: &discovery::Role| match r {
+        discovery::Role::Position => "position",
+        discovery::Role::Angle => "angle",
+        discovery::Role::Velocity => "velocity",
+        discovery::Role::Level => "level",
+        discovery::Role::Other => "other",
+    };
+    let list: Vec<String> = roles
+        .iter()
+        .map(|(state, role)| format!("{state} {}", name(role)))
+        .collect();
+    format!(
+        "Roles of the states (a friction law enters only a velocity's equation, an orifice or \
+         overflow only a level's; inferred from `A`, the units and the names, or given in the \
+         model file's `[roles]` table): {}.\n\n",
+        list.join(", ")
+    )
+}
+
 fn code_list(items: &[String]) -> String {
     if items.is_empty() {
         return "none".into();
