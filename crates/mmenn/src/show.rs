@@ -262,6 +262,14 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
     if let Some(f) = &spec.acquisition {
         lines.extend(acquisition_lines(f));
     }
+    if !spec.roles.is_empty() {
+        let given: Vec<String> = spec
+            .roles
+            .iter()
+            .map(|(state, role)| format!("{state} {}", crate::words::role(*role)))
+            .collect();
+        lines.push(format!("roles given to discover: {}", given.join(", ")));
+    }
     if !spec.terms.is_empty() && sigmas.is_empty() {
         lines.push(if spec.parameters.iter().any(|p| p.sigma.is_some()) {
             "(term coefficients without ±σ: the ±σ above are the parameters')".into()
@@ -430,6 +438,15 @@ coefficient = -0.803
             "{lines:?}"
         );
         assert!(lines.iter().any(|l| l.contains("x [m]")), "{lines:?}");
+        assert!(!lines.iter().any(|l| l.contains("roles")), "{lines:?}");
+        // A `[roles]` table is shown.
+        let with_roles = text.replace("[[terms]]", "[roles]\nx = \"position\"\n\n[[terms]]");
+        let model = LoadedModel::parse(path, &with_roles).unwrap();
+        let lines = equations(&model, &sig);
+        assert!(
+            lines.contains(&"roles given to discover: x position".to_string()),
+            "{lines:?}"
+        );
     }
 
     /// A constant term reads as its coefficient (with its ±σ), not as `c 1`.

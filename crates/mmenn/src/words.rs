@@ -125,6 +125,17 @@ pub fn verdict(v: discovery::Verdict) -> &'static str {
     }
 }
 
+/// A state's role as the model file's `[roles]` table writes it.
+pub fn role(r: discovery::Role) -> &'static str {
+    match r {
+        discovery::Role::Position => "position",
+        discovery::Role::Angle => "angle",
+        discovery::Role::Velocity => "velocity",
+        discovery::Role::Level => "level",
+        discovery::Role::Other => "other",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,5 +150,19 @@ mod tests {
         assert_eq!(numbers(&[1.0, -0.5]), "[1.0000e0, -5.0000e-1]");
         assert!(!score_kind(condmon::ScoreKind::VoteShare).contains("Vote"));
         assert!(!network_domain(nn::Domain::Hold).contains("Hold"));
+        // The role words are the ones a `[roles]` table reads.
+        use discovery::Role;
+        for r in [
+            Role::Position,
+            Role::Angle,
+            Role::Velocity,
+            Role::Level,
+            Role::Other,
+        ] {
+            assert_eq!(
+                serde_json::to_string(&r).unwrap(),
+                format!("\"{}\"", role(r))
+            );
+        }
     }
 }

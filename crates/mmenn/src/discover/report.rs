@@ -360,16 +360,9 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
 /// `a, b` as inline code: `` `a`, `b` `` (`none` when empty).
 /// The roles the catalogue was matched against: which laws may enter which equation.
 fn roles_line(roles: &[(String, discovery::Role)]) -> String {
-    let name = |r: &discovery::Role| match r {
-        discovery::Role::Position => "position",
-        discovery::Role::Angle => "angle",
-        discovery::Role::Velocity => "velocity",
-        discovery::Role::Level => "level",
-        discovery::Role::Other => "other",
-    };
     let list: Vec<String> = roles
         .iter()
-        .map(|(state, role)| format!("{state} {}", name(role)))
+        .map(|(state, role)| format!("{state} {}", crate::words::role(*role)))
         .collect();
     format!(
         "Roles of the states (a friction law enters only a velocity's equation, an orifice or \
