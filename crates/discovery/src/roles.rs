@@ -136,6 +136,28 @@ impl StateRoles {
         Ok(Self { roles, partners })
     }
 
+    /// States whose name alone would make them a level or an angle but whose unit makes
+    /// them something else (and that `overrides` does not name): `(state, role by its
+    /// unit, role by its name)`. A level sensor read in volts is the usual case; the caller
+    /// can tell the user to give the role.
+    ///
+    /// Errors: as [`StateRoles::infer`].
+    pub fn unit_overrules_name(
+        model: &LinearModel,
+        units: &BTreeMap<String, String>,
+        overrides: &[(String, Role)],
+    ) -> Result<Vec<(String, Role, Role)>> {
+        let with = Self::infer(model, units, overrides)?;
+        let by_name = Self::infer(model, &BTreeMap::new(), overrides)?;
+        Ok(model
+            .state_names()
+            .iter()
+            .zip(with.roles.iter().zip(&by_name.roles))
+            .filter(|&(_, (w, n))| w != n && matches!(n, Role::Level | Role::Angle))
+            .map(|(name, (&w, &n))| (name.clone(), w, n))
+            .collect())
+    }
+
     /// The kind of state equation `i`.
     pub fn equation_kind(&self, i: usize) -> EquationKind {
         match self.roles.get(i) {
@@ -198,6 +220,31 @@ mod tests {
         let t = model(&[-0.1, 0.0, 0.1, -0.2], &[0.003, 0.0], &["h1", "h2"]);
         let r = StateRoles::infer(&t, &none, &[]).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(r.roles, [Role::Level, Role::Level]);
+        // Read in volts, they are `Other`, and the names say what the unit hid; a given
+        // role silences it, and a unit that agrees with the name is no case.
+        let volts = BTreeMap::from([
+            ("h1".to_string(), "V".to_string()),
+            ("h2".to_string(), "V".to_string()),
+        ]);
+        let hidden =
+            StateRoles::unit_overrules_name(&t, &volts, &[]).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            hidden,
+            [
+                ("h1".to_string(), Role::Other, Role::Level),
+                ("h2".to_string(), Role::Other, Role::Level)
+            ]
+        );
+        let given = [("h1".to_string(), Role::Level)];
+        let hidden =
+            StateRoles::unit_overrules_name(&t, &volts, &given).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(hidden, [("h2".to_string(), Role::Other, Role::Level)]);
+        let metres = BTreeMap::from([("h1".to_string(), "m".to_string())]);
+        assert!(
+            StateRoles::unit_overrules_name(&t, &metres, &[])
+                .unwrap_or_else(|e| panic!("{e}"))
+                .is_empty()
+        );
         assert_eq!(r.equation_kind(0), EquationKind::Flow);
         // Overrides, and an unknown name.
         let r = StateRoles::infer(&t, &none, &[("h2".into(), Role::Other)])

@@ -611,6 +611,11 @@ pub fn run_discover_with_progress(
     if let Some(g) = &degradation {
         warnings.push(g.reason.clone());
     }
+    warnings.extend(role_hints(
+        base_model.linear(),
+        &original.units,
+        &config.roles,
+    )?);
     let summary = DiscoverSummary {
         verdict,
         effects,
@@ -687,9 +692,72 @@ fn write_outputs(
     crate::html::write_report(out, &markdown)
 }
 
+/// A warning per state whose unit hid the role its name gives (a level read in volts is
+/// `other`: no orifice or overflow law is tried on it), naming the `[roles]` line that
+/// would give it.
+fn role_hints(
+    linear: &sysid_core::LinearModel,
+    units: &BTreeMap<String, String>,
+    given: &[(String, discovery::Role)],
+) -> Result<Vec<String>> {
+    let hidden = discovery::StateRoles::unit_overrules_name(linear, units, given)?;
+    Ok(hidden
+        .into_iter()
+        .map(|(state, by_unit, by_name)| {
+            let laws = match by_name {
+                discovery::Role::Level => "orifice or overflow",
+                _ => "angle (gravity, input coupling)",
+            };
+            format!(
+                "{state}: its name reads as a{} {} but its unit ({}) makes it {}, so no {laws} \
+                 law was tried on it; if it is one, say so in the model file: [roles] {state} = \
+                 \"{}\"",
+                if by_name == discovery::Role::Angle {
+                    "n"
+                } else {
+                    ""
+                },
+                crate::words::role(by_name),
+                units.get(&state).map_or("?", String::as_str),
+                crate::words::role(by_unit),
+                crate::words::role(by_name),
+            )
+        })
+        .collect())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A level read in volts is named in a warning with the `[roles]` line that gives its
+    /// role; one given, or one in metres, is not.
+    #[test]
+    fn levels_hidden_by_their_unit_are_named_with_the_fix() {
+        let text = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+A = [[-0.02, 0.0], [0.02, -0.015]]
+B = [[0.03], [0.0]]
+C = [[0.0, 1.0]]
+outputs = ["y"]
+corrected = ["h2"]
+units = { h1 = "V", h2 = "m" }
+"#;
+        let spec = crate::model_file::parse_model(Path::new("m.toml"), text).unwrap();
+        let hints = role_hints(&spec.linear, &spec.units, &[]).unwrap();
+        assert_eq!(hints.len(), 1, "{hints:?}");
+        assert!(
+            hints[0].starts_with("h1: ") && hints[0].contains("[roles] h1 = \"level\""),
+            "{hints:?}"
+        );
+        let given = [("h1".to_string(), discovery::Role::Level)];
+        assert!(
+            role_hints(&spec.linear, &spec.units, &given)
+                .unwrap()
+                .is_empty()
+        );
+    }
 
     fn gap(fits: &[(&str, f64)]) -> Gap {
         Gap {
