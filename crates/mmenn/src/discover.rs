@@ -734,17 +734,9 @@ mod tests {
     /// role; one given, or one in metres, is not.
     #[test]
     fn levels_hidden_by_their_unit_are_named_with_the_fix() {
-        let text = r#"
-states = ["h1", "h2"]
-inputs = ["u"]
-A = [[-0.02, 0.0], [0.02, -0.015]]
-B = [[0.03], [0.0]]
-C = [[0.0, 1.0]]
-outputs = ["y"]
-corrected = ["h2"]
-units = { h1 = "V", h2 = "m" }
-"#;
-        let spec = crate::model_file::parse_model(Path::new("m.toml"), text).unwrap();
+        // h2 in metres: a level by its unit.
+        let text = crate::model_file::TWO_TANKS_IN_VOLTS.replace("h2 = \"V\"", "h2 = \"m\"");
+        let spec = crate::model_file::parse_model(Path::new("m.toml"), &text).unwrap();
         let hints = role_hints(&spec.linear, &spec.units, &[]).unwrap();
         assert_eq!(hints.len(), 1, "{hints:?}");
         assert!(

@@ -888,5 +888,18 @@ pub fn write_model(path: &Path, spec: &ModelSpec) -> Result<()> {
     write_atomic(path, format_model(spec)?.as_bytes())
 }
 
+/// A linear two-tank model with both levels read in volts (tests of `[roles]`).
+#[cfg(test)]
+pub(crate) const TWO_TANKS_IN_VOLTS: &str = r#"
+states = ["h1", "h2"]
+inputs = ["u"]
+A = [[-0.02, 0.0], [0.02, -0.015]]
+B = [[0.03], [0.0]]
+C = [[0.0, 1.0]]
+outputs = ["y"]
+corrected = ["h2"]
+units = { h1 = "V", h2 = "V", u = "V", y = "V" }
+"#;
+
 #[cfg(test)]
 mod tests;

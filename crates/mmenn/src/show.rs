@@ -263,12 +263,10 @@ pub fn equations(model: &LoadedModel, sigmas: &TermSigmas) -> Vec<String> {
         lines.extend(acquisition_lines(f));
     }
     if !spec.roles.is_empty() {
-        let given: Vec<String> = spec
-            .roles
-            .iter()
-            .map(|(state, role)| format!("{state} {}", crate::words::role(*role)))
-            .collect();
-        lines.push(format!("roles given to discover: {}", given.join(", ")));
+        lines.push(format!(
+            "roles given to discover: {}",
+            crate::words::role_list(&spec.roles)
+        ));
     }
     if !spec.terms.is_empty() && sigmas.is_empty() {
         lines.push(if spec.parameters.iter().any(|p| p.sigma.is_some()) {

@@ -136,6 +136,15 @@ pub fn role(r: discovery::Role) -> &'static str {
     }
 }
 
+/// `state role, …` (`h1 level, h2 level`).
+pub fn role_list<'a>(roles: impl IntoIterator<Item = (&'a String, &'a discovery::Role)>) -> String {
+    roles
+        .into_iter()
+        .map(|(state, r)| format!("{state} {}", role(*r)))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

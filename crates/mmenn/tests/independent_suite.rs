@@ -270,9 +270,18 @@ fn score(case: &Case, verdict: &str, effects: &[Claim]) -> Result<(), String> {
 }
 
 fn run_case(case: &Case) -> Outcome {
+    let model = suite_dir()
+        .join("cases")
+        .join(&case.name)
+        .join("model.toml");
+    run_case_with(case, &model, "")
+}
+
+/// [`run_case`] with another model file (`tag` keeps its output folder apart).
+fn run_case_with(case: &Case, model: &Path, tag: &str) -> Outcome {
     let dir = suite_dir().join("cases").join(&case.name);
     let out = std::env::temp_dir().join(format!(
-        "mmenn-independent-suite-{}-{}",
+        "mmenn-independent-suite-{}-{}{tag}",
         std::process::id(),
         case.name
     ));
@@ -281,7 +290,7 @@ fn run_case(case: &Case) -> Outcome {
     let result = catch_unwind(AssertUnwindSafe(|| {
         run_discover(
             &[dir.join("est.csv")],
-            &dir.join("model.toml"),
+            model,
             &[dir.join("val.csv")],
             &DiscoverOptions::default(),
             &out,
@@ -395,6 +404,47 @@ fn line(case: &Case, o: &Outcome) -> String {
         },
         o.reason
     )
+}
+
+/// A `[roles]` table stands in for a level's unit, on the generator's records: the suite's
+/// two-tank case with both levels read in volts instead of metres fails the suite's rule
+/// (the unit hides the orifice law from the search), and passes it again when the model
+/// file names both as levels.
+#[test]
+fn a_roles_table_restores_the_level_laws_on_independent_records() {
+    let case = read_cases()
+        .into_iter()
+        .find(|c| c.name == "tanks_orifices_1pct")
+        .expect("the suite has its two-tank orifice case");
+    let dir = suite_dir().join("cases").join(&case.name);
+    let text = std::fs::read_to_string(dir.join("model.toml")).expect("case model");
+    let volts = text.replace(
+        r#"units = { h1 = "m", h2 = "m", u = "V" }"#,
+        r#"units = { h1 = "V", h2 = "V", u = "V" }"#,
+    );
+    assert_ne!(
+        volts, text,
+        "the case's units line changed; update this test"
+    );
+    let tmp = std::env::temp_dir().join(format!("mmenn-roles-suite-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).expect("temp dir");
+    let plain = tmp.join("volts.toml");
+    let given = tmp.join("volts_roles.toml");
+    std::fs::write(&plain, &volts).expect("write");
+    std::fs::write(
+        &given,
+        format!("{volts}\n[roles]\nh1 = \"level\"\nh2 = \"level\"\n"),
+    )
+    .expect("write");
+    let without = run_case_with(&case, &plain, "-volts");
+    let with = run_case_with(&case, &given, "-roles");
+    let _ = std::fs::remove_dir_all(&tmp);
+    assert!(
+        !without.pass && !without.effects.iter().any(|c| c.name == "orifice_outflow"),
+        "{}",
+        line(&case, &without)
+    );
+    assert!(with.pass, "{}", line(&case, &with));
 }
 
 #[test]

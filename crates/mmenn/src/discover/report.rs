@@ -357,21 +357,17 @@ pub(super) fn report(s: &DiscoverSummary) -> String {
     r
 }
 
-/// `a, b` as inline code: `` `a`, `b` `` (`none` when empty).
 /// The roles the catalogue was matched against: which laws may enter which equation.
 fn roles_line(roles: &[(String, discovery::Role)]) -> String {
-    let list: Vec<String> = roles
-        .iter()
-        .map(|(state, role)| format!("{state} {}", crate::words::role(*role)))
-        .collect();
     format!(
         "Roles of the states (a friction law enters only a velocity's equation, an orifice or \
          overflow only a level's; inferred from `A`, the units and the names, or given in the \
          model file's `[roles]` table): {}.\n\n",
-        list.join(", ")
+        crate::words::role_list(roles.iter().map(|(s, r)| (s, r)))
     )
 }
 
+/// `a, b` as inline code: `` `a`, `b` `` (`none` when empty).
 fn code_list(items: &[String]) -> String {
     if items.is_empty() {
         return "none".into();

@@ -475,20 +475,8 @@ fn x0_prior_table_is_read_checked_and_not_written() {
 /// unknown role (a syntax error naming the value, with its line).
 #[test]
 fn roles_table_round_trips_and_bad_entries_are_typed() {
-    let text = r#"
-states = ["h1", "h2"]
-inputs = ["u"]
-A = [[-0.02, 0.0], [0.02, -0.015]]
-B = [[0.03], [0.0]]
-C = [[0.0, 1.0]]
-outputs = ["y"]
-corrected = ["h2"]
-units = { h1 = "V", h2 = "V", u = "V", y = "V" }
-
-[roles]
-h1 = "level"
-h2 = "level"
-"#;
+    let text = format!("{TWO_TANKS_IN_VOLTS}\n[roles]\nh1 = \"level\"\nh2 = \"level\"\n");
+    let text = text.as_str();
     let spec = parse_model(Path::new("m.toml"), text).unwrap();
     assert_eq!(
         spec.roles.iter().collect::<Vec<_>>(),
